@@ -1,0 +1,26 @@
+"""vplayground_ros: installable by pip (make run / make test) and by colcon (ament_python).
+
+rclpy and the message packages are deliberately not pip requirements: inside a ROS install colcon
+resolves them from package.xml; without one, `make` installs the Jazzy wheels from PyPI.
+"""
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = "vplayground_ros"
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(exclude=["test", "bench"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}/config", glob("config/*")),
+    ],
+    python_requires=">=3.10",
+    install_requires=["numpy>=1.24", "numba>=0.59", "pyyaml>=6"],
+    extras_require={"test": ["pytest>=7"]},
+    zip_safe=False,
+    entry_points={"console_scripts": [f"vplayground = {PACKAGE}.cli:main"]},
+)

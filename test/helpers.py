@@ -1,0 +1,52 @@
+"""Scene builders shared by the physics tests."""
+import numpy as np
+
+from vplayground_ros.physics import World
+
+
+def kinetic_energy(world):
+    s = world.state()
+    v, w, m, size = s["linear_velocities"], s["angular_velocities"], s["masses"], s["sizes"]
+    # Box inertia about the centre; the rotational part is a bound (axes not rotated), enough
+    # for "does it grow" comparisons.
+    inertia = m[:, None] / 12.0 * (size[:, [1, 0, 0]] ** 2 + size[:, [2, 2, 1]] ** 2)
+    return float(0.5 * np.sum(m * np.sum(v * v, axis=1)) + 0.5 * np.sum(inertia * w * w))
+
+
+def tower(count, size=1.0, settings=None):
+    world = World(settings)
+    for k in range(count):
+        world.add_body({"name": f"t{k}", "size": [size] * 3, "position": [0, 0, size * (0.5 + k)]})
+    return world
+
+
+def brick_wall(rows=10, length=1.0, depth=0.5, height=0.5, settings=None):
+    """Running-bond wall: even rows of 6 bricks, odd rows of 5 offset by half a brick (55)."""
+    world = World(settings)
+    for row in range(rows):
+        count = 6 if row % 2 == 0 else 5
+        offset = 0.0 if row % 2 == 0 else 0.5 * length
+        for k in range(count):
+            world.add_body({"name": f"b{row}_{k}", "size": [length, depth, height],
+                            "position": [offset + k * length - 2.5 * length, 0, height * (0.5 + row)]})
+    return world
+
+
+def pile(count, seed=1, size=0.5, spacing=0.75, settings=None):
+    """Boxes on a jittered grid above the ground, falling into a pile."""
+    rng = np.random.default_rng(seed)
+    side = int(np.ceil(np.sqrt(count / 4)))
+    world = World(settings)
+    for k in range(count):
+        ix, iy, iz = k % side, (k // side) % side, k // (side * side)
+        jitter = rng.uniform(-0.1, 0.1, 3)
+        world.add_body({"name": f"p{k}", "size": [size] * 3,
+                        "position": [(ix - side / 2) * spacing + jitter[0],
+                                     (iy - side / 2) * spacing + jitter[1],
+                                     1.0 + iz * spacing + jitter[2]],
+                        "rpy": list(rng.uniform(-0.5, 0.5, 3)), "density": 500})
+    return world
+
+
+def max_drift(world, start):
+    return float(np.max(np.linalg.norm(world.state()["positions"] - start, axis=1)))

@@ -1,0 +1,192 @@
+"""The Python API of SPEC 4: names, slots, bad input, scene files."""
+import math
+
+import numpy as np
+import pytest
+
+from vplayground_ros.physics import World
+from vplayground_ros.scene import SceneError, load_world, save_world
+
+
+def snapshot(world):
+    return world.body_names(), {k: v.copy() for k, v in world.state().items()}
+
+
+def assert_unchanged(world, before):
+    names, state = snapshot(world)
+    assert names == before[0]
+    for key in state:
+        assert np.array_equal(state[key], before[1][key]), key
+
+
+@pytest.fixture
+def world():
+    w = World()
+    w.add_body({"name": "a", "position": [0, 0, 0.5]})
+    w.add_body({"name": "b", "position": [3, 0, 0.5]})
+    w.step(10)
+    return w
+
+
+@pytest.mark.parametrize("spec, fragment", [
+    ({"colour": "red"}, "body.colour: unknown key"),
+    ({"size": [1, 0, 1]}, "body.size[1]: must be > 0"),
+    ({"size": [1, 1]}, "body.size: expected 3 numbers"),
+    ({"mass": -2}, "body.mass: must be > 0"),
+    ({"density": 0}, "body.density: must be > 0"),
+    ({"position": [0, math.nan, 1]}, "body.position[1]: must be finite"),
+    ({"linear_velocity": [math.inf, 0, 0]}, "body.linear_velocity[0]: must be finite"),
+    ({"elasticity": 1.5}, "body.elasticity: must be <= 1"),
+    ({"static_friction": -0.1}, "body.static_friction: must be >= 0"),
+    ({"immovable": "yes"}, "body.immovable: expected true or false"),
+    ({"shape": "sphere"}, "body.shape: unsupported shape"),
+    ({"name": "a"}, "already exists"),
+    ({"name": "bad name!"}, "body.name: invalid name"),
+    ({"rpy": [0, 0, 0], "quaternion": [0, 0, 0, 1]}, "either rpy or quaternion"),
+])
+def test_bad_spawn_raises_and_changes_nothing(world, spec, fragment):
+    before = snapshot(world)
+    with pytest.raises(ValueError, match=None) as error:
+        world.add_body(spec)
+    assert fragment in str(error.value)
+    assert_unchanged(world, before)
+
+
+@pytest.mark.parametrize("fields, fragment", [
+    ({"size": [1, -1, 1]}, "a.size[1]: must be > 0"),
+    ({"mass": 0}, "a.mass: must be > 0"),
+    ({"name": "c"}, "a.name: unknown key"),
+    ({"position": [0, 0, float("nan")]}, "a.position[2]: must be finite"),
+])
+def test_bad_edit_raises_and_changes_nothing(world, fields, fragment):
+    before = snapshot(world)
+    with pytest.raises(ValueError) as error:
+        world.edit_body("a", **fields)
+    assert fragment in str(error.value)
+    assert_unchanged(world, before)
+
+
+def test_unknown_names_raise_key_error(world):
+    before = snapshot(world)
+    for call in (lambda: world.edit_body("nobody", mass=1.0), lambda: world.remove_body("nobody"),
+                 lambda: world.apply_impulse("nobody", [1, 0, 0])):
+        with pytest.raises(KeyError, match="nobody"):
+            call()
+    assert_unchanged(world, before)
+
+
+def test_step_rejects_bad_counts(world):
+    for n in (-1, 1.5, "3", True):
+        with pytest.raises(ValueError):
+            world.step(n)
+
+
+def test_names_are_unique_and_slots_are_reused_without_disturbing_others(world):
+    generated = world.add_body({"position": [6, 0, 0.5]})
+    assert generated not in ("a", "b") and generated in world.body_names()
+    b_before = world.state()["positions"][world.body_names().index("b")].copy()
+    world.remove_body("a")
+    assert world.body_names() == ["b", generated] or world.body_names() == [generated, "b"] or "a" not in world.body_names()
+    assert np.array_equal(world.state()["positions"][world.body_names().index("b")], b_before)
+    world.add_body({"name": "c", "position": [-4, 0, 0.5]})
+    assert sorted(world.body_names()) == sorted(["b", "c", generated])
+    assert len(world._bodies.active) == 64  # the freed slot was reused, nothing grew
+
+
+def test_edit_changes_only_given_keys(world):
+    before = world.body("b")
+    world.edit_body("b", mass=10.0, linear_velocity=[1, 0, 0])
+    after = world.body("b")
+    assert after["mass"] == 10.0 and after["linear_velocity"] == [1.0, 0.0, 0.0]
+    for key in ("size", "position", "quaternion", "elasticity", "static_friction"):
+        assert after[key] == before[key]
+
+
+def test_state_and_contacts_shapes():
+    world = World({"freezing": {"enabled": False}})  # frozen bodies make no contacts
+    world.add_body({"name": "a", "position": [0, 0, 0.5]})
+    world.add_body({"name": "b", "position": [3, 0, 0.5]})
+    world.step(64)
+    s = world.state()
+    assert s["positions"].shape == (2, 3) and s["quaternions"].shape == (2, 4)
+    c = world.contacts()
+    assert len(c["points"]) >= 8  # two boxes on the ground, four corners each
+    assert set(np.unique(c["body_b"])) == {-1}
+    assert np.allclose(c["normals"], [0, 0, -1])
+    assert np.all(c["impulses"] >= 0)
+
+
+def test_growing_beyond_capacity_keeps_bodies():
+    world = World(capacity=4)
+    names = [world.add_body({"position": [2.0 * k, 0, 0.5]}) for k in range(10)]
+    world.step(5)
+    assert world.body_names() == names
+    assert np.allclose(world.state()["positions"][:, 0], 2.0 * np.arange(10), atol=1e-5)
+
+
+SCENE = {
+    "version": 1,
+    "settings": {"steps_per_second": 100, "resolve_iterations": 4, "octree_depth": 4,
+                 "gravity": [0, 0, -9.0], "freezing": {"enabled": False}},
+    "ground": {"height": -1.0, "elasticity": 0.3},
+    "bodies": [
+        {"name": "crate", "size": [1, 2, 0.5], "position": [0, 0, 2], "rpy": [0.1, 0.2, 0.3],
+         "linear_velocity": [1, 0, 0], "mass": 12.5, "elasticity": 0.4},
+        {"name": "wall", "size": [5, 0.2, 2], "position": [0, 4, 0], "immovable": True},
+        {"size": [0.3, 0.3, 0.3], "position": [2, 2, 5], "density": 800},
+    ],
+}
+
+
+def test_scene_round_trip(tmp_path):
+    world = load_world(SCENE)
+    world.step(30)
+    save_world(world, tmp_path / "saved.yaml")
+    again = load_world(tmp_path / "saved.yaml")
+    assert again.body_names() == world.body_names()
+    assert again.settings == world.settings and again.ground == world.ground
+    for name in world.body_names():
+        assert again.body(name) == world.body(name)
+    world.step(20)
+    again.step(20)
+    assert np.allclose(again.state()["positions"], world.state()["positions"], atol=1e-9)
+
+
+@pytest.mark.parametrize("mutate, fragment", [
+    (lambda s: s.update(version=2), "version: unsupported version 2"),
+    (lambda s: s.pop("version"), "version: missing"),
+    (lambda s: s.update(extra=1), "extra: unknown key"),
+    (lambda s: s["settings"].update(steps_per_second=0), "settings.steps_per_second: must be between"),
+    (lambda s: s["settings"]["freezing"].update(time="long"), "settings.freezing.time: expected a number"),
+    (lambda s: s["ground"].update(static_friction=-1), "ground.static_friction: must be >= 0"),
+    (lambda s: s["bodies"][0].update(size=[1, 2, 0]), "bodies[0].size[2]: must be > 0"),
+    (lambda s: s["bodies"][1].update(name="crate"), "bodies[1].name: duplicate name 'crate'"),
+    (lambda s: s["bodies"][2].update(mass=float("inf")), "bodies[2].mass: must be finite"),
+    (lambda s: s.update(bodies={"a": 1}), "bodies: expected a list"),
+])
+def test_scene_errors_name_the_key(mutate, fragment):
+    import copy
+    scene = copy.deepcopy(SCENE)
+    mutate(scene)
+    with pytest.raises(SceneError) as error:
+        load_world(scene)
+    assert fragment in str(error.value)
+
+
+def test_scene_file_errors_name_the_file(tmp_path):
+    broken = tmp_path / "broken.yaml"
+    broken.write_text("version: 1\nbodies: [\n")
+    with pytest.raises(SceneError, match="broken.yaml: not valid YAML"):
+        load_world(broken)
+    with pytest.raises(SceneError, match="missing.yaml: cannot read"):
+        load_world(tmp_path / "missing.yaml")
+
+
+def test_default_scene_loads_and_runs():
+    from vplayground_ros.resources import find_shared
+    world = load_world(find_shared("config/default_scene.yaml"))
+    world.step(5 * 128)
+    s = world.state()
+    assert np.all(np.isfinite(s["positions"]))
+    half_height = 0.5 * s["sizes"].min(axis=1)
+    assert np.all(s["positions"][:, 2] > half_height * 0.5)

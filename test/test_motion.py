@@ -1,0 +1,112 @@
+"""Single bodies against analytic answers."""
+import math
+
+import numpy as np
+import pytest
+
+from vplayground_ros.physics import World
+
+G = 9.81
+
+
+def test_free_fall_follows_the_parabola():
+    world = World({"gravity": [0, 0, -G]}, ground=None)
+    world.add_body({"name": "b", "position": [0, 0, 100], "linear_velocity": [1.0, 0, 5.0]})
+    world.step(256)
+    t, dt = world.time, 1.0 / 128
+    p = world.state()["positions"][0]
+    v = world.state()["linear_velocities"][0]
+    # Symplectic Euler is exact in velocity and lags the parabola by g t dt / 2 in position.
+    assert v[2] == pytest.approx(5.0 - G * t, abs=1e-9)
+    assert p[0] == pytest.approx(1.0 * t, abs=1e-9)
+    exact = 100 + 5.0 * t - 0.5 * G * t * t
+    assert abs(p[2] - exact) <= 0.5 * G * t * dt * 1.0001
+    assert p[2] == pytest.approx(exact - 0.5 * G * t * dt, abs=1e-9)
+
+
+@pytest.mark.parametrize("elasticity", [0.3, 0.6, 0.9])
+def test_bounce_height_matches_restitution(elasticity):
+    drop = 2.0
+    world = World(ground={"elasticity": 0.0})
+    world.add_body({"name": "b", "size": [0.5, 0.5, 0.5], "position": [0, 0, 0.25 + drop],
+                    "elasticity": elasticity, "allow_freezing": False})
+    bounced, apex = False, 0.0
+    for _ in range(3 * 128):
+        world.step(1)
+        height = world.state()["positions"][0, 2] - 0.25
+        vz = world.state()["linear_velocities"][0, 2]
+        if vz > 0.0:
+            bounced = True
+        if bounced:
+            apex = max(apex, height)
+            if vz < 0.0:
+                break
+    assert bounced
+    # The pair elasticity is the larger of the two (box vs ground 0): rebound = e^2 * drop.
+    # Tolerance 8 %: the impact speed is sampled at 128 steps/s.
+    assert apex == pytest.approx(elasticity ** 2 * drop, rel=0.08)
+
+
+def incline_world(theta, mu_s, mu_d):
+    """Ground as an incline: gravity tilted by theta about y, downhill along +x."""
+    world = World({"gravity": [G * math.sin(theta), 0, -G * math.cos(theta)]},
+                  ground={"static_friction": mu_s, "dynamic_friction": mu_d, "elasticity": 0.0})
+    world.add_body({"name": "b", "size": [1, 1, 0.5], "position": [0, 0, 0.25],
+                    "static_friction": mu_s, "dynamic_friction": mu_d, "elasticity": 0.0,
+                    "allow_freezing": False})
+    return world
+
+
+@pytest.mark.parametrize("ratio", [0.5, 0.9])
+def test_static_friction_holds_below_its_angle(ratio):
+    mu_s, mu_d = 0.6, 0.4
+    world = incline_world(math.atan(ratio * mu_s), mu_s, mu_d)
+    world.step(2 * 128)
+    assert abs(world.state()["positions"][0, 0]) < 1e-3
+
+
+@pytest.mark.parametrize("ratio", [1.2, 2.0])
+def test_sliding_acceleration_is_g_sin_minus_mu_d_cos(ratio):
+    mu_s, mu_d = 0.6, 0.4
+    theta = math.atan(ratio * mu_s)
+    world = incline_world(theta, mu_s, mu_d)
+    world.step(64)  # settle the contact
+    x0, v0 = world.state()["positions"][0, 0], world.state()["linear_velocities"][0, 0]
+    world.step(256)
+    v1 = world.state()["linear_velocities"][0, 0]
+    measured = (v1 - v0) / 2.0
+    expected = G * (math.sin(theta) - mu_d * math.cos(theta))
+    assert measured == pytest.approx(expected, rel=0.03)
+    assert world.state()["positions"][0, 0] > x0
+
+
+def test_spinning_box_stops_like_four_corner_friction():
+    mu = 0.5
+    world = World(ground={"static_friction": mu, "dynamic_friction": mu})
+    world.add_body({"name": "b", "size": [1, 1, 1], "position": [0, 0, 0.5],
+                    "angular_velocity": [0, 0, 6.0], "static_friction": mu,
+                    "dynamic_friction": mu, "allow_freezing": False})
+    # Four corner contacts at r = a/sqrt(2) each carry m g / 4: torque mu m g r against an
+    # inertia m a^2 / 6, so w falls at mu g r 6 / a^2.
+    deceleration = mu * G * (1 / math.sqrt(2)) * 6.0
+    expected_stop = 6.0 / deceleration
+    stop = None
+    for k in range(256):
+        world.step(1)
+        if abs(world.state()["angular_velocities"][0, 2]) < 0.05:
+            stop = world.time
+            break
+    assert stop is not None
+    assert stop == pytest.approx(expected_stop, rel=0.1)
+    world.step(128)
+    assert np.linalg.norm(world.state()["angular_velocities"][0]) < 0.05
+    assert np.linalg.norm(world.state()["positions"][0, :2]) < 0.05
+
+
+def test_box_rests_at_its_half_height_and_freezes():
+    world = World()
+    world.add_body({"name": "b", "size": [1, 1, 0.4], "position": [0, 0, 1.0]})
+    world.step(3 * 128)
+    s = world.state()
+    assert s["positions"][0, 2] == pytest.approx(0.2, abs=0.006)
+    assert s["frozen"][0]

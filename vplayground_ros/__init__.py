@@ -1,0 +1,1 @@
+"""vplayground_ros: a real-time rigid-body sandbox for ROS 2 and Foxglove."""

@@ -1,0 +1,72 @@
+"""Bodies as structure-of-arrays: one row (slot) per box, owned by the World.
+
+A namedtuple of numpy arrays is what the compiled kernels receive; it keeps the kernels' argument
+lists short and every field named. Slots of removed bodies are marked inactive and reused.
+"""
+from collections import namedtuple
+
+import numpy as np
+
+BodyArrays = namedtuple("BodyArrays", [
+    "active",                # slot holds a body
+    "position",              # (N, 3) centre of mass, world, m
+    "orientation",           # (N, 4) quaternion x, y, z, w, body -> world
+    "linear_velocity",       # (N, 3) m/s
+    "angular_velocity",      # (N, 3) rad/s, world frame
+    "mass",                  # (N,) kg (kept as given, so saving reproduces it exactly)
+    "inv_mass",              # (N,) 1/kg
+    "inv_inertia",           # (N, 3) inverse inertia tensor in the body frame (diagonal for a box)
+    "half_extents",          # (N, 3) m
+    "elasticity",            # (N,) coefficient of restitution
+    "static_friction",       # (N,)
+    "dynamic_friction",      # (N,)
+    "immovable",             # (N,) infinite mass, never moves
+    "allow_freezing",        # (N,)
+    "frozen",                # (N,) not simulated, static for others
+    "freeze_timer",          # (N,) seconds spent below the freezing thresholds
+    "static_indexed",        # (N,) the body sits in the rarely rebuilt static octree index
+    "external_impulse",      # (N, 3) N*s applied at the next step, then cleared (~/push)
+    "external_angular_impulse",  # (N, 3) N*m*s likewise
+    # Derived each step, for the solver:
+    "awake",                 # (N,) active, not frozen, not immovable: the bodies that move
+    "rotation",              # (N, 3, 3) from orientation
+    "solver_inv_mass",       # (N,) inv_mass of awake bodies, 0 for the others (static to all)
+    "inv_inertia_world",     # (N, 3, 3) R diag(inv_inertia) R^T of awake bodies, else 0
+    "pseudo_velocity",       # (N, 3) split-impulse position correction, m/s, this step only
+    "pseudo_angular_velocity",
+    "aabb_min", "aabb_max",  # (N, 3) bounds for the broad phase, grown by the step's motion
+    "octree_level",          # (N,) int64 octree level of the body's bounds
+])
+
+
+def allocate_bodies(capacity):
+    f = lambda *shape: np.zeros((capacity,) + shape)  # noqa: E731
+    b = lambda: np.zeros(capacity, dtype=np.bool_)  # noqa: E731
+    orientation = f(4)
+    orientation[:, 3] = 1.0
+    return BodyArrays(
+        active=b(), position=f(3), orientation=orientation, linear_velocity=f(3),
+        angular_velocity=f(3), mass=f(), inv_mass=f(), inv_inertia=f(3), half_extents=f(3),
+        elasticity=f(), static_friction=f(), dynamic_friction=f(), immovable=b(),
+        allow_freezing=b(), frozen=b(), freeze_timer=f(), static_indexed=b(),
+        external_impulse=f(3), external_angular_impulse=f(3), awake=b(), rotation=f(3, 3),
+        solver_inv_mass=f(), inv_inertia_world=f(3, 3), pseudo_velocity=f(3),
+        pseudo_angular_velocity=f(3), aabb_min=f(3), aabb_max=f(3),
+        octree_level=np.zeros(capacity, np.int64))
+
+
+def grow_bodies(bodies, capacity):
+    """A copy with room for `capacity` slots; existing slots keep their index."""
+    grown = allocate_bodies(capacity)
+    n = len(bodies.active)
+    for field, old in zip(BodyArrays._fields, bodies):
+        getattr(grown, field)[:n] = old
+    return grown
+
+
+def box_inverse_inertia(mass, half_extents):
+    """Inverse of the solid box's principal inertia m/12 (b^2 + c^2, ...), full edges a, b, c."""
+    size_sq = (2.0 * np.asarray(half_extents, dtype=float)) ** 2
+    inertia = mass / 12.0 * np.array((size_sq[1] + size_sq[2], size_sq[0] + size_sq[2],
+                                      size_sq[0] + size_sq[1]))
+    return 1.0 / inertia

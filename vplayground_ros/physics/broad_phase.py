@@ -1,0 +1,235 @@
+"""Broad phase: a linear (Morton-coded) octree over the world's root cube.
+
+Each object (a box's AABB, a mesh triangle's AABB) lives at the deepest level, at most
+`octree_depth`, whose cells are at least as large as the object, and so touches at most 2x2x2
+cells there. A cell is the key `level_offset(L) + morton(x, y, z)`; entries are kept sorted by
+key, so a cell's objects are one contiguous run, its ancestors are single keys and all of its
+descendants at a finer level are one contiguous key range: every query is a binary search.
+
+Three indexes, rebuilt at different rates:
+- moving: the awake bodies, rebuilt every step;
+- static: frozen and immovable bodies, rebuilt only when enough of them changed (bodies that
+  froze since wait in the moving index; woken ones are skipped by their `static_indexed` flag);
+- mesh: the playground's triangles, built once.
+Objects outside the root cube are clamped to its border cells: still correct, just less pruned.
+"""
+from collections import namedtuple
+
+import numpy as np
+from numba import njit
+
+from .constants import MAX_OCTREE_DEPTH
+
+OctreeIndex = namedtuple("OctreeIndex", [
+    "keys",          # (M,) int64 cell keys, sorted
+    "ids",           # (M,) int64 body slot or triangle index of each entry
+    "count",         # (1,) int64 entries in use
+    "level_mask",    # (1,) int64 bit L set when level L has entries
+])
+
+ID_BITS = 24  # entry ids (slots, triangles) below 16 M; keys stay below 2**32
+LEVEL_BITS = np.array([1 << level for level in range(MAX_OCTREE_DEPTH + 1)], dtype=np.int64)
+
+
+def allocate_index(capacity):
+    return OctreeIndex(np.zeros(capacity, np.int64), np.zeros(capacity, np.int64),
+                       np.zeros(1, np.int64), np.zeros(1, np.int64))
+
+
+BroadPhase = namedtuple("BroadPhase", [
+    "moving", "static",   # OctreeIndex of the moving bodies (per step) and of the resting ones
+    "moving_ids",         # (N,) scratch: slots in the moving index
+    "stamp", "scratch",   # (N,) scratch of the pair queries
+    "pair_a", "pair_b",   # (P,) candidate pairs
+    "pair_count",         # (1,) pairs found in the last step
+    "stale",              # (1,) static-index entries of bodies that have since woken or gone
+    "force_rebuild",      # (1,) bool: the World changed resting bodies between calls
+])
+
+# A box touches at most 2x2x2 cells of its level.
+MAX_CELLS_PER_OBJECT = 8
+
+
+def allocate_broad_phase(body_capacity, pair_capacity):
+    index_capacity = MAX_CELLS_PER_OBJECT * body_capacity
+    return BroadPhase(
+        moving=allocate_index(index_capacity), static=allocate_index(index_capacity),
+        moving_ids=np.zeros(body_capacity, np.int64), stamp=np.full(body_capacity, -1, np.int64),
+        scratch=np.zeros(body_capacity, np.int64), pair_a=np.zeros(pair_capacity, np.int64),
+        pair_b=np.zeros(pair_capacity, np.int64), pair_count=np.zeros(1, np.int64),
+        stale=np.zeros(1, np.int64), force_rebuild=np.ones(1, np.bool_))
+
+
+@njit(cache=True, nogil=True)
+def level_offset(level):
+    return ((1 << (3 * level)) - 1) // 7
+
+
+@njit(cache=True, nogil=True)
+def spread_bits(v):
+    """Inserts two zero bits after each of the low 10 bits of v (Morton interleave)."""
+    v &= 0x3FF
+    v = (v | (v << 16)) & 0x030000FF
+    v = (v | (v << 8)) & 0x0300F00F
+    v = (v | (v << 4)) & 0x030C30C3
+    v = (v | (v << 2)) & 0x09249249
+    return v
+
+
+@njit(cache=True, nogil=True)
+def morton(x, y, z):
+    return spread_bits(x) | (spread_bits(y) << 1) | (spread_bits(z) << 2)
+
+
+@njit(cache=True, nogil=True)
+def object_level(aabb_min, aabb_max, root_size, depth):
+    extent = max(aabb_max[0] - aabb_min[0], aabb_max[1] - aabb_min[1], aabb_max[2] - aabb_min[2])
+    level = 0
+    cell = root_size
+    while level < depth and cell * 0.5 >= extent:
+        cell *= 0.5
+        level += 1
+    return level
+
+
+@njit(cache=True, nogil=True)
+def cell_coordinate(value, origin, cell_size, cells):
+    c = int(np.floor((value - origin) / cell_size))
+    return min(max(c, 0), cells - 1)
+
+
+@njit(cache=True, nogil=True)
+def cell_box(aabb_min, aabb_max, level, root_min, root_size):
+    """Inclusive cell coordinate ranges (x0, x1, y0, y1, z0, z1) the AABB touches at `level`."""
+    cells = 1 << level
+    size = root_size / cells
+    return (cell_coordinate(aabb_min[0], root_min[0], size, cells),
+            cell_coordinate(aabb_max[0], root_min[0], size, cells),
+            cell_coordinate(aabb_min[1], root_min[1], size, cells),
+            cell_coordinate(aabb_max[1], root_min[1], size, cells),
+            cell_coordinate(aabb_min[2], root_min[2], size, cells),
+            cell_coordinate(aabb_max[2], root_min[2], size, cells))
+
+
+@njit(cache=True, nogil=True)
+def build_index(index, ids, aabb_min, aabb_max, levels, root_min, root_size):
+    """Indexes the objects `ids` (rows of aabb_min/aabb_max/levels). Returns False when the
+    index arrays are too small (the caller grows them and calls again)."""
+    n = 0
+    capacity = len(index.keys)
+    mask = 0
+    for k in range(len(ids)):
+        obj = ids[k]
+        level = levels[obj]
+        x0, x1, y0, y1, z0, z1 = cell_box(aabb_min[obj], aabb_max[obj], level, root_min, root_size)
+        base = level_offset(level)
+        mask |= 1 << level
+        for x in range(x0, x1 + 1):
+            for y in range(y0, y1 + 1):
+                for z in range(z0, z1 + 1):
+                    if n >= capacity:
+                        return False
+                    # key and id in one int64, so a plain sort orders by cell then object.
+                    index.keys[n] = ((base + morton(x, y, z)) << ID_BITS) | obj
+                    n += 1
+    packed = np.sort(index.keys[:n])
+    id_mask = (1 << ID_BITS) - 1
+    for k in range(n):
+        index.ids[k] = packed[k] & id_mask
+        index.keys[k] = packed[k] >> ID_BITS
+    index.count[0] = n
+    index.level_mask[0] = mask
+    return True
+
+
+@njit(cache=True, nogil=True)
+def key_run(index, key_lo, key_hi):
+    """Entries whose cell key lies in [key_lo, key_hi)."""
+    keys = index.keys[:index.count[0]]
+    return np.searchsorted(keys, key_lo), np.searchsorted(keys, key_hi)
+
+
+@njit(cache=True, nogil=True)
+def aabbs_overlap(min_a, max_a, min_b, max_b):
+    return (min_a[0] <= max_b[0] and min_b[0] <= max_a[0] and min_a[1] <= max_b[1]
+            and min_b[1] <= max_a[1] and min_a[2] <= max_b[2] and min_b[2] <= max_a[2])
+
+
+@njit(cache=True, nogil=True)
+def cell_query_range(level, code, other_level, finer_too):
+    """Key range at `other_level` that can hold objects overlapping cell (level, code): the
+    ancestor cell when coarser, every descendant when finer (only asked for when `finer_too`)."""
+    base = level_offset(other_level)
+    if other_level <= level:
+        ancestor = code >> (3 * (level - other_level))
+        return base + ancestor, base + ancestor + 1
+    if not finer_too:
+        return 0, 0
+    shift = 3 * (other_level - level)
+    return base + (code << shift), base + ((code + 1) << shift)
+
+
+@njit(cache=True, nogil=True)
+def query_index(index, level, box, finer_too, stamp, query_id, out):
+    """Objects of `index` in the cells `box` (from cell_box at `level`) and their ancestors (and
+    descendants when `finer_too`), each once: `stamp[obj] == query_id` marks it as seen.
+    Returns how many ids were written to `out`."""
+    x0, x1, y0, y1, z0, z1 = box
+    mask = index.level_mask[0]
+    n = 0
+    for x in range(x0, x1 + 1):
+        for y in range(y0, y1 + 1):
+            for z in range(z0, z1 + 1):
+                code = morton(x, y, z)
+                for other in range(len(LEVEL_BITS)):
+                    if not mask & LEVEL_BITS[other]:
+                        continue
+                    key_lo, key_hi = cell_query_range(level, code, other, finer_too)
+                    if key_lo == key_hi:
+                        continue
+                    start, end = key_run(index, key_lo, key_hi)
+                    for k in range(start, end):
+                        obj = index.ids[k]
+                        if stamp[obj] != query_id:
+                            stamp[obj] = query_id
+                            out[n] = obj
+                            n += 1
+    return n
+
+
+@njit(cache=True, nogil=True)
+def find_body_pairs(moving_ids, moving, static, aabb_min, aabb_max, levels, awake, static_indexed,
+                    root_min, root_size, stamp, scratch, pair_a, pair_b):
+    """Candidate body pairs whose AABBs overlap and at least one of which moves.
+
+    Every body of the moving index queries it at its own and coarser levels (same-level pairs
+    are reported by the lower slot, so each pair once) and queries the static index at every
+    level. Returns the pair count, or -1 when pair_a/pair_b are full."""
+    stamp[:] = -1
+    count = 0
+    capacity = len(pair_a)
+    for k in range(len(moving_ids)):
+        i = moving_ids[k]
+        level = levels[i]
+        box = cell_box(aabb_min[i], aabb_max[i], level, root_min, root_size)
+        n = query_index(moving, level, box, False, stamp, 2 * i, scratch)
+        for m in range(n):
+            j = scratch[m]
+            if j == i or (levels[j] == level and j < i) or not (awake[i] or awake[j]):
+                continue
+            if aabbs_overlap(aabb_min[i], aabb_max[i], aabb_min[j], aabb_max[j]):
+                if count >= capacity:
+                    return -1
+                pair_a[count], pair_b[count] = i, j
+                count += 1
+        if not awake[i]:
+            continue
+        n = query_index(static, level, box, True, stamp, 2 * i + 1, scratch)
+        for m in range(n):
+            j = scratch[m]
+            if static_indexed[j] and aabbs_overlap(aabb_min[i], aabb_max[i], aabb_min[j], aabb_max[j]):
+                if count >= capacity:
+                    return -1
+                pair_a[count], pair_b[count] = i, j
+                count += 1
+    return count

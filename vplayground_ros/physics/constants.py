@@ -1,0 +1,53 @@
+"""Tuning constants of the engine, in one place, each with what it trades off.
+
+Lengths in metres, speeds in m/s, times in seconds. None of these is a user setting: the 2008
+settings (steps per second, resolve iterations, octree depth, freezing thresholds) live in the
+scene's `settings` and keep their 2008 meaning.
+"""
+
+# Contacts are generated up to this far apart (plus the distance the bodies can close in one
+# step), so a resting contact exists before bodies touch and a fast body meets its contact before
+# it can pass through (speculative contacts). Larger costs solver rows; smaller lets bodies jitter.
+CONTACT_MARGIN = 0.02
+
+# Penetration allowed without correction. Correcting every micrometre makes resting contacts
+# flicker in and out; too much slop makes boxes visibly sink into each other.
+LINEAR_SLOP = 0.005
+
+# Fraction of the remaining penetration removed per step by the position (split-impulse) pass.
+# 1.0 would remove it at once and overshoot in stacks; lower leaves boxes sunk for longer.
+POSITION_CORRECTION = 0.2
+
+# Cap on the speed the position pass may use to push bodies apart, so a deep overlap (a body
+# spawned inside another) separates over a few steps instead of exploding.
+MAX_CORRECTION_SPEED = 2.0
+
+# Relative normal speeds below this do not bounce. Without it, the velocity that gravity adds in
+# a step would be reflected by elasticity and resting stacks would never come to rest.
+RESTITUTION_THRESHOLD = 0.2
+
+# A contact point slipping slower than this when a step begins is sticking: static friction
+# holds it. Faster, it slides with dynamic friction. Too low and resting boxes on slopes creep.
+STICKING_SPEED = 0.01
+
+# Separation-axis choice: an edge-edge axis must separate better than the best face axis by this
+# much before it wins; faces give 4-point manifolds and keep resting boxes from rocking.
+EDGE_AXIS_TOLERANCE = 0.005
+
+# Two manifold points (in the first body's frame) closer than this are the same contact from one
+# step to the next, so last step's impulse warm-starts this step's solve.
+WARM_START_MATCH_DISTANCE = 0.03
+
+# A frozen body is woken by a touching awake body whose contact-point speed exceeds this many
+# times the freezing linear speed threshold: a box sliding over a frozen pile wakes it, a box
+# merely resting on it does not.
+WAKE_SPEED_FACTOR = 2.0
+
+# A frozen body enters the (rarely rebuilt) static index once this many bodies wait for it, or a
+# fraction of the indexed ones; until then it is re-indexed each step like a moving body.
+STATIC_REINDEX_MIN_PENDING = 32
+STATIC_REINDEX_PENDING_FRACTION = 0.1
+
+# The octree never goes deeper than this, whatever `octree_depth` says: Morton codes of 10 bits
+# per axis fit comfortably in int64 keys together with their level offset.
+MAX_OCTREE_DEPTH = 10

@@ -1,0 +1,121 @@
+"""Contact points and manifolds of one step, and the warm start from the step before.
+
+A manifold is the set of (at most 4) points between two objects; its points are contiguous.
+`body_b` is a body slot, or GROUND / PLAYGROUND for the static world. Normals point from A to B,
+`depth` is penetration (negative: a speculative contact still that far apart).
+"""
+from collections import namedtuple
+
+import numpy as np
+from numba import njit
+
+from .constants import WARM_START_MATCH_DISTANCE
+
+GROUND = -1
+PLAYGROUND = -2
+
+Contacts = namedtuple("Contacts", [
+    "count",              # (1,) points in use
+    "body_a", "body_b",   # (K,) int64
+    "point",              # (K, 3) world, halfway between the surfaces
+    "normal",             # (K, 3) unit, from A to B
+    "depth",              # (K,) m
+    "local_a",            # (K, 3) the point in A's body frame: identity across steps
+    "r_a", "r_b",         # (K, 3) from the centres of mass to the point
+    "tangent1", "tangent2",
+    "mass_normal", "mass_tangent1", "mass_tangent2",  # (K,) effective masses of the rows
+    "restitution",        # (K,) pair elasticity
+    "friction_coefficient",  # (K,) pair static or dynamic coefficient, chosen per step
+    "approach_speed",     # (K,) normal velocity before the collision pass (negative: closing)
+    "collision_impulse", "collision_friction",  # (K,), (K, 2) accumulated in the collision pass
+    "impulse", "friction",  # (K,), (K, 2) accumulated in the contact pass (warm-started)
+    "friction_world",     # (K, 3) contact-pass friction impulse as a world vector, for next step
+    "position_impulse",   # (K,) split-impulse accumulator of the position pass
+    "manifold_count",     # (1,)
+    "manifold_start", "manifold_size", "manifold_a", "manifold_b",  # (M,)
+    "table_key", "table_manifold",  # open-addressing hash: pair key -> manifold, for warm start
+])
+
+
+def allocate_contacts(points, manifolds):
+    f = lambda *shape: np.zeros((points,) + shape)  # noqa: E731
+    i = lambda n: np.zeros(n, np.int64)  # noqa: E731
+    table = 1 << int(np.ceil(np.log2(2 * manifolds + 2)))
+    return Contacts(
+        count=i(1), body_a=i(points), body_b=i(points), point=f(3), normal=f(3), depth=f(),
+        local_a=f(3), r_a=f(3), r_b=f(3), tangent1=f(3), tangent2=f(3), mass_normal=f(),
+        mass_tangent1=f(), mass_tangent2=f(), restitution=f(), friction_coefficient=f(),
+        approach_speed=f(), collision_impulse=f(), collision_friction=f(2),
+        impulse=f(), friction=f(2), friction_world=f(3), position_impulse=f(),
+        manifold_count=i(1), manifold_start=i(manifolds), manifold_size=i(manifolds),
+        manifold_a=i(manifolds), manifold_b=i(manifolds),
+        table_key=np.full(table, -1, np.int64), table_manifold=i(table))
+
+
+@njit(cache=True, nogil=True)
+def pair_key(a, b):
+    """a is a body slot; b a body slot, GROUND, or -(3 + triangle) for a playground triangle."""
+    return a * (1 << 32) + (b + (1 << 31))
+
+
+@njit(cache=True, nogil=True)
+def table_slot(key, mask):
+    # Fibonacci hashing (2**64 / golden ratio, as a signed int64) spreads neighbouring keys.
+    return ((key * -7046029254386353131) >> 17) & mask
+
+
+@njit(cache=True, nogil=True)
+def index_manifolds(contacts):
+    """Fills the pair -> manifold hash table (read by the next step's warm start)."""
+    keys = contacts.table_key
+    keys[:] = -1
+    mask = len(keys) - 1
+    for m in range(contacts.manifold_count[0]):
+        key = pair_key(contacts.manifold_a[m], contacts.manifold_b[m])
+        slot = table_slot(key, mask)
+        while keys[slot] != -1:
+            slot = (slot + 1) & mask
+        keys[slot] = key
+        contacts.table_manifold[slot] = m
+
+
+@njit(cache=True, nogil=True)
+def find_manifold(contacts, a, b):
+    keys = contacts.table_key
+    mask = len(keys) - 1
+    key = pair_key(a, b)
+    slot = table_slot(key, mask)
+    while keys[slot] != -1:
+        if keys[slot] == key:
+            return contacts.table_manifold[slot]
+        slot = (slot + 1) & mask
+    return -1
+
+
+@njit(cache=True, nogil=True)
+def warm_start_from(previous, current):
+    """Copies last step's contact-pass impulses onto this step's points that are the same contact
+    (same pair, within WARM_START_MATCH_DISTANCE in A's frame). Stacks then start each solve
+    from nearly the answer, which the fixed iteration count alone could not reach."""
+    limit_sq = WARM_START_MATCH_DISTANCE * WARM_START_MATCH_DISTANCE
+    for m in range(current.manifold_count[0]):
+        start, size = current.manifold_start[m], current.manifold_size[m]
+        for c in range(start, start + size):
+            current.impulse[c] = 0.0
+            current.friction_world[c, :] = 0.0
+        old = find_manifold(previous, current.manifold_a[m], current.manifold_b[m])
+        if old < 0:
+            continue
+        old_start, old_size = previous.manifold_start[old], previous.manifold_size[old]
+        for c in range(start, start + size):
+            best, best_sq = -1, limit_sq
+            for o in range(old_start, old_start + old_size):
+                dx = current.local_a[c, 0] - previous.local_a[o, 0]
+                dy = current.local_a[c, 1] - previous.local_a[o, 1]
+                dz = current.local_a[c, 2] - previous.local_a[o, 2]
+                d_sq = dx * dx + dy * dy + dz * dz
+                if d_sq < best_sq:
+                    best, best_sq = o, d_sq
+            if best >= 0:
+                current.impulse[c] = previous.impulse[best]
+                current.friction_world[c, :] = previous.friction_world[best, :]

@@ -1,0 +1,330 @@
+"""Narrow phase: separating-axis tests and contact manifolds for box/box and box/ground.
+
+Box/box tests the 15 axes (3 face normals of each box, 9 edge crosses) and leaves at the first
+one that separates by more than the speculative margin. On a face axis the incident face of the
+other box is clipped against the reference face's side planes (up to 8 points), and the points
+are reduced to the 4 that keep the manifold's area; on an edge axis the two closest edge points
+give one contact. Points come out in `scratch_point`/`scratch_depth` with the A -> B normal.
+"""
+import numpy as np
+from numba import njit
+
+from .constants import CONTACT_MARGIN, EDGE_AXIS_TOLERANCE
+from .contact import GROUND
+from .integrate import speculative_reach
+
+MAX_CLIP_POINTS = 8
+FACE_AXIS_TOLERANCE = 1e-3  # B's face must beat A's by this to become the reference (no flip-flop)
+
+
+@njit(cache=True, nogil=True)
+def box_box_axis(pa, ra, ha, pb, rb, hb, margin):
+    """Best separating axis: (kind 0 face of A / 1 face of B / 2 edges / -1 separated,
+    index (face axis, or 3*i + j for edge a_i x b_j), separation, normal A -> B)."""
+    d0, d1, d2 = pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]
+    # c[i, j] = a_i . b_j; t = d in A's frame
+    c = np.empty((3, 3))
+    abs_c = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            v = ra[0, i] * rb[0, j] + ra[1, i] * rb[1, j] + ra[2, i] * rb[2, j]
+            c[i, j] = v
+            abs_c[i, j] = abs(v) + 1e-9  # parallel edges give near-zero crosses, never 0/0
+    t = (d0 * ra[0, 0] + d1 * ra[1, 0] + d2 * ra[2, 0],
+         d0 * ra[0, 1] + d1 * ra[1, 1] + d2 * ra[2, 1],
+         d0 * ra[0, 2] + d1 * ra[1, 2] + d2 * ra[2, 2])
+
+    best_a, best_a_axis = -np.inf, -1
+    for i in range(3):
+        s = abs(t[i]) - (ha[i] + hb[0] * abs_c[i, 0] + hb[1] * abs_c[i, 1] + hb[2] * abs_c[i, 2])
+        if s > margin:
+            return -1, 0, s, (0.0, 0.0, 0.0)
+        if s > best_a:
+            best_a, best_a_axis = s, i
+    best_b, best_b_axis = -np.inf, -1
+    for j in range(3):
+        tb = d0 * rb[0, j] + d1 * rb[1, j] + d2 * rb[2, j]
+        s = abs(tb) - (hb[j] + ha[0] * abs_c[0, j] + ha[1] * abs_c[1, j] + ha[2] * abs_c[2, j])
+        if s > margin:
+            return -1, 0, s, (0.0, 0.0, 0.0)
+        if s > best_b:
+            best_b, best_b_axis = s, j
+    best_e, best_e_axis = -np.inf, -1
+    for i in range(3):
+        i1, i2 = (i + 1) % 3, (i + 2) % 3
+        for j in range(3):
+            j1, j2 = (j + 1) % 3, (j + 2) % 3
+            length = np.sqrt(max(1.0 - c[i, j] * c[i, j], 0.0))
+            if length < 1e-5:
+                continue  # parallel edges: the face axes already cover this direction
+            radius_a = ha[i1] * abs_c[i2, j] + ha[i2] * abs_c[i1, j]
+            radius_b = hb[j1] * abs_c[i, j2] + hb[j2] * abs_c[i, j1]
+            s = (abs(t[i2] * c[i1, j] - t[i1] * c[i2, j]) - radius_a - radius_b) / length
+            if s > margin:
+                return -1, 0, s, (0.0, 0.0, 0.0)
+            if s > best_e:
+                best_e, best_e_axis = s, 3 * i + j
+
+    if best_e > max(best_a, best_b) + EDGE_AXIS_TOLERANCE:
+        i, j = best_e_axis // 3, best_e_axis % 3
+        n0 = ra[1, i] * rb[2, j] - ra[2, i] * rb[1, j]
+        n1 = ra[2, i] * rb[0, j] - ra[0, i] * rb[2, j]
+        n2 = ra[0, i] * rb[1, j] - ra[1, i] * rb[0, j]
+        inv = 1.0 / np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+        if n0 * d0 + n1 * d1 + n2 * d2 < 0.0:
+            inv = -inv
+        return 2, best_e_axis, best_e, (n0 * inv, n1 * inv, n2 * inv)
+    if best_b > best_a + FACE_AXIS_TOLERANCE:
+        j = best_b_axis
+        sign = 1.0 if d0 * rb[0, j] + d1 * rb[1, j] + d2 * rb[2, j] >= 0.0 else -1.0
+        return 1, j, best_b, (rb[0, j] * sign, rb[1, j] * sign, rb[2, j] * sign)
+    i = best_a_axis
+    sign = 1.0 if t[i] >= 0.0 else -1.0
+    return 0, i, best_a, (ra[0, i] * sign, ra[1, i] * sign, ra[2, i] * sign)
+
+
+@njit(cache=True, nogil=True)
+def clip_polygon(src, n_src, dst, axis, limit, sign):
+    """Sutherland-Hodgman against the half-space sign * p[axis] <= limit. Returns points kept."""
+    n = 0
+    if n_src == 0:
+        return 0
+    prev = n_src - 1
+    prev_d = sign * src[prev, axis] - limit
+    for k in range(n_src):
+        d = sign * src[k, axis] - limit
+        if (prev_d <= 0.0) != (d <= 0.0):
+            f = prev_d / (prev_d - d)
+            for e in range(3):
+                dst[n, e] = src[prev, e] + f * (src[k, e] - src[prev, e])
+            n += 1
+        if d <= 0.0:
+            for e in range(3):
+                dst[n, e] = src[k, e]
+            n += 1
+        prev, prev_d = k, d
+    return n
+
+
+@njit(cache=True, nogil=True)
+def face_manifold(pr, rr, hr, face_axis, pi, ri, hi, normal, margin, poly_a, poly_b, out_point,
+                  out_depth):
+    """Clips the incident box's face against the reference box's face whose outward normal is
+    `normal` (pointing at the incident box). Writes points (world, halfway between the faces) and
+    depths; returns their count."""
+    # Incident face: the face of the incident box most anti-parallel to the reference normal.
+    best, inc_axis, inc_sign = -1.0, 0, 1.0
+    for k in range(3):
+        d = ri[0, k] * normal[0] + ri[1, k] * normal[1] + ri[2, k] * normal[2]
+        if abs(d) > best:
+            best, inc_axis = abs(d), k
+            inc_sign = -1.0 if d > 0.0 else 1.0
+    k1, k2 = (inc_axis + 1) % 3, (inc_axis + 2) % 3
+    u_axis, v_axis = (face_axis + 1) % 3, (face_axis + 2) % 3
+    face_center = (pr[0] + normal[0] * hr[face_axis], pr[1] + normal[1] * hr[face_axis],
+                   pr[2] + normal[2] * hr[face_axis])
+    # The incident face's corners, in the reference face frame (u, v, normal).
+    for corner in range(4):
+        su = 1.0 if corner == 0 or corner == 3 else -1.0
+        sv = 1.0 if corner < 2 else -1.0
+        w0 = pi[0] + inc_sign * ri[0, inc_axis] * hi[inc_axis] + su * ri[0, k1] * hi[k1] + sv * ri[0, k2] * hi[k2]
+        w1 = pi[1] + inc_sign * ri[1, inc_axis] * hi[inc_axis] + su * ri[1, k1] * hi[k1] + sv * ri[1, k2] * hi[k2]
+        w2 = pi[2] + inc_sign * ri[2, inc_axis] * hi[inc_axis] + su * ri[2, k1] * hi[k1] + sv * ri[2, k2] * hi[k2]
+        w0, w1, w2 = w0 - face_center[0], w1 - face_center[1], w2 - face_center[2]
+        poly_a[corner, 0] = w0 * rr[0, u_axis] + w1 * rr[1, u_axis] + w2 * rr[2, u_axis]
+        poly_a[corner, 1] = w0 * rr[0, v_axis] + w1 * rr[1, v_axis] + w2 * rr[2, v_axis]
+        poly_a[corner, 2] = w0 * normal[0] + w1 * normal[1] + w2 * normal[2]
+    n = clip_polygon(poly_a, 4, poly_b, 0, hr[u_axis], 1.0)
+    n = clip_polygon(poly_b, n, poly_a, 0, hr[u_axis], -1.0)
+    n = clip_polygon(poly_a, n, poly_b, 1, hr[v_axis], 1.0)
+    n = clip_polygon(poly_b, n, poly_a, 1, hr[v_axis], -1.0)
+    kept = 0
+    for k in range(n):
+        x, y, z = poly_a[k, 0], poly_a[k, 1], poly_a[k, 2]
+        if z > margin:
+            continue
+        half = 0.5 * z  # halfway between the incident point and the reference plane
+        for e in range(3):
+            out_point[kept, e] = face_center[e] + x * rr[e, u_axis] + y * rr[e, v_axis] + half * normal[e]
+        out_depth[kept] = -z
+        kept += 1
+    return kept
+
+
+@njit(cache=True, nogil=True)
+def edge_contact(pa, ra, ha, pb, rb, hb, axis_index, normal, out_point):
+    """Closest points of the two edges realising an edge-edge axis; writes their midpoint."""
+    i, j = axis_index // 3, axis_index % 3
+    ea = np.empty(3)
+    eb = np.empty(3)
+    for e in range(3):
+        ea[e] = pa[e]
+        eb[e] = pb[e]
+    for k in range(3):
+        if k != i:
+            s = ha[k] if ra[0, k] * normal[0] + ra[1, k] * normal[1] + ra[2, k] * normal[2] > 0.0 else -ha[k]
+            for e in range(3):
+                ea[e] += ra[e, k] * s
+        if k != j:
+            s = -hb[k] if rb[0, k] * normal[0] + rb[1, k] * normal[1] + rb[2, k] * normal[2] > 0.0 else hb[k]
+            for e in range(3):
+                eb[e] += rb[e, k] * s
+    # Lines ea + s*da and eb + t*db, closest parameters clamped to the edges.
+    da0, da1, da2 = ra[0, i], ra[1, i], ra[2, i]
+    db0, db1, db2 = rb[0, j], rb[1, j], rb[2, j]
+    r0, r1, r2 = ea[0] - eb[0], ea[1] - eb[1], ea[2] - eb[2]
+    b = da0 * db0 + da1 * db1 + da2 * db2
+    d = da0 * r0 + da1 * r1 + da2 * r2
+    f = db0 * r0 + db1 * r1 + db2 * r2
+    denom = 1.0 - b * b
+    s = (b * f - d) / denom if denom > 1e-12 else 0.0
+    s = min(max(s, -ha[i]), ha[i])
+    t = min(max(b * s + f, -hb[j]), hb[j])
+    for e in range(3):
+        out_point[0, e] = 0.5 * (ea[e] + s * ra[e, i] + eb[e] + t * rb[e, j])
+
+
+@njit(cache=True, nogil=True)
+def reduce_manifold(points, depths, n, normal, keep):
+    """Indices of at most 4 points: the deepest, the farthest from it, then the two spanning the
+    largest triangles on either side, so the kept quad supports the body like the full set."""
+    if n <= 4:
+        for k in range(n):
+            keep[k] = k
+        return n
+    first = 0
+    for k in range(1, n):
+        if depths[k] > depths[first]:
+            first = k
+    second, best = first, -1.0
+    for k in range(n):
+        d = ((points[k, 0] - points[first, 0]) ** 2 + (points[k, 1] - points[first, 1]) ** 2
+             + (points[k, 2] - points[first, 2]) ** 2)
+        if d > best:
+            second, best = k, d
+    ex, ey, ez = (points[second, 0] - points[first, 0], points[second, 1] - points[first, 1],
+                  points[second, 2] - points[first, 2])
+    third, fourth, most, least = -1, -1, 0.0, 0.0
+    for k in range(n):
+        if k == first or k == second:
+            continue
+        px, py, pz = points[k, 0] - points[first, 0], points[k, 1] - points[first, 1], points[k, 2] - points[first, 2]
+        area = (ey * pz - ez * py) * normal[0] + (ez * px - ex * pz) * normal[1] + (ex * py - ey * px) * normal[2]
+        if third < 0 or area > most:
+            third, most = k, area
+        if fourth < 0 or area < least:
+            fourth, least = k, area
+    keep[0], keep[1] = first, second
+    count = 2
+    if third >= 0:
+        keep[count] = third
+        count += 1
+    if fourth >= 0 and fourth != third:
+        keep[count] = fourth
+        count += 1
+    return count
+
+
+@njit(cache=True, nogil=True)
+def box_box(pa, ra, ha, pb, rb, hb, margin, poly_a, poly_b, out_point, out_depth):
+    """Manifold of boxes A and B: returns (point count, normal A -> B)."""
+    kind, index, separation, normal = box_box_axis(pa, ra, ha, pb, rb, hb, margin)
+    if kind < 0:
+        return 0, normal
+    if kind == 2:
+        edge_contact(pa, ra, ha, pb, rb, hb, index, normal, out_point)
+        out_depth[0] = -separation
+        return 1, normal
+    if kind == 0:
+        n = face_manifold(pa, ra, ha, index, pb, rb, hb, normal, margin, poly_a, poly_b,
+                          out_point, out_depth)
+        return n, normal
+    # B's face is the reference: clip with the normal pointing from B to A, then flip it back.
+    flipped = (-normal[0], -normal[1], -normal[2])
+    n = face_manifold(pb, rb, hb, index, pa, ra, ha, flipped, margin, poly_a, poly_b,
+                      out_point, out_depth)
+    return n, normal
+
+
+@njit(cache=True, nogil=True)
+def box_ground(p, r, h, height, margin, out_point, out_depth):
+    """Corners of the box within `margin` of the plane z = height; points halfway to the plane."""
+    n = 0
+    for corner in range(8):
+        sx = 1.0 if corner & 1 else -1.0
+        sy = 1.0 if corner & 2 else -1.0
+        sz = 1.0 if corner & 4 else -1.0
+        z = p[2] + sx * r[2, 0] * h[0] + sy * r[2, 1] * h[1] + sz * r[2, 2] * h[2]
+        gap = z - height
+        if gap > margin:
+            continue
+        out_point[n, 0] = p[0] + sx * r[0, 0] * h[0] + sy * r[0, 1] * h[1] + sz * r[0, 2] * h[2]
+        out_point[n, 1] = p[1] + sx * r[1, 0] * h[0] + sy * r[1, 1] * h[1] + sz * r[1, 2] * h[2]
+        out_point[n, 2] = z - 0.5 * gap
+        out_depth[n] = -gap
+        n += 1
+    return n
+
+
+@njit(cache=True, nogil=True)
+def emit_manifold(contacts, bodies, a, b, key_b, normal, scratch_point, scratch_depth, n, keep):
+    """Appends the (reduced) manifold of a and b. key_b identifies the other object in the warm
+    start table (a slot, GROUND, or a playground triangle). False when the buffers are full."""
+    if n == 0:
+        return True
+    kept = reduce_manifold(scratch_point, scratch_depth, n, normal, keep)
+    start, m = contacts.count[0], contacts.manifold_count[0]
+    if start + kept > len(contacts.body_a) or m >= len(contacts.manifold_start):
+        return False
+    r, p = bodies.rotation[a], bodies.position[a]
+    for k in range(kept):
+        c = start + k
+        src = keep[k]
+        contacts.body_a[c], contacts.body_b[c] = a, b
+        for e in range(3):
+            contacts.point[c, e] = scratch_point[src, e]
+            contacts.normal[c, e] = normal[e]
+        contacts.depth[c] = scratch_depth[src]
+        dx, dy, dz = scratch_point[src, 0] - p[0], scratch_point[src, 1] - p[1], scratch_point[src, 2] - p[2]
+        for e in range(3):
+            contacts.local_a[c, e] = r[0, e] * dx + r[1, e] * dy + r[2, e] * dz
+    contacts.manifold_start[m], contacts.manifold_size[m] = start, kept
+    contacts.manifold_a[m], contacts.manifold_b[m] = a, key_b
+    contacts.count[0] = start + kept
+    contacts.manifold_count[0] = m + 1
+    return True
+
+
+@njit(cache=True, nogil=True)
+def collide(contacts, bodies, pair_a, pair_b, pair_count, ground_enabled, ground_height, dt):
+    """Manifolds of every candidate pair and of every awake body with the ground. Returns False
+    when the contact buffers are full (nothing of the step has been applied yet)."""
+    contacts.count[0] = 0
+    contacts.manifold_count[0] = 0
+    poly_a = np.empty((MAX_CLIP_POINTS, 3))
+    poly_b = np.empty((MAX_CLIP_POINTS, 3))
+    scratch_point = np.empty((MAX_CLIP_POINTS, 3))
+    scratch_depth = np.empty(MAX_CLIP_POINTS)
+    keep = np.empty(4, np.int64)
+    for k in range(pair_count):
+        a, b = pair_a[k], pair_b[k]
+        if not bodies.awake[a]:
+            a, b = b, a  # the moving body first: the ground-contact code and solver expect it
+        margin = CONTACT_MARGIN + speculative_reach(bodies, a, dt) + speculative_reach(bodies, b, dt)
+        n, normal = box_box(bodies.position[a], bodies.rotation[a], bodies.half_extents[a],
+                            bodies.position[b], bodies.rotation[b], bodies.half_extents[b],
+                            margin, poly_a, poly_b, scratch_point, scratch_depth)
+        if not emit_manifold(contacts, bodies, a, b, b, normal, scratch_point, scratch_depth, n, keep):
+            return False
+    if ground_enabled:
+        down = (0.0, 0.0, -1.0)
+        for i in range(len(bodies.active)):
+            if not bodies.awake[i] or bodies.aabb_min[i, 2] > ground_height + 0.5 * CONTACT_MARGIN:
+                continue
+            margin = CONTACT_MARGIN + speculative_reach(bodies, i, dt)
+            n = box_ground(bodies.position[i], bodies.rotation[i], bodies.half_extents[i],
+                           ground_height, margin, scratch_point, scratch_depth)
+            if not emit_manifold(contacts, bodies, i, GROUND, GROUND, down, scratch_point,
+                                 scratch_depth, n, keep):
+                return False
+    return True

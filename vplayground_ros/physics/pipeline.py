@@ -1,0 +1,136 @@
+"""The step pipeline: one compiled call runs many whole steps. Read `step_world` top to bottom to
+read the physics; each stage lives in the module named after it."""
+from collections import namedtuple
+
+import numpy as np
+from numba import njit
+
+from .broad_phase import build_index, find_body_pairs
+from .constants import STATIC_REINDEX_MIN_PENDING, STATIC_REINDEX_PENDING_FRACTION
+from .contact import index_manifolds, warm_start_from
+from .contact_solver import (collision_pass, contact_pass, prepare_contacts, shock_propagation,
+                             warm_start)
+from .freezing import update_freezing, wake_touched
+from .integrate import integrate_positions, integrate_velocities, update_body
+from .narrow_phase import collide
+
+Settings = namedtuple("Settings", [
+    "gravity", "dt", "resolve_iterations", "octree_depth",
+    "freezing_enabled", "freezing_time", "freezing_linear_speed", "freezing_angular_speed",
+    "ground_enabled", "ground_height", "ground_material",  # (elasticity, static, dynamic)
+    "root_min", "root_size",  # the octree's root cube
+])
+
+# step_world's status: why it returned before doing every step.
+DONE, GROW_PAIRS, GROW_CONTACTS, GROW_INDEX = 0, 1, 2, 3
+
+# step_world's counters, summed over its steps (the caller zeroes them).
+STAT_WOKEN, STAT_FROZEN, STAT_PAIRS, STAT_POINTS = 0, 1, 2, 3
+
+
+@njit(cache=True, nogil=True)
+def rebuild_static_index(bodies, broad, settings):
+    """Indexes every resting (frozen or immovable) body. False when the index is too small."""
+    ids = np.nonzero(bodies.active & ~bodies.awake)[0]
+    if not build_index(broad.static, ids, bodies.aabb_min, bodies.aabb_max, bodies.octree_level,
+                       settings.root_min, settings.root_size):
+        return False
+    bodies.static_indexed[:] = False
+    bodies.static_indexed[ids] = True
+    broad.stale[0] = 0
+    broad.force_rebuild[0] = False
+    return True
+
+
+@njit(cache=True, nogil=True)
+def static_index_outdated(bodies, broad):
+    indexed = 0
+    pending = 0
+    for i in range(len(bodies.active)):
+        if bodies.static_indexed[i]:
+            indexed += 1
+        elif bodies.active[i] and not bodies.awake[i]:
+            pending += 1
+    limit = max(STATIC_REINDEX_MIN_PENDING, int(STATIC_REINDEX_PENDING_FRACTION * indexed))
+    return broad.force_rebuild[0] or pending >= limit or broad.stale[0] >= limit
+
+
+@njit(cache=True, nogil=True)
+def detect(bodies, broad, contacts, settings):
+    """Broad phase then narrow phase for the current positions. Returns a status."""
+    s = settings
+    moving_count = 0
+    for i in range(len(bodies.active)):
+        if bodies.active[i] and not bodies.static_indexed[i]:
+            broad.moving_ids[moving_count] = i
+            moving_count += 1
+    moving_ids = broad.moving_ids[:moving_count]
+    if not build_index(broad.moving, moving_ids, bodies.aabb_min, bodies.aabb_max,
+                       bodies.octree_level, s.root_min, s.root_size):
+        return GROW_INDEX
+    pairs = find_body_pairs(moving_ids, broad.moving, broad.static, bodies.aabb_min,
+                            bodies.aabb_max, bodies.octree_level, bodies.awake,
+                            bodies.static_indexed, s.root_min, s.root_size, broad.stamp,
+                            broad.scratch, broad.pair_a, broad.pair_b)
+    if pairs < 0:
+        return GROW_PAIRS
+    broad.pair_count[0] = pairs
+    if not collide(contacts, bodies, broad.pair_a, broad.pair_b, pairs, s.ground_enabled,
+                   s.ground_height, s.dt):
+        return GROW_CONTACTS
+    return DONE
+
+
+@njit(cache=True, nogil=True)
+def step_world(steps, bodies, settings, broad, previous, current, stats):
+    """Runs up to `steps` steps. Returns (steps done, status). The contact buffers swap every
+    step: after an odd number of steps the newest contacts are in the buffer passed as
+    `current`, else in the one passed as `previous`. A status other than DONE means a buffer was
+    too small; that step has not been applied and the caller grows the buffer and goes on."""
+    s = settings
+    for done in range(steps):
+        # 1. Derived state: rotations, solver masses, broad-phase bounds.
+        for i in range(len(bodies.active)):
+            if bodies.active[i]:
+                update_body(bodies, i, s.dt, s.root_size, s.octree_depth)
+        if static_index_outdated(bodies, broad) and not rebuild_static_index(bodies, broad, s):
+            return done, GROW_INDEX
+        # 2. Collision detection (octree broad phase, SAT narrow phase) at the current positions,
+        #    with speculative margins covering this step's motion.
+        status = detect(bodies, broad, current, s)
+        if status != DONE:
+            return done, status
+        # 3. Freezing: sleepers touched by moving bodies wake, and are detected again with their
+        #    own contacts so they do not sink for a step.
+        woken = wake_touched(current, bodies, s.freezing_linear_speed)
+        if woken > 0:
+            for i in range(len(bodies.active)):
+                if bodies.active[i]:
+                    update_body(bodies, i, s.dt, s.root_size, s.octree_depth)
+            broad.stale[0] += woken
+            status = detect(bodies, broad, current, s)
+            if status != DONE:
+                return done, status
+        # 4. Collision pass with the pre-step velocities and the bodies' elasticity.
+        warm_start_from(previous, current)
+        prepare_contacts(current, bodies, s.ground_material)
+        collision_pass(current, bodies, s.resolve_iterations, s.dt)
+        # 5. Velocity update with external forces.
+        integrate_velocities(bodies, s.gravity, s.dt)
+        # 6. Contact pass: zero elasticity, twice the iterations, split-impulse penetration fix,
+        #    then shock propagation up the stacks.
+        warm_start(current, bodies)
+        contact_pass(current, bodies, 2 * s.resolve_iterations, s.dt)
+        shock_propagation(current, bodies, s.gravity, s.dt)
+        # 7. Positions from velocities.
+        integrate_positions(bodies, s.dt)
+        # 8. Freezing of bodies that have been at rest long enough.
+        frozen_now = update_freezing(bodies, s.freezing_enabled, s.freezing_time,
+                                     s.freezing_linear_speed, s.freezing_angular_speed, s.dt)
+        index_manifolds(current)
+        stats[STAT_WOKEN] += woken
+        stats[STAT_FROZEN] += frozen_now
+        stats[STAT_PAIRS] += broad.pair_count[0]
+        stats[STAT_POINTS] += current.count[0]
+        previous, current = current, previous
+    return steps, DONE

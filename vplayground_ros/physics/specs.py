@@ -1,0 +1,196 @@
+"""Validation of the SPEC 3 schema pieces the engine takes: settings, ground, body specs.
+
+Every check names the key path (`bodies[3].size[1]`) and the problem; callers prefix the file.
+Validators return normalised plain-Python values and never touch a World, so a failure leaves
+everything as it was.
+"""
+import math
+import re
+
+NAME_PATTERN = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]{0,63}$")
+
+DEFAULT_SETTINGS = {
+    "gravity": [0.0, 0.0, -9.81],
+    "steps_per_second": 128,
+    "resolve_iterations": 5,
+    "octree_depth": 5,
+    "freezing": {"enabled": True, "time": 0.5, "linear_speed": 0.05, "angular_speed": 0.05},
+}
+DEFAULT_GROUND = {"height": 0.0, "elasticity": 0.1, "static_friction": 0.8, "dynamic_friction": 0.6}
+DEFAULT_DENSITY = 500.0
+BODY_DEFAULTS = {
+    "shape": "box", "size": [1.0, 1.0, 1.0], "position": [0.0, 0.0, 0.0],
+    "linear_velocity": [0.0, 0.0, 0.0], "angular_velocity": [0.0, 0.0, 0.0],
+    "elasticity": 0.2, "static_friction": 0.6, "dynamic_friction": 0.4,
+    "immovable": False, "allow_freezing": True, "frozen": False,
+}
+MAX_FRICTION = 10.0
+MAX_SIZE = 1.0e4       # m: larger boxes break the octree's and the solver's scales
+MAX_COORDINATE = 1.0e6  # m
+MAX_SPEED = 1.0e4      # m/s, rad/s
+
+
+class SpecError(ValueError):
+    """A ValueError whose message starts with the key path of the bad value."""
+
+    def __init__(self, path, problem):
+        self.path, self.problem = path, problem
+        super().__init__(f"{path}: {problem}" if path else problem)
+
+
+def child(path, key):
+    if isinstance(key, int):
+        return f"{path}[{key}]"
+    return f"{path}.{key}" if path else str(key)
+
+
+def _is_number(value):
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def number(value, path, low=-math.inf, high=math.inf, low_open=False):
+    if not _is_number(value):
+        raise SpecError(path, f"expected a number, got {type(value).__name__} {value!r:.40}")
+    value = float(value)
+    if not math.isfinite(value):
+        raise SpecError(path, f"must be finite, got {value}")
+    if value < low or (low_open and value == low):
+        raise SpecError(path, f"must be {'>' if low_open else '>='} {low:g}, got {value:g}")
+    if value > high:
+        raise SpecError(path, f"must be <= {high:g}, got {value:g}")
+    return value
+
+
+def integer(value, path, low, high):
+    if isinstance(value, float) and value.is_integer():
+        value = int(value)
+    if not isinstance(value, int) or isinstance(value, bool):
+        raise SpecError(path, f"expected an integer, got {type(value).__name__} {value!r:.40}")
+    if not low <= value <= high:
+        raise SpecError(path, f"must be between {low} and {high}, got {value}")
+    return value
+
+
+def boolean(value, path):
+    if not isinstance(value, bool):
+        raise SpecError(path, f"expected true or false, got {type(value).__name__} {value!r:.40}")
+    return value
+
+
+def vector(value, path, length, low=-math.inf, high=math.inf, low_open=False):
+    if not isinstance(value, (list, tuple)):
+        raise SpecError(path, f"expected a list of {length} numbers, got {type(value).__name__}")
+    if len(value) != length:
+        raise SpecError(path, f"expected {length} numbers, got {len(value)}")
+    return [number(v, child(path, k), low, high, low_open) for k, v in enumerate(value)]
+
+
+def mapping(value, path, allowed):
+    if not isinstance(value, dict):
+        raise SpecError(path, f"expected a mapping, got {type(value).__name__}")
+    for key in value:
+        if key not in allowed:
+            raise SpecError(child(path, key), f"unknown key (allowed: {', '.join(sorted(allowed))})")
+    return value
+
+
+def name(value, path):
+    if not isinstance(value, str):
+        raise SpecError(path, f"expected a string, got {type(value).__name__}")
+    if not NAME_PATTERN.match(value):
+        raise SpecError(path, f"invalid name {value[:80]!r}: 1-64 characters of letters, digits, "
+                              "'_', '-', '.', starting with a letter or '_'")
+    return value
+
+
+def quaternion(value, path):
+    q = vector(value, path, 4, -1.0e3, 1.0e3)
+    length = math.sqrt(sum(v * v for v in q))
+    if length < 1e-6:
+        raise SpecError(path, "quaternion has zero length")
+    return [v / length for v in q]
+
+
+def validate_settings(raw, path="settings"):
+    """Settings merged over the defaults (a partial mapping changes only its keys)."""
+    raw = {} if raw is None else raw
+    mapping(raw, path, DEFAULT_SETTINGS)
+    out = {**DEFAULT_SETTINGS, "freezing": dict(DEFAULT_SETTINGS["freezing"])}
+    if "gravity" in raw:
+        out["gravity"] = vector(raw["gravity"], child(path, "gravity"), 3, -1.0e3, 1.0e3)
+    if "steps_per_second" in raw:
+        out["steps_per_second"] = integer(raw["steps_per_second"], child(path, "steps_per_second"), 1, 10000)
+    if "resolve_iterations" in raw:
+        out["resolve_iterations"] = integer(raw["resolve_iterations"], child(path, "resolve_iterations"), 1, 100)
+    if "octree_depth" in raw:
+        out["octree_depth"] = integer(raw["octree_depth"], child(path, "octree_depth"), 1, 10)
+    if "freezing" in raw:
+        fpath = child(path, "freezing")
+        freezing = mapping(raw["freezing"], fpath, DEFAULT_SETTINGS["freezing"])
+        if "enabled" in freezing:
+            out["freezing"]["enabled"] = boolean(freezing["enabled"], child(fpath, "enabled"))
+        for key in ("time", "linear_speed", "angular_speed"):
+            if key in freezing:
+                out["freezing"][key] = number(freezing[key], child(fpath, key), 0.0, 1.0e6)
+    return out
+
+
+def validate_ground(raw, path="ground"):
+    """None (no ground plane) or the ground's height and material over the defaults."""
+    if raw is None:
+        return None
+    mapping(raw, path, DEFAULT_GROUND)
+    out = dict(DEFAULT_GROUND)
+    if "height" in raw:
+        out["height"] = number(raw["height"], child(path, "height"), -MAX_COORDINATE, MAX_COORDINATE)
+    if "elasticity" in raw:
+        out["elasticity"] = number(raw["elasticity"], child(path, "elasticity"), 0.0, 1.0)
+    for key in ("static_friction", "dynamic_friction"):
+        if key in raw:
+            out[key] = number(raw[key], child(path, key), 0.0, MAX_FRICTION)
+    return out
+
+
+BODY_KEYS = {"name", "shape", "size", "position", "rpy", "quaternion", "linear_velocity",
+             "angular_velocity", "density", "mass", "elasticity", "static_friction",
+             "dynamic_friction", "immovable", "allow_freezing", "frozen"}
+
+
+def validate_body_fields(raw, path, allowed=BODY_KEYS):
+    """The given keys of a body spec, checked and normalised (no defaults filled in)."""
+    mapping(raw, path, allowed)
+    out = {}
+    for key, value in raw.items():
+        p = child(path, key)
+        if key == "name":
+            out[key] = name(value, p)
+        elif key == "shape":
+            if value != "box":
+                raise SpecError(p, f"unsupported shape {value!r:.40} (supported: box)")
+            out[key] = value
+        elif key == "size":
+            out[key] = vector(value, p, 3, 0.0, MAX_SIZE, low_open=True)
+        elif key == "position":
+            out[key] = vector(value, p, 3, -MAX_COORDINATE, MAX_COORDINATE)
+        elif key == "rpy":
+            out[key] = vector(value, p, 3, -1.0e3, 1.0e3)
+        elif key == "quaternion":
+            out[key] = quaternion(value, p)
+        elif key in ("linear_velocity", "angular_velocity"):
+            out[key] = vector(value, p, 3, -MAX_SPEED, MAX_SPEED)
+        elif key in ("density", "mass"):
+            out[key] = number(value, p, 0.0, 1.0e12, low_open=True)
+        elif key == "elasticity":
+            out[key] = number(value, p, 0.0, 1.0)
+        elif key in ("static_friction", "dynamic_friction"):
+            out[key] = number(value, p, 0.0, MAX_FRICTION)
+        else:
+            out[key] = boolean(value, p)
+    if "rpy" in out and "quaternion" in out:
+        raise SpecError(path, "give either rpy or quaternion, not both")
+    return out
+
+
+def validate_body(raw, path="body"):
+    """A complete body spec: the given keys over BODY_DEFAULTS (name stays optional)."""
+    return {**BODY_DEFAULTS, **validate_body_fields(raw, path)}

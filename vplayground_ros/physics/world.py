@@ -1,0 +1,398 @@
+"""The World: owns the body arrays, maps names to slots, and steps the compiled pipeline.
+
+Everything here is Python bookkeeping between steps (adding, editing, removing bodies, growing
+buffers); the physics runs inside `pipeline.step_world`, many steps per call.
+"""
+import heapq
+import math
+
+import numpy as np
+
+from . import specs
+from .bodies import allocate_bodies, box_inverse_inertia, grow_bodies
+from .broad_phase import allocate_broad_phase
+from .constants import CONTACT_MARGIN
+from .contact import allocate_contacts, index_manifolds
+from .math3d import quat_to_rpy, rpy_to_quat
+from .pipeline import (DONE, GROW_CONTACTS, GROW_INDEX, GROW_PAIRS, STAT_FROZEN, STAT_PAIRS,
+                       STAT_POINTS, STAT_WOKEN, Settings, step_world)
+
+# The root cube reaches this far past the bodies it was fitted to, and is at least this large.
+ROOT_PADDING = 4.0
+MIN_ROOT_SIZE = 16.0
+
+
+def quaternions_to_matrices(q):
+    """(N, 4) xyzw -> (N, 3, 3), vectorised (the compiled kernel has its own per-body version)."""
+    x, y, z, w = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+    ], -2)
+
+
+def box_bounds(position, orientation, half_extents):
+    """World AABBs (min, max) of boxes, (N, 3) each."""
+    extent = np.einsum("nij,nj->ni", np.abs(quaternions_to_matrices(orientation)), half_extents)
+    return position - extent, position + extent
+
+
+class World:
+    """A world of boxes on an optional ground plane. See SPEC 4 for the contract."""
+
+    def __init__(self, settings=None, ground=specs.DEFAULT_GROUND, capacity=64):
+        self.settings = specs.validate_settings(settings)
+        self.ground = specs.validate_ground(ground)
+        self.time = 0.0
+        self.step_count = 0
+        self._bodies = allocate_bodies(capacity)
+        self._names = [None] * capacity
+        self._slots = {}
+        self._free = list(range(capacity))
+        self._generated = 0
+        self._broad = allocate_broad_phase(capacity, 4 * capacity)
+        # [newest, scratch]: the newest step's contacts, and the buffer the next step fills.
+        self._contacts = [allocate_contacts(16 * capacity, 4 * capacity) for _ in range(2)]
+        self._root = None  # (min corner, edge length) of the octree root cube; fitted lazily
+        self.stats = {"woken": 0, "frozen": 0, "pairs": 0, "points": 0}
+
+    # ----------------------------------------------------------------- bodies
+    def body_names(self):
+        return [self._names[s] for s in self._active_slots()]
+
+    def add_body(self, spec):
+        """Adds a box from a SPEC 3 body spec; returns its (given or generated) unique name."""
+        body = specs.validate_body(spec)
+        name = body.get("name")
+        if name is None:
+            name = self._generate_name()
+        elif name in self._slots:
+            raise ValueError(f"body.name: a body named {name!r} already exists")
+        if not self._free:
+            self._grow(2 * len(self._names))
+        slot = heapq.heappop(self._free)
+        b = self._bodies
+        b.active[slot] = True
+        b.position[slot] = body["position"]
+        b.orientation[slot] = body["quaternion"] if "quaternion" in body else rpy_to_quat(body.get("rpy", (0, 0, 0)))
+        b.half_extents[slot] = np.asarray(body["size"]) * 0.5
+        size = body["size"]
+        b.mass[slot] = body["mass"] if "mass" in body else body.get("density", specs.DEFAULT_DENSITY) * size[0] * size[1] * size[2]
+        self._set_fields(slot, body)
+        self._names[slot] = name
+        self._slots[name] = slot
+        self._check_root(slot)
+        return name
+
+    def edit_body(self, name, /, **fields):
+        """Changes only the given SPEC 3 body keys (not name or shape). Size changes keep the
+        mass unless mass or density is given too. Wakes the body and whatever touches it,
+        unless the edit freezes it (`frozen=True`)."""
+        slot = self._slot(name)
+        body = specs.validate_body_fields(fields, name, specs.BODY_KEYS - {"name", "shape"})
+        self._wake_touching(slot)
+        self._forget_contacts(slot)
+        b = self._bodies
+        if "position" in body:
+            b.position[slot] = body["position"]
+        if "rpy" in body:
+            b.orientation[slot] = rpy_to_quat(body["rpy"])
+        if "quaternion" in body:
+            b.orientation[slot] = body["quaternion"]
+        if "size" in body:
+            b.half_extents[slot] = np.asarray(body["size"]) * 0.5
+        size = 2.0 * b.half_extents[slot]
+        if "mass" in body:
+            b.mass[slot] = body["mass"]
+        elif "density" in body:
+            b.mass[slot] = body["density"] * float(np.prod(size))
+        self._set_fields(slot, body)
+        if not body.get("frozen", False):
+            self._wake(slot)
+        self._check_root(slot)
+
+    def remove_body(self, name):
+        slot = self._slot(name)
+        self._wake_touching(slot)
+        self._forget_contacts(slot)
+        b = self._bodies
+        if b.static_indexed[slot]:
+            self._broad.stale[0] += 1
+        for field, default in (("active", False), ("frozen", False), ("static_indexed", False),
+                               ("awake", False), ("immovable", False)):
+            getattr(b, field)[slot] = default
+        b.linear_velocity[slot] = 0.0
+        b.angular_velocity[slot] = 0.0
+        b.external_impulse[slot] = 0.0
+        b.external_angular_impulse[slot] = 0.0
+        del self._slots[name]
+        self._names[slot] = None
+        heapq.heappush(self._free, slot)
+
+    def apply_impulse(self, name, impulse=(0.0, 0.0, 0.0), angular_impulse=(0.0, 0.0, 0.0)):
+        """Queues an impulse (N s) and an angular impulse (N m s, world) for the next step: the
+        2008 mouse push/pull. Wakes the body."""
+        slot = self._slot(name)
+        imp = specs.vector(list(impulse), "impulse", 3, -1e9, 1e9)
+        ang = specs.vector(list(angular_impulse), "angular_impulse", 3, -1e9, 1e9)
+        if self._bodies.immovable[slot]:
+            return
+        self._wake(slot)
+        self._bodies.external_impulse[slot] += imp
+        self._bodies.external_angular_impulse[slot] += ang
+
+    def wake_all(self):
+        for slot in self._active_slots():
+            self._wake(slot)
+
+    def update_settings(self, settings=None, ground=specs.DEFAULT_GROUND, keep_ground=True):
+        """Changes the given settings on the running world (the 2008 "Physics values" panel);
+        the ground too unless keep_ground. Everything wakes, since gravity or thresholds may have
+        changed under bodies at rest."""
+        merged = {**self.settings, **(settings or {})}
+        if settings and "freezing" in settings and isinstance(settings["freezing"], dict):
+            merged["freezing"] = {**self.settings["freezing"], **settings["freezing"]}
+        new_settings = specs.validate_settings(merged)
+        new_ground = self.ground if keep_ground else specs.validate_ground(ground)
+        depth_changed = new_settings["octree_depth"] != self.settings["octree_depth"]
+        self.settings, self.ground = new_settings, new_ground
+        if depth_changed:
+            self._root = None
+        self.wake_all()
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, n=1):
+        """Runs n whole steps of 1/steps_per_second inside compiled code."""
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
+            raise ValueError(f"step: n must be a non-negative integer, got {n!r}")
+        if self._root is None:
+            self._fit_root()
+        dt = 1.0 / self.settings["steps_per_second"]
+        counters = np.zeros(4, np.int64)
+        done = 0
+        while done < n:
+            newest, scratch = self._contacts
+            steps, status = step_world(n - done, self._bodies, self._kernel_settings(), self._broad,
+                                       newest, scratch, counters)
+            if steps % 2:
+                self._contacts.reverse()
+            done += steps
+            self.time += steps * dt
+            self.step_count += steps
+            if status == GROW_PAIRS:
+                self._grow_pairs()
+            elif status == GROW_CONTACTS:
+                self._grow_contacts()
+            elif status == GROW_INDEX:
+                # Indexes hold 8 cells per body slot, the most a body can touch.
+                raise RuntimeError("octree index overflow: an index is smaller than 8 x bodies")
+            else:
+                assert status == DONE
+        for key, index in (("woken", STAT_WOKEN), ("frozen", STAT_FROZEN), ("pairs", STAT_PAIRS),
+                           ("points", STAT_POINTS)):
+            self.stats[key] += int(counters[index])
+
+    # ------------------------------------------------------------------ queries
+    def state(self):
+        """One row per body, in body_names() order (copies)."""
+        slots = self._active_slots()
+        b = self._bodies
+        return {
+            "positions": b.position[slots].copy(),
+            "quaternions": b.orientation[slots].copy(),
+            "linear_velocities": b.linear_velocity[slots].copy(),
+            "angular_velocities": b.angular_velocity[slots].copy(),
+            "frozen": b.frozen[slots].copy(),
+            "sizes": 2.0 * b.half_extents[slots],
+            "masses": b.mass[slots].copy(),
+            "immovable": b.immovable[slots].copy(),
+        }
+
+    def contacts(self):
+        """The newest step's contact points; body_a/body_b are rows of state(), -1 the ground,
+        -2 the playground. Normals point from A to B; impulses are N s (collision + contact)."""
+        c = self._contacts[0]
+        n = int(c.count[0])
+        active = self._bodies.active
+        row_of_slot = np.cumsum(active) - 1
+        a, b = c.body_a[:n], c.body_b[:n]
+        # Bodies removed since that step take their contacts with them.
+        keep = np.nonzero(active[a] & ((b < 0) | active[np.maximum(b, 0)]))[0]
+        a, b = a[keep], b[keep]
+        return {
+            "points": c.point[keep],
+            "normals": c.normal[keep],
+            "depths": c.depth[keep],
+            "impulses": c.collision_impulse[keep] + c.impulse[keep],
+            "body_a": row_of_slot[a],
+            "body_b": np.where(b >= 0, row_of_slot[np.maximum(b, 0)], b),
+        }
+
+    def body(self, name):
+        """Everything a scene file holds about one body (the SPEC 3 keys), as plain Python."""
+        slot = self._slot(name)
+        b = self._bodies
+        return {
+            "name": name, "shape": "box",
+            "size": (2.0 * b.half_extents[slot]).tolist(),
+            "position": b.position[slot].tolist(),
+            "quaternion": b.orientation[slot].tolist(),
+            "linear_velocity": b.linear_velocity[slot].tolist(),
+            "angular_velocity": b.angular_velocity[slot].tolist(),
+            "mass": float(b.mass[slot]),
+            "elasticity": float(b.elasticity[slot]),
+            "static_friction": float(b.static_friction[slot]),
+            "dynamic_friction": float(b.dynamic_friction[slot]),
+            "immovable": bool(b.immovable[slot]),
+            "allow_freezing": bool(b.allow_freezing[slot]),
+            "frozen": bool(b.frozen[slot]),
+        }
+
+    def rpy(self, name):
+        return quat_to_rpy(self._bodies.orientation[self._slot(name)])
+
+    # ------------------------------------------------------------------ internals
+    def _active_slots(self):
+        return np.nonzero(self._bodies.active)[0]
+
+    def _slot(self, name):
+        try:
+            return self._slots[name]
+        except (KeyError, TypeError):
+            raise KeyError(f"no body named {name!r}") from None
+
+    def _generate_name(self):
+        while True:
+            self._generated += 1
+            name = f"box_{self._generated}"
+            if name not in self._slots:
+                return name
+
+    def _set_fields(self, slot, body):
+        """Material, flags and velocities from a validated (partial) spec, and the mass-derived
+        arrays from the current mass and size."""
+        b = self._bodies
+        for key in ("elasticity", "static_friction", "dynamic_friction", "immovable",
+                    "allow_freezing"):
+            if key in body:
+                getattr(b, key)[slot] = body[key]
+        if "linear_velocity" in body:
+            b.linear_velocity[slot] = body["linear_velocity"]
+        if "angular_velocity" in body:
+            b.angular_velocity[slot] = body["angular_velocity"]
+        b.inv_mass[slot] = 1.0 / b.mass[slot]
+        b.inv_inertia[slot] = box_inverse_inertia(b.mass[slot], b.half_extents[slot])
+        if b.immovable[slot]:
+            b.linear_velocity[slot] = 0.0
+            b.angular_velocity[slot] = 0.0
+        if body.get("frozen", False) and not b.immovable[slot]:
+            b.frozen[slot] = True
+            b.linear_velocity[slot] = 0.0
+            b.angular_velocity[slot] = 0.0
+        if b.static_indexed[slot]:
+            # Whatever changed, its static-index entry may no longer match.
+            b.static_indexed[slot] = False
+            self._broad.stale[0] += 1
+
+    def _forget_contacts(self, slot):
+        """Drops the warm-start impulses of the newest contacts of a slot that is edited or
+        removed: they belong to geometry that no longer exists."""
+        c = self._contacts[0]
+        n = int(c.count[0])
+        involved = (c.body_a[:n] == slot) | (c.body_b[:n] == slot)
+        c.impulse[:n][involved] = 0.0
+        c.friction_world[:n][involved] = 0.0
+
+    def _wake(self, slot):
+        b = self._bodies
+        b.frozen[slot] = False
+        b.freeze_timer[slot] = 0.0
+        if b.static_indexed[slot] and not b.immovable[slot]:
+            b.static_indexed[slot] = False
+            self._broad.stale[0] += 1
+
+    def _wake_touching(self, slot):
+        """Wakes the frozen bodies whose bounds touch this body's (what rests on it or leans on
+        it), before the body moves, changes or goes."""
+        b = self._bodies
+        sleepers = np.nonzero(b.active & b.frozen)[0]
+        sleepers = sleepers[sleepers != slot]
+        if len(sleepers) == 0:
+            return
+        lo, hi = box_bounds(b.position[[slot]], b.orientation[[slot]], b.half_extents[[slot]])
+        s_lo, s_hi = box_bounds(b.position[sleepers], b.orientation[sleepers], b.half_extents[sleepers])
+        touching = np.all((s_lo <= hi + CONTACT_MARGIN) & (lo - CONTACT_MARGIN <= s_hi), axis=1)
+        for other in sleepers[touching]:
+            self._wake(other)
+
+    def _check_root(self, slot):
+        if self._root is None:
+            return
+        b = self._bodies
+        lo, hi = box_bounds(b.position[[slot]], b.orientation[[slot]], b.half_extents[[slot]])
+        root_min, size = self._root
+        if np.any(lo < root_min) or np.any(hi > root_min + size):
+            self._root = None
+
+    def _fit_root(self):
+        """Fits the octree's root cube around the bodies (clamping keeps bodies that later leave
+        it correct, only less pruned) and has the static index rebuilt in it."""
+        slots = self._active_slots()
+        if len(slots):
+            b = self._bodies
+            lo, hi = box_bounds(b.position[slots], b.orientation[slots], b.half_extents[slots])
+            lo, hi = lo.min(axis=0), hi.max(axis=0)
+        else:
+            lo = hi = np.zeros(3)
+        size = max(float(np.max(hi - lo)) + 2.0 * ROOT_PADDING, MIN_ROOT_SIZE)
+        self._root = (0.5 * (lo + hi) - 0.5 * size, size)
+        self._broad.force_rebuild[0] = True
+
+    def _kernel_settings(self):
+        s, g = self.settings, self.ground
+        root_min, root_size = self._root
+        freezing = s["freezing"]
+        return Settings(
+            gravity=np.asarray(s["gravity"], dtype=np.float64),
+            dt=1.0 / s["steps_per_second"],
+            resolve_iterations=int(s["resolve_iterations"]),
+            octree_depth=int(s["octree_depth"]),
+            freezing_enabled=bool(freezing["enabled"]),
+            freezing_time=float(freezing["time"]),
+            freezing_linear_speed=float(freezing["linear_speed"]),
+            freezing_angular_speed=float(freezing["angular_speed"]),
+            ground_enabled=g is not None,
+            ground_height=float(g["height"]) if g else 0.0,
+            ground_material=(float(g["elasticity"]), float(g["static_friction"]),
+                             float(g["dynamic_friction"])) if g else (0.0, 0.0, 0.0),
+            root_min=np.asarray(root_min, dtype=np.float64),
+            root_size=float(root_size),
+        )
+
+    def _grow(self, capacity):
+        old = len(self._names)
+        self._bodies = grow_bodies(self._bodies, capacity)
+        self._names.extend([None] * (capacity - old))
+        for slot in range(old, capacity):
+            heapq.heappush(self._free, slot)
+        self._broad = allocate_broad_phase(capacity, max(len(self._broad.pair_a), 4 * capacity))
+        self._bodies.static_indexed[:] = False  # the new static index starts empty
+
+    def _grow_pairs(self):
+        old = self._broad
+        grown = allocate_broad_phase(len(old.stamp), 2 * len(old.pair_a))
+        self._broad = grown._replace(moving=old.moving, static=old.static, stale=old.stale,
+                                     force_rebuild=old.force_rebuild)
+
+    def _grow_contacts(self):
+        newest, _ = self._contacts
+        points, manifolds = 2 * len(newest.body_a), 2 * len(newest.manifold_start)
+        grown = allocate_contacts(points, manifolds)
+        for field in newest._fields:
+            if field.startswith("table_"):
+                continue
+            old, new = getattr(newest, field), getattr(grown, field)
+            new[:len(old)] = old
+        index_manifolds(grown)
+        self._contacts = [grown, allocate_contacts(points, manifolds)]

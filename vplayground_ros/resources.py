@@ -1,0 +1,31 @@
+"""Finding the package's shared files (config/, meshes/) wherever it was installed from."""
+import sys
+from pathlib import Path
+
+PACKAGE = "vplayground_ros"
+
+
+def share_directories():
+    """Candidate share roots, most specific first: a ROS install (ament_index), a source tree
+    (editable install, tests), then pip's data_files under the interpreter's prefix."""
+    roots = []
+    try:
+        from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
+        try:
+            roots.append(Path(get_package_share_directory(PACKAGE)))
+        except PackageNotFoundError:
+            pass
+    except ImportError:
+        pass
+    roots.append(Path(__file__).resolve().parent.parent)
+    roots.append(Path(sys.prefix) / "share" / PACKAGE)
+    return roots
+
+
+def find_shared(relative):
+    """Path of a shared file such as 'config/default_scene.yaml', or None."""
+    for root in share_directories():
+        candidate = root / relative
+        if candidate.is_file():
+            return candidate
+    return None
