@@ -40,10 +40,10 @@ def test_pile_settles_freezes_and_never_gains_energy():
         frozen.append(world.state()["frozen"].mean())
     energies, frozen = np.array(energies), np.array(frozen)
     assert frozen[-1] >= 0.9
-    # Settled: 95 % frozen and the kinetic energy under 0.1 % of its peak (before that, boxes
-    # still tipping off the edge turn height into speed). From then on the energy never rises
-    # above that level: no jitter, no explosion, nothing feeds energy into the resting pile.
-    settled_samples = np.nonzero((frozen >= 0.95) & (energies <= 1e-3 * energies.max()))[0]
+    # Settled: 99 % frozen (before that, the last boxes still tipping off the edge turn height
+    # into speed). From then on the energy never rises above its level then: no jitter, no
+    # explosion, nothing feeds energy into the resting pile.
+    settled_samples = np.nonzero(frozen >= 0.99)[0]
     assert len(settled_samples) > 0
     settled = int(settled_samples[0])
     assert np.all(energies[settled:] <= energies[settled] + 1e-9)

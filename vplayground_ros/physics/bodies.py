@@ -1,7 +1,9 @@
 """Bodies as structure-of-arrays: one row (slot) per box, owned by the World.
 
 A namedtuple of numpy arrays is what the compiled kernels receive; it keeps the kernels' argument
-lists short and every field named. Slots of removed bodies are marked inactive and reused.
+lists short and every field named. Kernels unpack the arrays they need once, outside their loops:
+Numba pays reference counting for every array handed to a call, which in a per-contact loop
+costs more than the physics. Slots of removed bodies are marked inactive and reused.
 """
 from collections import namedtuple
 
@@ -11,8 +13,8 @@ BodyArrays = namedtuple("BodyArrays", [
     "active",                # slot holds a body
     "position",              # (N, 3) centre of mass, world, m
     "orientation",           # (N, 4) quaternion x, y, z, w, body -> world
-    "linear_velocity",       # (N, 3) m/s
-    "angular_velocity",      # (N, 3) rad/s, world frame
+    "velocity",              # (N + 1, 6) linear m/s, angular rad/s (world); the extra last
+                             # row is the static world (ground, mesh): always zero
     "mass",                  # (N,) kg (kept as given, so saving reproduces it exactly)
     "inv_mass",              # (N,) 1/kg
     "inv_inertia",           # (N, 3) inverse inertia tensor in the body frame (diagonal for a box)
@@ -32,8 +34,8 @@ BodyArrays = namedtuple("BodyArrays", [
     "rotation",              # (N, 3, 3) from orientation
     "solver_inv_mass",       # (N,) inv_mass of awake bodies, 0 for the others (static to all)
     "inv_inertia_world",     # (N, 3, 3) R diag(inv_inertia) R^T of awake bodies, else 0
-    "pseudo_velocity",       # (N, 3) split-impulse position correction, m/s, this step only
-    "pseudo_angular_velocity",
+    "pseudo_velocity",       # (N + 1, 6) split-impulse position correction, this step only
+    "speculative_reach",     # (N,) m the body's surface can move in this step
     "aabb_min", "aabb_max",  # (N, 3) bounds for the broad phase, grown by the step's motion
     "octree_level",          # (N,) int64 octree level of the body's bounds
 ])
@@ -45,13 +47,13 @@ def allocate_bodies(capacity):
     orientation = f(4)
     orientation[:, 3] = 1.0
     return BodyArrays(
-        active=b(), position=f(3), orientation=orientation, linear_velocity=f(3),
-        angular_velocity=f(3), mass=f(), inv_mass=f(), inv_inertia=f(3), half_extents=f(3),
+        active=b(), position=f(3), orientation=orientation,
+        velocity=np.zeros((capacity + 1, 6)), mass=f(), inv_mass=f(), inv_inertia=f(3), half_extents=f(3),
         elasticity=f(), static_friction=f(), dynamic_friction=f(), immovable=b(),
         allow_freezing=b(), frozen=b(), freeze_timer=f(), static_indexed=b(),
         external_impulse=f(3), external_angular_impulse=f(3), awake=b(), rotation=f(3, 3),
-        solver_inv_mass=f(), inv_inertia_world=f(3, 3), pseudo_velocity=f(3),
-        pseudo_angular_velocity=f(3), aabb_min=f(3), aabb_max=f(3),
+        solver_inv_mass=f(), inv_inertia_world=f(3, 3), pseudo_velocity=np.zeros((capacity + 1, 6)),
+        speculative_reach=f(), aabb_min=f(3), aabb_max=f(3),
         octree_level=np.zeros(capacity, np.int64))
 
 
@@ -60,7 +62,7 @@ def grow_bodies(bodies, capacity):
     grown = allocate_bodies(capacity)
     n = len(bodies.active)
     for field, old in zip(BodyArrays._fields, bodies):
-        getattr(grown, field)[:n] = old
+        getattr(grown, field)[:n] = old[:n]  # velocity's static-world row stays last (zero)
     return grown
 
 

@@ -21,9 +21,12 @@ Contacts = namedtuple("Contacts", [
     "normal",             # (K, 3) unit, from A to B
     "depth",              # (K,) m
     "local_a",            # (K, 3) the point in A's body frame: identity across steps
-    "r_a", "r_b",         # (K, 3) from the centres of mass to the point
-    "tangent1", "tangent2",
-    "mass_normal", "mass_tangent1", "mass_tangent2",  # (K,) effective masses of the rows
+    # The solver's view: each point has three rows (normal, tangent 1, tangent 2). A row's
+    # Jacobian J (12: A's linear and angular part, then B's) gives the relative velocity along
+    # it as J . (v_A, v_B); `response` is M^-1 J^T, what a unit impulse does to the velocities.
+    "velocity_a", "velocity_b",  # (K,) rows of the velocity arrays (the static world's last row)
+    "jacobian", "response",      # (K, 3, 12)
+    "row_mass",           # (K, 3) effective mass 1 / (J M^-1 J^T) of each row
     "restitution",        # (K,) pair elasticity
     "friction_coefficient",  # (K,) pair static or dynamic coefficient, chosen per step
     "approach_speed",     # (K,) normal velocity before the collision pass (negative: closing)
@@ -31,6 +34,7 @@ Contacts = namedtuple("Contacts", [
     "impulse", "friction",  # (K,), (K, 2) accumulated in the contact pass (warm-started)
     "friction_world",     # (K, 3) contact-pass friction impulse as a world vector, for next step
     "position_impulse",   # (K,) split-impulse accumulator of the position pass
+    "collision_target", "contact_target", "position_target",  # (K,) normal velocity goals
     "manifold_count",     # (1,)
     "manifold_start", "manifold_size", "manifold_a", "manifold_b",  # (M,)
     "table_key", "table_manifold",  # open-addressing hash: pair key -> manifold, for warm start
@@ -43,13 +47,13 @@ def allocate_contacts(points, manifolds):
     table = 1 << int(np.ceil(np.log2(2 * manifolds + 2)))
     return Contacts(
         count=i(1), body_a=i(points), body_b=i(points), point=f(3), normal=f(3), depth=f(),
-        local_a=f(3), r_a=f(3), r_b=f(3), tangent1=f(3), tangent2=f(3), mass_normal=f(),
-        mass_tangent1=f(), mass_tangent2=f(), restitution=f(), friction_coefficient=f(),
-        approach_speed=f(), collision_impulse=f(), collision_friction=f(2),
-        impulse=f(), friction=f(2), friction_world=f(3), position_impulse=f(),
-        manifold_count=i(1), manifold_start=i(manifolds), manifold_size=i(manifolds),
-        manifold_a=i(manifolds), manifold_b=i(manifolds),
-        table_key=np.full(table, -1, np.int64), table_manifold=i(table))
+        local_a=f(3), velocity_a=i(points), velocity_b=i(points), jacobian=f(3, 12),
+        response=f(3, 12), row_mass=f(3), restitution=f(), friction_coefficient=f(),
+        approach_speed=f(), collision_impulse=f(), collision_friction=f(2), impulse=f(),
+        friction=f(2), friction_world=f(3), position_impulse=f(), collision_target=f(),
+        contact_target=f(), position_target=f(), manifold_count=i(1),
+        manifold_start=i(manifolds), manifold_size=i(manifolds), manifold_a=i(manifolds),
+        manifold_b=i(manifolds), table_key=np.full(table, -1, np.int64), table_manifold=i(table))
 
 
 @njit(cache=True, nogil=True)

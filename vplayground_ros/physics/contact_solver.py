@@ -24,9 +24,14 @@ from numba import njit
 
 from .constants import (LINEAR_SLOP, MAX_CORRECTION_SPEED, POSITION_CORRECTION,
                         RESTITUTION_THRESHOLD, STICKING_SPEED)
+from .math3d import cross
+
+# A row whose target is this low is not solved in that pass.
+INACTIVE = -1.0e30
+SHOCK_SWEEPS_PER_MANIFOLD = 4  # a manifold's points against a fixed support converge in a few
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def tangent_basis(n):
     """Two unit tangents completing n to a right-handed basis."""
     if abs(n[0]) > 0.57735:
@@ -35,102 +40,76 @@ def tangent_basis(n):
     else:
         inv = 1.0 / np.sqrt(n[1] * n[1] + n[2] * n[2])
         t1 = (0.0, n[2] * inv, -n[1] * inv)
-    t2 = (n[1] * t1[2] - n[2] * t1[1], n[2] * t1[0] - n[0] * t1[2], n[0] * t1[1] - n[1] * t1[0])
-    return t1, t2
-
-
-@njit(cache=True, nogil=True, inline="always")
-def angular_term(inv_inertia, r, d):
-    """(r x d) . I^-1 (r x d): what a unit impulse along d at r costs in rotation."""
-    cx, cy, cz = r[1] * d[2] - r[2] * d[1], r[2] * d[0] - r[0] * d[2], r[0] * d[1] - r[1] * d[0]
-    ix = inv_inertia[0, 0] * cx + inv_inertia[0, 1] * cy + inv_inertia[0, 2] * cz
-    iy = inv_inertia[1, 0] * cx + inv_inertia[1, 1] * cy + inv_inertia[1, 2] * cz
-    iz = inv_inertia[2, 0] * cx + inv_inertia[2, 1] * cy + inv_inertia[2, 2] * cz
-    return cx * ix + cy * iy + cz * iz
-
-
-@njit(cache=True, nogil=True, inline="always")
-def effective_mass(bodies, a, b, r_a, r_b, d):
-    k = bodies.solver_inv_mass[a] + angular_term(bodies.inv_inertia_world[a], r_a, d)
-    if b >= 0:
-        k += bodies.solver_inv_mass[b] + angular_term(bodies.inv_inertia_world[b], r_b, d)
-    return 1.0 / k if k > 0.0 else 0.0
-
-
-@njit(cache=True, nogil=True, inline="always")
-def relative_velocity(linear, angular, a, b, r_a, r_b):
-    """Velocity of B's surface point minus A's, for the given velocity arrays."""
-    va, wa = linear[a], angular[a]
-    vx = -(va[0] + wa[1] * r_a[2] - wa[2] * r_a[1])
-    vy = -(va[1] + wa[2] * r_a[0] - wa[0] * r_a[2])
-    vz = -(va[2] + wa[0] * r_a[1] - wa[1] * r_a[0])
-    if b >= 0:
-        vb, wb = linear[b], angular[b]
-        vx += vb[0] + wb[1] * r_b[2] - wb[2] * r_b[1]
-        vy += vb[1] + wb[2] * r_b[0] - wb[0] * r_b[2]
-        vz += vb[2] + wb[0] * r_b[1] - wb[1] * r_b[0]
-    return vx, vy, vz
-
-
-@njit(cache=True, nogil=True, inline="always")
-def apply_body_impulse(bodies, linear, angular, body, r, px, py, pz):
-    """Impulse p at lever arm r on one body; bodies that do not move ignore it."""
-    if body < 0 or not bodies.awake[body]:
-        return
-    m = bodies.solver_inv_mass[body]
-    linear[body, 0] += px * m
-    linear[body, 1] += py * m
-    linear[body, 2] += pz * m
-    cx, cy, cz = r[1] * pz - r[2] * py, r[2] * px - r[0] * pz, r[0] * py - r[1] * px
-    inv_i = bodies.inv_inertia_world[body]
-    angular[body, 0] += inv_i[0, 0] * cx + inv_i[0, 1] * cy + inv_i[0, 2] * cz
-    angular[body, 1] += inv_i[1, 0] * cx + inv_i[1, 1] * cy + inv_i[1, 2] * cz
-    angular[body, 2] += inv_i[2, 0] * cx + inv_i[2, 1] * cy + inv_i[2, 2] * cz
-
-
-@njit(cache=True, nogil=True, inline="always")
-def apply_impulse(bodies, linear, angular, a, b, r_a, r_b, px, py, pz):
-    """Impulse p on B at r_b and -p on A at r_a."""
-    apply_body_impulse(bodies, linear, angular, a, r_a, -px, -py, -pz)
-    apply_body_impulse(bodies, linear, angular, b, r_b, px, py, pz)
+    return t1, cross(n, t1)
 
 
 @njit(cache=True, nogil=True)
-def prepare_contacts(contacts, bodies, ground_material):
-    """Lever arms, tangents, effective masses, pair materials and approach speeds of every point,
-    and the warm-start impulses applied to the velocities."""
+def prepare_contacts(contacts, bodies, ground_material, dt):
+    """Rows (Jacobians, responses, effective masses), pair materials, the targets of the three
+    passes, and the warm-start friction projected onto this step's tangents."""
     ground_elasticity, ground_static, ground_dynamic = ground_material
+    position, velocity = bodies.position, bodies.velocity
+    inv_mass, inv_inertia = bodies.solver_inv_mass, bodies.inv_inertia_world
+    static_row = len(bodies.active)
+    jac, resp, row_mass = contacts.jacobian, contacts.response, contacts.row_mass
+    inv_dt = 1.0 / dt
     for c in range(contacts.count[0]):
         a, b = contacts.body_a[c], contacts.body_b[c]
-        n = contacts.normal[c]
-        for e in range(3):
-            contacts.r_a[c, e] = contacts.point[c, e] - bodies.position[a, e]
-            contacts.r_b[c, e] = contacts.point[c, e] - bodies.position[b, e] if b >= 0 else 0.0
-        r_a, r_b = contacts.r_a[c], contacts.r_b[c]
+        n = (contacts.normal[c, 0], contacts.normal[c, 1], contacts.normal[c, 2])
+        p = contacts.point[c]
+        r_a = (p[0] - position[a, 0], p[1] - position[a, 1], p[2] - position[a, 2])
+        row_b = b if b >= 0 else static_row
+        r_b = (p[0] - position[b, 0], p[1] - position[b, 1], p[2] - position[b, 2]) if b >= 0 else (0.0, 0.0, 0.0)
+        contacts.velocity_a[c], contacts.velocity_b[c] = a, row_b
         t1, t2 = tangent_basis(n)
-        for e in range(3):
-            contacts.tangent1[c, e] = t1[e]
-            contacts.tangent2[c, e] = t2[e]
-        contacts.mass_normal[c] = effective_mass(bodies, a, b, r_a, r_b, n)
-        contacts.mass_tangent1[c] = effective_mass(bodies, a, b, r_a, r_b, t1)
-        contacts.mass_tangent2[c] = effective_mass(bodies, a, b, r_a, r_b, t2)
+        for row, d in enumerate((n, t1, t2)):
+            arm_a, arm_b = cross(r_a, d), cross(r_b, d)
+            k = 0.0
+            for e in range(3):
+                jac[c, row, e], jac[c, row, 3 + e] = -d[e], -arm_a[e]
+                jac[c, row, 6 + e], jac[c, row, 9 + e] = d[e], arm_b[e]
+                resp[c, row, e] = -inv_mass[a] * d[e]
+                resp[c, row, 6 + e] = inv_mass[b] * d[e] if b >= 0 else 0.0
+                resp[c, row, 3 + e] = -(inv_inertia[a, e, 0] * arm_a[0] + inv_inertia[a, e, 1] * arm_a[1]
+                                        + inv_inertia[a, e, 2] * arm_a[2])
+                resp[c, row, 9 + e] = (inv_inertia[b, e, 0] * arm_b[0] + inv_inertia[b, e, 1] * arm_b[1]
+                                       + inv_inertia[b, e, 2] * arm_b[2]) if b >= 0 else 0.0
+            for e in range(12):
+                k += jac[c, row, e] * resp[c, row, e]
+            row_mass[c, row] = 1.0 / k if k > 0.0 else 0.0
         if b >= 0:
             elasticity, mu_s, mu_d = (bodies.elasticity[b], bodies.static_friction[b],
                                       bodies.dynamic_friction[b])
         else:  # the ground, and the playground mesh, which is made of the same material
             elasticity, mu_s, mu_d = ground_elasticity, ground_static, ground_dynamic
-        contacts.restitution[c] = max(bodies.elasticity[a], elasticity)
-        v = relative_velocity(bodies.linear_velocity, bodies.angular_velocity, a, b, r_a, r_b)
-        vn = v[0] * n[0] + v[1] * n[1] + v[2] * n[2]
+        restitution = max(bodies.elasticity[a], elasticity)
+        contacts.restitution[c] = restitution
+        vn = v1 = v2 = 0.0
+        for e in range(6):
+            vn += jac[c, 0, e] * velocity[a, e] + jac[c, 0, 6 + e] * velocity[row_b, e]
+            v1 += jac[c, 1, e] * velocity[a, e] + jac[c, 1, 6 + e] * velocity[row_b, e]
+            v2 += jac[c, 2, e] * velocity[a, e] + jac[c, 2, 6 + e] * velocity[row_b, e]
         contacts.approach_speed[c] = vn
-        slip_sq = v[0] ** 2 + v[1] ** 2 + v[2] ** 2 - vn * vn
-        if slip_sq < STICKING_SPEED * STICKING_SPEED:
+        if v1 * v1 + v2 * v2 < STICKING_SPEED * STICKING_SPEED:
             contacts.friction_coefficient[c] = np.sqrt(bodies.static_friction[a] * mu_s)
         else:
             contacts.friction_coefficient[c] = np.sqrt(bodies.dynamic_friction[a] * mu_d)
+        depth = contacts.depth[c]
+        # Collision pass: only contacts this step's motion would close (Guendelman: detect at
+        # the predicted positions, resolve with the pre-step velocities).
+        if vn < 0.0 and -depth + dt * vn < 0.0:
+            contacts.collision_target[c] = -restitution * vn if vn < -RESTITUTION_THRESHOLD else 0.0
+        else:
+            contacts.collision_target[c] = INACTIVE
+        # Contact pass: a speculative contact may close its gap this step, but no more.
+        contacts.contact_target[c] = depth * inv_dt if depth < 0.0 else 0.0
+        if depth > LINEAR_SLOP:
+            contacts.position_target[c] = min(POSITION_CORRECTION * (depth - LINEAR_SLOP) * inv_dt,
+                                              MAX_CORRECTION_SPEED)
+        else:
+            contacts.position_target[c] = INACTIVE
         contacts.collision_impulse[c] = 0.0
-        contacts.collision_friction[c, 0] = 0.0
-        contacts.collision_friction[c, 1] = 0.0
+        contacts.collision_friction[c, 0] = contacts.collision_friction[c, 1] = 0.0
         contacts.position_impulse[c] = 0.0
         fw = contacts.friction_world[c]
         contacts.friction[c, 0] = fw[0] * t1[0] + fw[1] * t1[1] + fw[2] * t1[2]
@@ -138,110 +117,85 @@ def prepare_contacts(contacts, bodies, ground_material):
 
 
 @njit(cache=True, nogil=True)
-def warm_start(contacts, bodies):
-    lin, ang = bodies.linear_velocity, bodies.angular_velocity
-    for c in range(contacts.count[0]):
-        n, t1, t2 = contacts.normal[c], contacts.tangent1[c], contacts.tangent2[c]
-        pn, f1, f2 = contacts.impulse[c], contacts.friction[c, 0], contacts.friction[c, 1]
-        apply_impulse(bodies, lin, ang, contacts.body_a[c], contacts.body_b[c], contacts.r_a[c],
-                      contacts.r_b[c], pn * n[0] + f1 * t1[0] + f2 * t2[0],
-                      pn * n[1] + f1 * t1[1] + f2 * t2[1], pn * n[2] + f1 * t1[2] + f2 * t2[2])
-
-
-@njit(cache=True, nogil=True, inline="always")
-def solve_friction(contacts, bodies, c, normal_impulse, friction):
-    """Coulomb friction of point c given its accumulated normal impulse; `friction` is the (K, 2)
-    accumulator of the pass."""
-    a, b = contacts.body_a[c], contacts.body_b[c]
-    r_a, r_b = contacts.r_a[c], contacts.r_b[c]
-    t1, t2 = contacts.tangent1[c], contacts.tangent2[c]
-    lin, ang = bodies.linear_velocity, bodies.angular_velocity
-    v = relative_velocity(lin, ang, a, b, r_a, r_b)
-    old1, old2 = friction[c, 0], friction[c, 1]
-    new1 = old1 - contacts.mass_tangent1[c] * (v[0] * t1[0] + v[1] * t1[1] + v[2] * t1[2])
-    new2 = old2 - contacts.mass_tangent2[c] * (v[0] * t2[0] + v[1] * t2[1] + v[2] * t2[2])
-    magnitude = np.sqrt(new1 * new1 + new2 * new2)
-    limit = contacts.friction_coefficient[c] * normal_impulse
-    if magnitude > limit:
-        new1 *= limit / magnitude
-        new2 *= limit / magnitude
-    friction[c, 0], friction[c, 1] = new1, new2
-    d1, d2 = new1 - old1, new2 - old2
-    apply_impulse(bodies, lin, ang, a, b, r_a, r_b, d1 * t1[0] + d2 * t2[0],
-                  d1 * t1[1] + d2 * t2[1], d1 * t1[2] + d2 * t2[2])
-
-
-@njit(cache=True, nogil=True, inline="always")
-def solve_normal(contacts, bodies, linear, angular, c, target, accumulated):
-    """Drives the normal velocity of point c (in the given velocity arrays) towards at least
-    `target`, keeping the accumulated impulse non-negative. Returns the new accumulated impulse."""
-    a, b = contacts.body_a[c], contacts.body_b[c]
-    r_a, r_b, n = contacts.r_a[c], contacts.r_b[c], contacts.normal[c]
-    v = relative_velocity(linear, angular, a, b, r_a, r_b)
-    vn = v[0] * n[0] + v[1] * n[1] + v[2] * n[2]
-    new = max(accumulated + contacts.mass_normal[c] * (target - vn), 0.0)
-    delta = new - accumulated
-    apply_impulse(bodies, linear, angular, a, b, r_a, r_b, delta * n[0], delta * n[1], delta * n[2])
-    return new
-
-
-@njit(cache=True, nogil=True, inline="always")
-def sweep_order(count, sweep, k):
-    """Alternates the order of the contact list between sweeps, as the 2008 program did, so no
-    contact is always solved last (and so always wins)."""
-    return k if sweep % 2 == 0 else count - 1 - k
-
-
-@njit(cache=True, nogil=True)
-def collision_pass(contacts, bodies, iterations, dt):
+def solve_rows(velocity, contacts, sweeps, target, normal_impulse, friction, with_friction):
+    """Sequential impulses over every point, `sweeps` times, alternating the order of the
+    contact list as the 2008 program did (no contact is always solved last, and so always wins).
+    Per point: the friction circle (when asked), then the normal row driven to at least its
+    target with a non-negative accumulated impulse."""
+    jac, resp, row_mass = contacts.jacobian, contacts.response, contacts.row_mass
+    rows_a, rows_b, mu = contacts.velocity_a, contacts.velocity_b, contacts.friction_coefficient
     count = contacts.count[0]
-    for sweep in range(iterations):
+    for sweep in range(sweeps):
         for k in range(count):
-            c = sweep_order(count, sweep, k)
-            approach = contacts.approach_speed[c]
-            # Only contacts that this step's motion would close collide (Guendelman: detect at
-            # the predicted positions, resolve with the pre-step velocities).
-            if approach >= 0.0 or -contacts.depth[c] + dt * approach >= 0.0:
+            c = k if sweep % 2 == 0 else count - 1 - k
+            goal = target[c]
+            if goal <= INACTIVE:
                 continue
-            target = -contacts.restitution[c] * approach if approach < -RESTITUTION_THRESHOLD else 0.0
-            contacts.collision_impulse[c] = solve_normal(
-                contacts, bodies, bodies.linear_velocity, bodies.angular_velocity, c, target,
-                contacts.collision_impulse[c])
-            solve_friction(contacts, bodies, c, contacts.collision_impulse[c],
-                           contacts.collision_friction)
+            a, b = rows_a[c], rows_b[c]
+            if with_friction:
+                v1 = v2 = 0.0
+                for e in range(6):
+                    v1 += jac[c, 1, e] * velocity[a, e] + jac[c, 1, 6 + e] * velocity[b, e]
+                    v2 += jac[c, 2, e] * velocity[a, e] + jac[c, 2, 6 + e] * velocity[b, e]
+                old1, old2 = friction[c, 0], friction[c, 1]
+                new1, new2 = old1 - row_mass[c, 1] * v1, old2 - row_mass[c, 2] * v2
+                magnitude = np.sqrt(new1 * new1 + new2 * new2)
+                limit = mu[c] * normal_impulse[c]
+                if magnitude > limit:
+                    new1 *= limit / magnitude
+                    new2 *= limit / magnitude
+                friction[c, 0], friction[c, 1] = new1, new2
+                d1, d2 = new1 - old1, new2 - old2
+                for e in range(6):
+                    velocity[a, e] += resp[c, 1, e] * d1 + resp[c, 2, e] * d2
+                    velocity[b, e] += resp[c, 1, 6 + e] * d1 + resp[c, 2, 6 + e] * d2
+            vn = 0.0
+            for e in range(6):
+                vn += jac[c, 0, e] * velocity[a, e] + jac[c, 0, 6 + e] * velocity[b, e]
+            old = normal_impulse[c]
+            new = max(old + row_mass[c, 0] * (goal - vn), 0.0)
+            normal_impulse[c] = new
+            d = new - old
+            for e in range(6):
+                velocity[a, e] += resp[c, 0, e] * d
+                velocity[b, e] += resp[c, 0, 6 + e] * d
 
 
 @njit(cache=True, nogil=True)
-def contact_pass(contacts, bodies, iterations, dt):
-    count = contacts.count[0]
-    inv_dt = 1.0 / dt
-    for sweep in range(iterations):
-        for k in range(count):
-            c = sweep_order(count, sweep, k)
-            depth = contacts.depth[c]
-            solve_friction(contacts, bodies, c, contacts.impulse[c], contacts.friction)
-            # A speculative contact may close its gap this step, but no more.
-            target = depth * inv_dt if depth < 0.0 else 0.0
-            contacts.impulse[c] = solve_normal(contacts, bodies, bodies.linear_velocity,
-                                               bodies.angular_velocity, c, target,
-                                               contacts.impulse[c])
-            if depth > LINEAR_SLOP:
-                push = min(POSITION_CORRECTION * (depth - LINEAR_SLOP) * inv_dt, MAX_CORRECTION_SPEED)
-                contacts.position_impulse[c] = solve_normal(
-                    contacts, bodies, bodies.pseudo_velocity, bodies.pseudo_angular_velocity, c,
-                    push, contacts.position_impulse[c])
-    for c in range(count):
-        t1, t2 = contacts.tangent1[c], contacts.tangent2[c]
+def collision_pass(contacts, bodies, iterations):
+    solve_rows(bodies.velocity, contacts, iterations, contacts.collision_target,
+               contacts.collision_impulse, contacts.collision_friction, True)
+
+
+@njit(cache=True, nogil=True)
+def warm_start(contacts, bodies):
+    """Applies last step's contact-pass impulses: stacks start each solve near the answer."""
+    velocity, resp = bodies.velocity, contacts.response
+    for c in range(contacts.count[0]):
+        a, b = contacts.velocity_a[c], contacts.velocity_b[c]
+        pn, f1, f2 = contacts.impulse[c], contacts.friction[c, 0], contacts.friction[c, 1]
+        for e in range(6):
+            velocity[a, e] += resp[c, 0, e] * pn + resp[c, 1, e] * f1 + resp[c, 2, e] * f2
+            velocity[b, e] += resp[c, 0, 6 + e] * pn + resp[c, 1, 6 + e] * f1 + resp[c, 2, 6 + e] * f2
+
+
+@njit(cache=True, nogil=True)
+def contact_pass(contacts, bodies, iterations):
+    """Velocities (zero elasticity, friction), then the split-impulse position pass on the
+    pseudo velocities; keeps the friction as a world vector for the next step's warm start."""
+    solve_rows(bodies.velocity, contacts, iterations, contacts.contact_target, contacts.impulse,
+               contacts.friction, True)
+    solve_rows(bodies.pseudo_velocity, contacts, iterations, contacts.position_target,
+               contacts.position_impulse, contacts.friction, False)
+    jac = contacts.jacobian
+    for c in range(contacts.count[0]):
         f1, f2 = contacts.friction[c, 0], contacts.friction[c, 1]
-        for e in range(3):
-            contacts.friction_world[c, e] = f1 * t1[e] + f2 * t2[e]
-
-
-SHOCK_SWEEPS_PER_MANIFOLD = 4  # a manifold's points against a fixed support converge in a few
+        for e in range(3):  # the tangents are B's linear parts of rows 1 and 2
+            contacts.friction_world[c, e] = f1 * jac[c, 1, 6 + e] + f2 * jac[c, 2, 6 + e]
 
 
 @njit(cache=True, nogil=True)
-def shock_propagation(contacts, bodies, gravity, dt):
+def shock_propagation(contacts, bodies, gravity):
     """One more pass, manifold by manifold from the bottom up, in which the lower body of each
     load-bearing manifold has infinite mass (Guendelman et al. 2003, section 7): the support a
     stack's bottom box gets is handed up the stack within the step, where a fixed number of plain
@@ -257,32 +211,30 @@ def shock_propagation(contacts, bodies, gravity, dt):
     for m in range(count):
         p = contacts.point[contacts.manifold_start[m]]
         heights[m] = p[0] * up[0] + p[1] * up[1] + p[2] * up[2]
-    lin, ang = bodies.linear_velocity, bodies.angular_velocity
-    inv_dt = 1.0 / dt
+    velocity, awake = bodies.velocity, bodies.awake
+    jac, resp, target = contacts.jacobian, contacts.response, contacts.contact_target
     accumulated = np.zeros(4)
     for m in np.argsort(heights):
         start, size = contacts.manifold_start[m], contacts.manifold_size[m]
-        a, b = contacts.body_a[start], contacts.body_b[start]
+        a, b = contacts.velocity_a[start], contacts.velocity_b[start]
         n = contacts.normal[start]
         vertical = n[0] * up[0] + n[1] * up[1] + n[2] * up[2]
         if abs(vertical) < 0.5:
             continue  # side contacts carry no load of the stack
         # n points from A to B: with n pointing down, A is the upper body.
-        upper, sign = (a, -1.0) if vertical < 0.0 else (b, 1.0)
-        if upper < 0 or not bodies.awake[upper]:
+        upper, part = (contacts.body_a[start], 0) if vertical < 0.0 else (contacts.body_b[start], 6)
+        if upper < 0 or not awake[upper]:
             continue
         accumulated[:] = 0.0
         for sweep in range(SHOCK_SWEEPS_PER_MANIFOLD):
             for k in range(size):
-                c = start + sweep_order(size, sweep, k)
-                r = contacts.r_a[c] if upper == a else contacts.r_b[c]
-                mass = 1.0 / (bodies.solver_inv_mass[upper]
-                              + angular_term(bodies.inv_inertia_world[upper], r, n))
-                depth = contacts.depth[c]
-                target = depth * inv_dt if depth < 0.0 else 0.0
-                v = relative_velocity(lin, ang, a, b, contacts.r_a[c], contacts.r_b[c])
-                vn = v[0] * n[0] + v[1] * n[1] + v[2] * n[2]
+                c = start + (k if sweep % 2 == 0 else size - 1 - k)
+                k_upper = vn = 0.0
+                for e in range(6):
+                    k_upper += jac[c, 0, part + e] * resp[c, 0, part + e]
+                    vn += jac[c, 0, e] * velocity[a, e] + jac[c, 0, 6 + e] * velocity[b, e]
                 old = accumulated[k]
-                accumulated[k] = max(old + mass * (target - vn), 0.0)
-                p = (accumulated[k] - old) * sign
-                apply_body_impulse(bodies, lin, ang, upper, r, p * n[0], p * n[1], p * n[2])
+                accumulated[k] = max(old + (target[c] - vn) / k_upper, 0.0)
+                d = accumulated[k] - old
+                for e in range(6):
+                    velocity[upper, e] += resp[c, 0, part + e] * d

@@ -9,7 +9,6 @@ import numpy as np
 from numba import njit
 
 from .constants import WAKE_SPEED_FACTOR
-from .contact_solver import relative_velocity
 
 
 @njit(cache=True, nogil=True)
@@ -23,18 +22,23 @@ def wake_body(bodies, i):
 @njit(cache=True, nogil=True)
 def wake_touched(contacts, bodies, linear_threshold):
     """Wakes frozen bodies that an awake body touches fast enough. Returns how many woke."""
-    limit = WAKE_SPEED_FACTOR * linear_threshold
+    limit_sq = (WAKE_SPEED_FACTOR * linear_threshold) ** 2
+    velocity, position, awake = bodies.velocity, bodies.position, bodies.awake
     woken = 0
     for c in range(contacts.count[0]):
         a, b = contacts.body_a[c], contacts.body_b[c]
-        if b < 0 or bodies.awake[a] == bodies.awake[b]:
+        if b < 0 or awake[a] == awake[b]:
             continue
-        sleeper = b if bodies.awake[a] else a
+        mover, sleeper = (a, b) if awake[a] else (b, a)
         if not bodies.frozen[sleeper]:
             continue  # immovable, never woken
-        v = relative_velocity(bodies.linear_velocity, bodies.angular_velocity, a, b,
-                              contacts.r_a[c], contacts.r_b[c])
-        if v[0] * v[0] + v[1] * v[1] + v[2] * v[2] > limit * limit:
+        # The mover's surface velocity at the contact (the sleeper is at rest).
+        r = contacts.point[c] - position[mover]
+        v, w = velocity[mover, :3], velocity[mover, 3:]
+        vx = v[0] + w[1] * r[2] - w[2] * r[1]
+        vy = v[1] + w[2] * r[0] - w[0] * r[2]
+        vz = v[2] + w[0] * r[1] - w[1] * r[0]
+        if vx * vx + vy * vy + vz * vz > limit_sq:
             wake_body(bodies, sleeper)
             woken += 1
     return woken
@@ -46,11 +50,12 @@ def update_freezing(bodies, enabled, time_to_freeze, linear_threshold, angular_t
     Returns how many froze."""
     frozen = 0
     lin_sq, ang_sq = linear_threshold * linear_threshold, angular_threshold * angular_threshold
+    velocity = bodies.velocity
     for i in range(len(bodies.active)):
         if not bodies.awake[i]:
             continue
-        v, w = bodies.linear_velocity[i], bodies.angular_velocity[i]
-        slow = (v[0] ** 2 + v[1] ** 2 + v[2] ** 2 < lin_sq and w[0] ** 2 + w[1] ** 2 + w[2] ** 2 < ang_sq)
+        v = velocity[i]
+        slow = (v[0] ** 2 + v[1] ** 2 + v[2] ** 2 < lin_sq and v[3] ** 2 + v[4] ** 2 + v[5] ** 2 < ang_sq)
         if not (enabled and bodies.allow_freezing[i] and slow):
             bodies.freeze_timer[i] = 0.0
             continue
@@ -59,6 +64,5 @@ def update_freezing(bodies, enabled, time_to_freeze, linear_threshold, angular_t
             bodies.frozen[i] = True
             bodies.awake[i] = False
             v[:] = 0.0
-            w[:] = 0.0
             frozen += 1
     return frozen

@@ -11,7 +11,6 @@ from numba import njit
 
 from .constants import CONTACT_MARGIN, EDGE_AXIS_TOLERANCE
 from .contact import GROUND
-from .integrate import speculative_reach
 
 MAX_CLIP_POINTS = 8
 FACE_AXIS_TOLERANCE = 1e-3  # B's face must beat A's by this to become the reference (no flip-flop)
@@ -296,7 +295,7 @@ def emit_manifold(contacts, bodies, a, b, key_b, normal, scratch_point, scratch_
 
 
 @njit(cache=True, nogil=True)
-def collide(contacts, bodies, pair_a, pair_b, pair_count, ground_enabled, ground_height, dt):
+def collide(contacts, bodies, pair_a, pair_b, pair_count, ground_enabled, ground_height):
     """Manifolds of every candidate pair and of every awake body with the ground. Returns False
     when the contact buffers are full (nothing of the step has been applied yet)."""
     contacts.count[0] = 0
@@ -306,11 +305,12 @@ def collide(contacts, bodies, pair_a, pair_b, pair_count, ground_enabled, ground
     scratch_point = np.empty((MAX_CLIP_POINTS, 3))
     scratch_depth = np.empty(MAX_CLIP_POINTS)
     keep = np.empty(4, np.int64)
+    reach = bodies.speculative_reach
     for k in range(pair_count):
         a, b = pair_a[k], pair_b[k]
         if not bodies.awake[a]:
             a, b = b, a  # the moving body first: the ground-contact code and solver expect it
-        margin = CONTACT_MARGIN + speculative_reach(bodies, a, dt) + speculative_reach(bodies, b, dt)
+        margin = CONTACT_MARGIN + reach[a] + reach[b]
         n, normal = box_box(bodies.position[a], bodies.rotation[a], bodies.half_extents[a],
                             bodies.position[b], bodies.rotation[b], bodies.half_extents[b],
                             margin, poly_a, poly_b, scratch_point, scratch_depth)
@@ -321,7 +321,7 @@ def collide(contacts, bodies, pair_a, pair_b, pair_count, ground_enabled, ground
         for i in range(len(bodies.active)):
             if not bodies.awake[i] or bodies.aabb_min[i, 2] > ground_height + 0.5 * CONTACT_MARGIN:
                 continue
-            margin = CONTACT_MARGIN + speculative_reach(bodies, i, dt)
+            margin = CONTACT_MARGIN + reach[i]
             n = box_ground(bodies.position[i], bodies.rotation[i], bodies.half_extents[i],
                            ground_height, margin, scratch_point, scratch_depth)
             if not emit_manifold(contacts, bodies, i, GROUND, GROUND, down, scratch_point,

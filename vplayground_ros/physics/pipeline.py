@@ -11,7 +11,7 @@ from .contact import index_manifolds, warm_start_from
 from .contact_solver import (collision_pass, contact_pass, prepare_contacts, shock_propagation,
                              warm_start)
 from .freezing import update_freezing, wake_touched
-from .integrate import integrate_positions, integrate_velocities, update_body
+from .integrate import integrate_positions, integrate_velocities, update_bodies
 from .narrow_phase import collide
 
 Settings = namedtuple("Settings", [
@@ -76,7 +76,7 @@ def detect(bodies, broad, contacts, settings):
         return GROW_PAIRS
     broad.pair_count[0] = pairs
     if not collide(contacts, bodies, broad.pair_a, broad.pair_b, pairs, s.ground_enabled,
-                   s.ground_height, s.dt):
+                   s.ground_height):
         return GROW_CONTACTS
     return DONE
 
@@ -90,9 +90,7 @@ def step_world(steps, bodies, settings, broad, previous, current, stats):
     s = settings
     for done in range(steps):
         # 1. Derived state: rotations, solver masses, broad-phase bounds.
-        for i in range(len(bodies.active)):
-            if bodies.active[i]:
-                update_body(bodies, i, s.dt, s.root_size, s.octree_depth)
+        update_bodies(bodies, s.dt, s.root_size, s.octree_depth)
         if static_index_outdated(bodies, broad) and not rebuild_static_index(bodies, broad, s):
             return done, GROW_INDEX
         # 2. Collision detection (octree broad phase, SAT narrow phase) at the current positions,
@@ -104,24 +102,22 @@ def step_world(steps, bodies, settings, broad, previous, current, stats):
         #    own contacts so they do not sink for a step.
         woken = wake_touched(current, bodies, s.freezing_linear_speed)
         if woken > 0:
-            for i in range(len(bodies.active)):
-                if bodies.active[i]:
-                    update_body(bodies, i, s.dt, s.root_size, s.octree_depth)
+            update_bodies(bodies, s.dt, s.root_size, s.octree_depth)
             broad.stale[0] += woken
             status = detect(bodies, broad, current, s)
             if status != DONE:
                 return done, status
         # 4. Collision pass with the pre-step velocities and the bodies' elasticity.
         warm_start_from(previous, current)
-        prepare_contacts(current, bodies, s.ground_material)
-        collision_pass(current, bodies, s.resolve_iterations, s.dt)
+        prepare_contacts(current, bodies, s.ground_material, s.dt)
+        collision_pass(current, bodies, s.resolve_iterations)
         # 5. Velocity update with external forces.
         integrate_velocities(bodies, s.gravity, s.dt)
         # 6. Contact pass: zero elasticity, twice the iterations, split-impulse penetration fix,
         #    then shock propagation up the stacks.
         warm_start(current, bodies)
-        contact_pass(current, bodies, 2 * s.resolve_iterations, s.dt)
-        shock_propagation(current, bodies, s.gravity, s.dt)
+        contact_pass(current, bodies, 2 * s.resolve_iterations)
+        shock_propagation(current, bodies, s.gravity)
         # 7. Positions from velocities.
         integrate_positions(bodies, s.dt)
         # 8. Freezing of bodies that have been at rest long enough.

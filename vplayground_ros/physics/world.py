@@ -122,8 +122,7 @@ class World:
         for field, default in (("active", False), ("frozen", False), ("static_indexed", False),
                                ("awake", False), ("immovable", False)):
             getattr(b, field)[slot] = default
-        b.linear_velocity[slot] = 0.0
-        b.angular_velocity[slot] = 0.0
+        b.velocity[slot] = 0.0
         b.external_impulse[slot] = 0.0
         b.external_angular_impulse[slot] = 0.0
         del self._slots[name]
@@ -201,8 +200,8 @@ class World:
         return {
             "positions": b.position[slots].copy(),
             "quaternions": b.orientation[slots].copy(),
-            "linear_velocities": b.linear_velocity[slots].copy(),
-            "angular_velocities": b.angular_velocity[slots].copy(),
+            "linear_velocities": b.velocity[slots, :3],
+            "angular_velocities": b.velocity[slots, 3:],
             "frozen": b.frozen[slots].copy(),
             "sizes": 2.0 * b.half_extents[slots],
             "masses": b.mass[slots].copy(),
@@ -238,8 +237,8 @@ class World:
             "size": (2.0 * b.half_extents[slot]).tolist(),
             "position": b.position[slot].tolist(),
             "quaternion": b.orientation[slot].tolist(),
-            "linear_velocity": b.linear_velocity[slot].tolist(),
-            "angular_velocity": b.angular_velocity[slot].tolist(),
+            "linear_velocity": b.velocity[slot, :3].tolist(),
+            "angular_velocity": b.velocity[slot, 3:].tolist(),
             "mass": float(b.mass[slot]),
             "elasticity": float(b.elasticity[slot]),
             "static_friction": float(b.static_friction[slot]),
@@ -278,18 +277,16 @@ class World:
             if key in body:
                 getattr(b, key)[slot] = body[key]
         if "linear_velocity" in body:
-            b.linear_velocity[slot] = body["linear_velocity"]
+            b.velocity[slot, :3] = body["linear_velocity"]
         if "angular_velocity" in body:
-            b.angular_velocity[slot] = body["angular_velocity"]
+            b.velocity[slot, 3:] = body["angular_velocity"]
         b.inv_mass[slot] = 1.0 / b.mass[slot]
         b.inv_inertia[slot] = box_inverse_inertia(b.mass[slot], b.half_extents[slot])
         if b.immovable[slot]:
-            b.linear_velocity[slot] = 0.0
-            b.angular_velocity[slot] = 0.0
+            b.velocity[slot] = 0.0
         if body.get("frozen", False) and not b.immovable[slot]:
             b.frozen[slot] = True
-            b.linear_velocity[slot] = 0.0
-            b.angular_velocity[slot] = 0.0
+            b.velocity[slot] = 0.0
         if b.static_indexed[slot]:
             # Whatever changed, its static-index entry may no longer match.
             b.static_indexed[slot] = False
