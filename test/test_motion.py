@@ -110,3 +110,16 @@ def test_box_rests_at_its_half_height_and_freezes():
     s = world.state()
     assert s["positions"][0, 2] == pytest.approx(0.2, abs=0.006)
     assert s["frozen"][0]
+
+
+def test_push_impulse_changes_momentum_by_the_impulse():
+    world = World(ground=None, settings={"gravity": [0, 0, 0]})
+    world.add_body({"name": "b", "size": [1, 2, 0.5], "mass": 4.0})
+    world.apply_impulse("b", impulse=[8.0, 0, 0], angular_impulse=[0, 0, 1.0])
+    world.step(1)
+    s = world.state()
+    assert s["linear_velocities"][0] == pytest.approx([2.0, 0, 0])
+    # Inertia about z of a 1 x 2 box: m (1 + 4) / 12.
+    assert s["angular_velocities"][0] == pytest.approx([0, 0, 1.0 / (4.0 * 5 / 12)])
+    world.step(1)  # applied once, then cleared
+    assert world.state()["linear_velocities"][0] == pytest.approx([2.0, 0, 0])

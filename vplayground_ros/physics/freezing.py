@@ -5,7 +5,6 @@ an awake body touches it moving faster than WAKE_SPEED_FACTOR x the linear thres
 contact (it was hit, or what it rests on moves), when a body it touches is removed or edited, and
 when it is edited itself (those two are the World's job, between steps).
 """
-import numpy as np
 from numba import njit
 
 from .constants import WAKE_SPEED_FACTOR

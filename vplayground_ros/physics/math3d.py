@@ -10,16 +10,6 @@ def cross(a, b):
 
 
 @njit(cache=True, nogil=True)
-def dot(a, b):
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-@njit(cache=True, nogil=True)
-def norm(a):
-    return np.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
-
-
-@njit(cache=True, nogil=True)
 def quat_to_matrix(q, m):
     """Writes into m the rotation matrix whose columns are the body axes in the world."""
     x, y, z, w = q[0], q[1], q[2], q[3]
@@ -55,11 +45,3 @@ def rpy_to_quat(rpy):
                      cr * sp * cy + sr * cp * sy,
                      cr * cp * sy - sr * sp * cy,
                      cr * cp * cy + sr * sp * sy))
-
-
-def quat_to_rpy(q):
-    x, y, z, w = (float(v) for v in q)
-    roll = np.arctan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
-    pitch = np.arcsin(np.clip(2.0 * (w * y - z * x), -1.0, 1.0))
-    yaw = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-    return np.array((roll, pitch, yaw))

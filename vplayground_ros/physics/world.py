@@ -4,7 +4,6 @@ Everything here is Python bookkeeping between steps (adding, editing, removing b
 buffers); the physics runs inside `pipeline.step_world`, many steps per call.
 """
 import heapq
-import math
 
 import numpy as np
 
@@ -13,7 +12,7 @@ from .bodies import allocate_bodies, box_inverse_inertia, grow_bodies
 from .broad_phase import allocate_broad_phase
 from .constants import CONTACT_MARGIN
 from .contact import allocate_contacts, index_manifolds
-from .math3d import quat_to_rpy, rpy_to_quat
+from .math3d import rpy_to_quat
 from .pipeline import (DONE, GROW_CONTACTS, GROW_INDEX, GROW_PAIRS, STAT_FROZEN, STAT_PAIRS,
                        STAT_POINTS, STAT_WOKEN, Settings, step_world)
 
@@ -247,9 +246,6 @@ class World:
             "allow_freezing": bool(b.allow_freezing[slot]),
             "frozen": bool(b.frozen[slot]),
         }
-
-    def rpy(self, name):
-        return quat_to_rpy(self._bodies.orientation[self._slot(name)])
 
     # ------------------------------------------------------------------ internals
     def _active_slots(self):
