@@ -1,6 +1,6 @@
 """Quick benchmark: a pile of boxes (default 1,000; 0.5 m, 500 kg/m^3, jittered grid, fixed
 seed) falling for a few simulated seconds at 128 steps/s. Prints compile time, steps/s and the
-real-time factor of the falling phase and of the whole run.
+real-time factor of the falling phase, of the last second (settled) and of the whole run.
 
     python bench/pile.py [--boxes 1000] [--seconds 10]
 """
@@ -51,6 +51,8 @@ def main():
     print(f"falling (first 2 s): median {np.median(falling):.2f} ms/step, p95 "
           f"{np.percentile(falling, 95):.2f}, max {falling.max():.1f} ms, "
           f"RTF {len(falling) / rate / (falling.sum() / 1e3):.2f}")
+    resting = step_ms[-rate:]
+    print(f"last second: median {np.median(resting):.3f} ms/step, max {resting.max():.2f} ms")
     print(f"whole run: {steps / total_s:.0f} steps/s, RTF {args.seconds / total_s:.2f}, "
           f"{frozen}/{args.boxes} frozen at the end, "
           f"{world.stats['points'] / steps:.0f} contact points and {world.stats['pairs'] / steps:.0f} "
