@@ -190,3 +190,19 @@ def test_default_scene_loads_and_runs():
     assert np.all(np.isfinite(s["positions"]))
     half_height = 0.5 * s["sizes"].min(axis=1)
     assert np.all(s["positions"][:, 2] > half_height * 0.5)
+
+
+def test_buffer_growth_mid_call_gives_the_same_result():
+    """Pair and contact buffers that fill up inside step(n) are grown and the call goes on; the
+    result is the same as with buffers that were large enough from the start."""
+    from helpers import pile
+    roomy, cramped = pile(40, seed=3), pile(40, seed=3)
+    broad = cramped._broad
+    cramped._broad = broad._replace(pair_a=np.zeros(2, np.int64), pair_b=np.zeros(2, np.int64))
+    from vplayground_ros.physics.contact import allocate_contacts
+    cramped._contacts = [allocate_contacts(4, 2), allocate_contacts(4, 2)]
+    roomy.step(200)
+    cramped.step(200)
+    assert len(cramped._broad.pair_a) > 2 and len(cramped._contacts[0].body_a) > 4
+    for key, value in roomy.state().items():
+        assert np.array_equal(value, cramped.state()[key]), key
