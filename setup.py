@@ -17,6 +17,7 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", glob("config/*")),
+        (f"share/{PACKAGE}/meshes", glob("meshes/*.obj")),
     ],
     python_requires=">=3.10",
     install_requires=["numpy>=1.24", "numba>=0.59", "pyyaml>=6"],
