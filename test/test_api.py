@@ -206,3 +206,18 @@ def test_buffer_growth_mid_call_gives_the_same_result():
     assert len(cramped._broad.pair_a) > 2 and len(cramped._contacts[0].body_a) > 4
     for key, value in roomy.state().items():
         assert np.array_equal(value, cramped.state()[key]), key
+
+
+def test_settings_change_on_the_running_world():
+    world = World()
+    world.add_body({"name": "b", "position": [0, 0, 0.5]})
+    world.step(128)
+    assert world.state()["frozen"][0]
+    before = world.settings
+    with pytest.raises(ValueError, match="settings.gravity"):
+        world.update_settings({"gravity": [0, 0, float("nan")]})
+    assert world.settings == before and world.state()["frozen"][0]
+    world.update_settings({"gravity": [0, 0, 9.81], "octree_depth": 3, "freezing": {"time": 2.0}})
+    assert world.settings["freezing"]["linear_speed"] == before["freezing"]["linear_speed"]
+    world.step(64)  # woken, and gravity now points up
+    assert world.state()["positions"][0, 2] > 1.0

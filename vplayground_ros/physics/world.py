@@ -144,19 +144,17 @@ class World:
         for slot in self._active_slots():
             self._wake(slot)
 
-    def update_settings(self, settings=None, ground=specs.DEFAULT_GROUND, keep_ground=True):
-        """Changes the given settings on the running world (the 2008 "Physics values" panel);
-        the ground too unless keep_ground. Everything wakes, since gravity or thresholds may have
-        changed under bodies at rest."""
-        merged = {**self.settings, **(settings or {})}
-        if settings and "freezing" in settings and isinstance(settings["freezing"], dict):
+    def update_settings(self, settings):
+        """Changes the given settings (a partial SPEC 3 `settings` mapping) on the running world,
+        the 2008 "Physics values" panel. Everything wakes: gravity or thresholds may have changed
+        under bodies at rest."""
+        merged = {**self.settings, **settings}
+        if isinstance(settings.get("freezing"), dict):
             merged["freezing"] = {**self.settings["freezing"], **settings["freezing"]}
         new_settings = specs.validate_settings(merged)
-        new_ground = self.ground if keep_ground else specs.validate_ground(ground)
-        depth_changed = new_settings["octree_depth"] != self.settings["octree_depth"]
-        self.settings, self.ground = new_settings, new_ground
-        if depth_changed:
-            self._root = None
+        if new_settings["octree_depth"] != self.settings["octree_depth"]:
+            self._root = None  # refit, which rebuilds the static index at the new depth
+        self.settings = new_settings
         self.wake_all()
 
     # ------------------------------------------------------------------ stepping
