@@ -12,18 +12,23 @@ from .constants import WAKE_SPEED_FACTOR
 
 @njit(cache=True, nogil=True)
 def wake_body(bodies, i):
+    """Returns True when the body leaves a stale entry in the static index (skipped by queries,
+    counted towards the next rebuild)."""
     bodies.frozen[i] = False
     bodies.freeze_timer[i] = 0.0
     bodies.awake[i] = not bodies.immovable[i]
-    bodies.static_indexed[i] = False  # its static-index entry is now stale and skipped
+    was_indexed = bodies.static_indexed[i]
+    bodies.static_indexed[i] = False
+    return was_indexed
 
 
 @njit(cache=True, nogil=True)
 def wake_touched(contacts, bodies, linear_threshold):
-    """Wakes frozen bodies that an awake body touches fast enough. Returns how many woke."""
+    """Wakes frozen bodies that an awake body touches fast enough. Returns how many woke and how
+    many of them left stale static-index entries."""
     limit_sq = (WAKE_SPEED_FACTOR * linear_threshold) ** 2
     velocity, position, awake = bodies.velocity, bodies.position, bodies.awake
-    woken = 0
+    woken = stale = 0
     for c in range(contacts.count[0]):
         a, b = contacts.body_a[c], contacts.body_b[c]
         if b < 0 or awake[a] == awake[b]:
@@ -38,9 +43,9 @@ def wake_touched(contacts, bodies, linear_threshold):
         vy = v[1] + w[2] * r[0] - w[0] * r[2]
         vz = v[2] + w[0] * r[1] - w[1] * r[0]
         if vx * vx + vy * vy + vz * vz > limit_sq:
-            wake_body(bodies, sleeper)
+            stale += wake_body(bodies, sleeper)
             woken += 1
-    return woken
+    return woken, stale
 
 
 @njit(cache=True, nogil=True)

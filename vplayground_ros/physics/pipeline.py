@@ -100,10 +100,10 @@ def step_world(steps, bodies, settings, broad, previous, current, stats):
             return done, status
         # 3. Freezing: sleepers touched by moving bodies wake, and are detected again with their
         #    own contacts so they do not sink for a step.
-        woken = wake_touched(current, bodies, s.freezing_linear_speed)
+        woken, stale = wake_touched(current, bodies, s.freezing_linear_speed)
         if woken > 0:
             update_bodies(bodies, s.dt, s.root_size, s.octree_depth)
-            broad.stale[0] += woken
+            broad.stale[0] += stale
             status = detect(bodies, broad, current, s)
             if status != DONE:
                 return done, status

@@ -371,10 +371,9 @@ class World:
         self._bodies.static_indexed[:] = False  # the new static index starts empty
 
     def _grow_pairs(self):
-        old = self._broad
-        grown = allocate_broad_phase(len(old.stamp), 2 * len(old.pair_a))
-        self._broad = grown._replace(moving=old.moving, static=old.static, stale=old.stale,
-                                     force_rebuild=old.force_rebuild)
+        size = 2 * len(self._broad.pair_a)
+        self._broad = self._broad._replace(pair_a=np.zeros(size, np.int64),
+                                           pair_b=np.zeros(size, np.int64))
 
     def _grow_contacts(self):
         newest, _ = self._contacts
