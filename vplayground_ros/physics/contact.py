@@ -35,6 +35,7 @@ Contacts = namedtuple("Contacts", [
     "friction_world",     # (K, 3) contact-pass friction impulse as a world vector, for next step
     "position_impulse",   # (K,) split-impulse accumulator of the position pass
     "collision_target", "contact_target", "position_target",  # (K,) normal velocity goals
+    "solve_order",        # (K,) points in the order the sweeps visit them
     "manifold_count",     # (1,)
     "manifold_start", "manifold_size", "manifold_a", "manifold_b",  # (M,)
     "table_key", "table_manifold",  # open-addressing hash: pair key -> manifold, for warm start
@@ -51,7 +52,7 @@ def allocate_contacts(points, manifolds):
         response=f(3, 12), row_mass=f(3), restitution=f(), friction_coefficient=f(),
         approach_speed=f(), collision_impulse=f(), collision_friction=f(2), impulse=f(),
         friction=f(2), friction_world=f(3), position_impulse=f(), collision_target=f(),
-        contact_target=f(), position_target=f(), manifold_count=i(1),
+        contact_target=f(), position_target=f(), solve_order=i(points), manifold_count=i(1),
         manifold_start=i(manifolds), manifold_size=i(manifolds), manifold_a=i(manifolds),
         manifold_b=i(manifolds), table_key=np.full(table, -1, np.int64), table_manifold=i(table))
 

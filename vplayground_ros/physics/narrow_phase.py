@@ -83,15 +83,16 @@ def box_box_axis(pa, ra, ha, pb, rb, hb, margin):
 
 
 @njit(cache=True, nogil=True)
-def clip_polygon(src, n_src, dst, axis, limit, sign):
-    """Sutherland-Hodgman against the half-space sign * p[axis] <= limit. Returns points kept."""
+def clip_polygon(src, n_src, dst, plane, offset):
+    """Sutherland-Hodgman: the part of polygon src (world points) with plane . p <= offset,
+    written to dst. Returns its point count."""
     n = 0
     if n_src == 0:
         return 0
     prev = n_src - 1
-    prev_d = sign * src[prev, axis] - limit
+    prev_d = src[prev, 0] * plane[0] + src[prev, 1] * plane[1] + src[prev, 2] * plane[2] - offset
     for k in range(n_src):
-        d = sign * src[k, axis] - limit
+        d = src[k, 0] * plane[0] + src[k, 1] * plane[1] + src[k, 2] * plane[2] - offset
         if (prev_d <= 0.0) != (d <= 0.0):
             f = prev_d / (prev_d - d)
             for e in range(3):
@@ -106,48 +107,55 @@ def clip_polygon(src, n_src, dst, axis, limit, sign):
 
 
 @njit(cache=True, nogil=True)
-def face_manifold(pr, rr, hr, face_axis, pi, ri, hi, normal, margin, poly_a, poly_b, out_point,
-                  out_depth):
-    """Clips the incident box's face against the reference box's face whose outward normal is
-    `normal` (pointing at the incident box). Writes points (world, halfway between the faces) and
-    depths; returns their count."""
-    # Incident face: the face of the incident box most anti-parallel to the reference normal.
-    best, inc_axis, inc_sign = -1.0, 0, 1.0
+def incident_box_face(p, r, h, normal, out):
+    """Writes to out the 4 corners (in order around it) of the face of box (p, r, h) most
+    anti-parallel to `normal`, the reference normal pointing at this box."""
+    best, axis, sign = -1.0, 0, 1.0
     for k in range(3):
-        d = ri[0, k] * normal[0] + ri[1, k] * normal[1] + ri[2, k] * normal[2]
+        d = r[0, k] * normal[0] + r[1, k] * normal[1] + r[2, k] * normal[2]
         if abs(d) > best:
-            best, inc_axis = abs(d), k
-            inc_sign = -1.0 if d > 0.0 else 1.0
-    k1, k2 = (inc_axis + 1) % 3, (inc_axis + 2) % 3
-    u_axis, v_axis = (face_axis + 1) % 3, (face_axis + 2) % 3
-    face_center = (pr[0] + normal[0] * hr[face_axis], pr[1] + normal[1] * hr[face_axis],
-                   pr[2] + normal[2] * hr[face_axis])
-    # The incident face's corners, in the reference face frame (u, v, normal).
+            best, axis = abs(d), k
+            sign = -1.0 if d > 0.0 else 1.0
+    k1, k2 = (axis + 1) % 3, (axis + 2) % 3
     for corner in range(4):
         su = 1.0 if corner == 0 or corner == 3 else -1.0
         sv = 1.0 if corner < 2 else -1.0
-        w0 = pi[0] + inc_sign * ri[0, inc_axis] * hi[inc_axis] + su * ri[0, k1] * hi[k1] + sv * ri[0, k2] * hi[k2]
-        w1 = pi[1] + inc_sign * ri[1, inc_axis] * hi[inc_axis] + su * ri[1, k1] * hi[k1] + sv * ri[1, k2] * hi[k2]
-        w2 = pi[2] + inc_sign * ri[2, inc_axis] * hi[inc_axis] + su * ri[2, k1] * hi[k1] + sv * ri[2, k2] * hi[k2]
-        w0, w1, w2 = w0 - face_center[0], w1 - face_center[1], w2 - face_center[2]
-        poly_a[corner, 0] = w0 * rr[0, u_axis] + w1 * rr[1, u_axis] + w2 * rr[2, u_axis]
-        poly_a[corner, 1] = w0 * rr[0, v_axis] + w1 * rr[1, v_axis] + w2 * rr[2, v_axis]
-        poly_a[corner, 2] = w0 * normal[0] + w1 * normal[1] + w2 * normal[2]
-    n = clip_polygon(poly_a, 4, poly_b, 0, hr[u_axis], 1.0)
-    n = clip_polygon(poly_b, n, poly_a, 0, hr[u_axis], -1.0)
-    n = clip_polygon(poly_a, n, poly_b, 1, hr[v_axis], 1.0)
-    n = clip_polygon(poly_b, n, poly_a, 1, hr[v_axis], -1.0)
+        for e in range(3):
+            out[corner, e] = p[e] + sign * r[e, axis] * h[axis] + su * r[e, k1] * h[k1] + sv * r[e, k2] * h[k2]
+
+
+@njit(cache=True, nogil=True)
+def keep_below(poly, n, origin, normal, margin, out_point, out_depth):
+    """Points of poly at most `margin` above the reference plane (origin, normal), moved halfway
+    to it; depth is how far below the plane they were. Returns their count."""
     kept = 0
     for k in range(n):
-        x, y, z = poly_a[k, 0], poly_a[k, 1], poly_a[k, 2]
+        z = ((poly[k, 0] - origin[0]) * normal[0] + (poly[k, 1] - origin[1]) * normal[1]
+             + (poly[k, 2] - origin[2]) * normal[2])
         if z > margin:
             continue
-        half = 0.5 * z  # halfway between the incident point and the reference plane
         for e in range(3):
-            out_point[kept, e] = face_center[e] + x * rr[e, u_axis] + y * rr[e, v_axis] + half * normal[e]
+            out_point[kept, e] = poly[k, e] - 0.5 * z * normal[e]
         out_depth[kept] = -z
         kept += 1
     return kept
+
+
+@njit(cache=True, nogil=True)
+def clip_to_box_face(pr, rr, hr, face_axis, normal, poly_a, n, poly_b, margin, out_point,
+                     out_depth):
+    """Clips the incident polygon in poly_a (n world points) to the side planes of the reference
+    box's face whose outward normal is `normal`, and keeps what lies within `margin` of it."""
+    for k in range(2):
+        axis = (face_axis + 1 + k) % 3
+        for sign in (1.0, -1.0):
+            plane = (sign * rr[0, axis], sign * rr[1, axis], sign * rr[2, axis])
+            offset = plane[0] * pr[0] + plane[1] * pr[1] + plane[2] * pr[2] + hr[axis]
+            n = clip_polygon(poly_a, n, poly_b, plane, offset)
+            poly_a, poly_b = poly_b, poly_a
+    origin = (pr[0] + normal[0] * hr[face_axis], pr[1] + normal[1] * hr[face_axis],
+              pr[2] + normal[2] * hr[face_axis])
+    return keep_below(poly_a, n, origin, normal, margin, out_point, out_depth)
 
 
 @njit(cache=True, nogil=True)
@@ -235,13 +243,15 @@ def box_box(pa, ra, ha, pb, rb, hb, margin, poly_a, poly_b, out_point, out_depth
         out_depth[0] = -separation
         return 1, normal
     if kind == 0:
-        n = face_manifold(pa, ra, ha, index, pb, rb, hb, normal, margin, poly_a, poly_b,
-                          out_point, out_depth)
+        incident_box_face(pb, rb, hb, normal, poly_a)
+        n = clip_to_box_face(pa, ra, ha, index, normal, poly_a, 4, poly_b, margin, out_point,
+                             out_depth)
         return n, normal
-    # B's face is the reference: clip with the normal pointing from B to A, then flip it back.
+    # B's face is the reference: clip with the normal pointing from B to A; report A -> B.
     flipped = (-normal[0], -normal[1], -normal[2])
-    n = face_manifold(pb, rb, hb, index, pa, ra, ha, flipped, margin, poly_a, poly_b,
-                      out_point, out_depth)
+    incident_box_face(pa, ra, ha, flipped, poly_a)
+    n = clip_to_box_face(pb, rb, hb, index, flipped, poly_a, 4, poly_b, margin, out_point,
+                         out_depth)
     return n, normal
 
 

@@ -8,8 +8,7 @@ from numba import njit
 from .broad_phase import build_index, find_body_pairs
 from .constants import STATIC_REINDEX_MIN_PENDING, STATIC_REINDEX_PENDING_FRACTION
 from .contact import index_manifolds, warm_start_from
-from .contact_solver import (collision_pass, contact_pass, prepare_contacts, shock_propagation,
-                             warm_start)
+from .contact_solver import collision_pass, contact_pass, prepare_contacts, warm_start
 from .freezing import update_freezing, wake_touched
 from .integrate import integrate_positions, integrate_velocities, update_bodies
 from .narrow_phase import collide
@@ -109,15 +108,13 @@ def step_world(steps, bodies, settings, broad, previous, current, stats):
                 return done, status
         # 4. Collision pass with the pre-step velocities and the bodies' elasticity.
         warm_start_from(previous, current)
-        prepare_contacts(current, bodies, s.ground_material, s.dt)
+        prepare_contacts(current, bodies, s.ground_material, s.gravity, s.dt)
         collision_pass(current, bodies, s.resolve_iterations)
         # 5. Velocity update with external forces.
         integrate_velocities(bodies, s.gravity, s.dt)
-        # 6. Contact pass: zero elasticity, twice the iterations, split-impulse penetration fix,
-        #    then shock propagation up the stacks.
+        # 6. Contact pass: zero elasticity, twice the iterations, split-impulse penetration fix.
         warm_start(current, bodies)
         contact_pass(current, bodies, 2 * s.resolve_iterations)
-        shock_propagation(current, bodies, s.gravity)
         # 7. Positions from velocities.
         integrate_positions(bodies, s.dt)
         # 8. Freezing of bodies that have been at rest long enough.
