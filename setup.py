@@ -20,7 +20,7 @@ setup(
         (f"share/{PACKAGE}/meshes", glob("meshes/*.obj")),
     ],
     python_requires=">=3.10",
-    install_requires=["numpy>=1.24", "numba>=0.59", "pyyaml>=6"],
+    install_requires=["numpy>=1.24", "numba>=0.59", "pyyaml>=6", "trimesh>=4"],
     extras_require={"test": ["pytest>=7"]},
     zip_safe=False,
     entry_points={"console_scripts": [f"vplayground = {PACKAGE}.cli:main"]},

@@ -64,7 +64,9 @@ def main(argv=None):
     frozen = int(world.state()["frozen"].sum())
     print(f"summary: {len(world.body_names())} bodies, {frozen} frozen, {done} steps in "
           f"{wall:.2f} s wall ({done / max(stepping, 1e-9):.0f} steps/s of physics, achieved "
-          f"real-time factor {world.time / wall:.2f})")
+          f"real-time factor {world.time / wall:.2f}); per step {world.stats['pairs'] / done:.0f} "
+          f"body pairs and {world.stats['triangles'] / done:.1f} of "
+          f"{len(world.playground_triangles)} playground triangles tested")
     return 0
 
 

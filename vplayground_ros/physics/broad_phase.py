@@ -42,6 +42,8 @@ BroadPhase = namedtuple("BroadPhase", [
     "stamp", "scratch",   # (N,) scratch of the pair queries
     "pair_a", "pair_b",   # (P,) candidate pairs
     "pair_count",         # (1,) pairs found in the last step
+    "playground_body", "playground_triangle",  # (P,) candidate (body, playground triangle) pairs
+    "playground_count",   # (1,) of those found in the last step
     "stale",              # (1,) static-index entries of bodies that have since woken or gone
     "force_rebuild",      # (1,) bool: the World changed resting bodies between calls
 ])
@@ -57,6 +59,9 @@ def allocate_broad_phase(body_capacity, pair_capacity):
         moving_ids=np.zeros(body_capacity, np.int64), stamp=np.full(body_capacity, -1, np.int64),
         scratch=np.zeros(body_capacity, np.int64), pair_a=np.zeros(pair_capacity, np.int64),
         pair_b=np.zeros(pair_capacity, np.int64), pair_count=np.zeros(1, np.int64),
+        playground_body=np.zeros(pair_capacity, np.int64),
+        playground_triangle=np.zeros(pair_capacity, np.int64),
+        playground_count=np.zeros(1, np.int64),
         stale=np.zeros(1, np.int64), force_rebuild=np.ones(1, np.bool_))
 
 

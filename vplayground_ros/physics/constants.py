@@ -34,6 +34,13 @@ STICKING_SPEED = 0.01
 # much before it wins; faces give 4-point manifolds and keep resting boxes from rocking.
 EDGE_AXIS_TOLERANCE = 0.005
 
+# A playground triangle's own face gives the contact normal whenever the box is sunk at most this
+# far below the triangle's plane, so boxes slide across the seams between triangles instead of
+# catching on an edge or side axis that points into the neighbouring triangle. Larger would lift
+# a box standing beside a step lower than this onto it; smaller than resting penetration would
+# let seams catch again.
+SEAM_TOLERANCE = 0.02
+
 # Two manifold points (in the first body's frame) closer than this are the same contact from one
 # step to the next, so last step's impulse warm-starts this step's solve.
 WARM_START_MATCH_DISTANCE = 0.03

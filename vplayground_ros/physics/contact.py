@@ -1,8 +1,7 @@
 """Contact points and manifolds of one step, and the warm start from the step before.
 
 A manifold is the set of (at most 4) points between two objects; its points are contiguous.
-`body_b` is a body slot, or GROUND for the ground plane (World.contacts() reserves -2 for the
-playground mesh). Normals point from A to B,
+`body_b` is a body slot, or GROUND / PLAYGROUND for the static world. Normals point from A to B,
 `depth` is penetration (negative: a speculative contact still that far apart).
 """
 from collections import namedtuple
@@ -13,6 +12,7 @@ from numba import njit
 from .constants import WARM_START_MATCH_DISTANCE
 
 GROUND = -1
+PLAYGROUND = -2
 
 Contacts = namedtuple("Contacts", [
     "count",              # (1,) points in use

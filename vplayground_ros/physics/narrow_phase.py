@@ -9,8 +9,8 @@ give one contact. Points come out in `scratch_point`/`scratch_depth` with the A 
 import numpy as np
 from numba import njit
 
-from .constants import CONTACT_MARGIN, EDGE_AXIS_TOLERANCE
-from .contact import GROUND
+from .constants import CONTACT_MARGIN, EDGE_AXIS_TOLERANCE, SEAM_TOLERANCE
+from .contact import GROUND, PLAYGROUND
 
 MAX_CLIP_POINTS = 8
 FACE_AXIS_TOLERANCE = 1e-3  # B's face must beat A's by this to become the reference (no flip-flop)
@@ -159,36 +159,31 @@ def clip_to_box_face(pr, rr, hr, face_axis, normal, poly_a, n, poly_b, margin, o
 
 
 @njit(cache=True, nogil=True)
-def edge_contact(pa, ra, ha, pb, rb, hb, axis_index, normal, out_point):
-    """Closest points of the two edges realising an edge-edge axis; writes their midpoint."""
-    i, j = axis_index // 3, axis_index % 3
-    ea = np.empty(3)
-    eb = np.empty(3)
-    for e in range(3):
-        ea[e] = pa[e]
-        eb[e] = pb[e]
+def box_edge(p, r, h, axis, direction):
+    """The edge of box (p, r, h) parallel to its `axis` that lies farthest along `direction`:
+    (centre, unit direction, half length)."""
+    c0, c1, c2 = p[0], p[1], p[2]
     for k in range(3):
-        if k != i:
-            s = ha[k] if ra[0, k] * normal[0] + ra[1, k] * normal[1] + ra[2, k] * normal[2] > 0.0 else -ha[k]
-            for e in range(3):
-                ea[e] += ra[e, k] * s
-        if k != j:
-            s = -hb[k] if rb[0, k] * normal[0] + rb[1, k] * normal[1] + rb[2, k] * normal[2] > 0.0 else hb[k]
-            for e in range(3):
-                eb[e] += rb[e, k] * s
-    # Lines ea + s*da and eb + t*db, closest parameters clamped to the edges.
-    da0, da1, da2 = ra[0, i], ra[1, i], ra[2, i]
-    db0, db1, db2 = rb[0, j], rb[1, j], rb[2, j]
-    r0, r1, r2 = ea[0] - eb[0], ea[1] - eb[1], ea[2] - eb[2]
-    b = da0 * db0 + da1 * db1 + da2 * db2
-    d = da0 * r0 + da1 * r1 + da2 * r2
-    f = db0 * r0 + db1 * r1 + db2 * r2
+        if k != axis:
+            s = h[k] if r[0, k] * direction[0] + r[1, k] * direction[1] + r[2, k] * direction[2] > 0.0 else -h[k]
+            c0, c1, c2 = c0 + r[0, k] * s, c1 + r[1, k] * s, c2 + r[2, k] * s
+    return (c0, c1, c2), (r[0, axis], r[1, axis], r[2, axis]), h[axis]
+
+
+@njit(cache=True, nogil=True)
+def segments_midpoint(ca, da, half_a, cb, db, half_b):
+    """Midpoint of the closest points of two segments (centre, unit direction, half length)."""
+    r0, r1, r2 = ca[0] - cb[0], ca[1] - cb[1], ca[2] - cb[2]
+    b = da[0] * db[0] + da[1] * db[1] + da[2] * db[2]
+    d = da[0] * r0 + da[1] * r1 + da[2] * r2
+    f = db[0] * r0 + db[1] * r1 + db[2] * r2
     denom = 1.0 - b * b
     s = (b * f - d) / denom if denom > 1e-12 else 0.0
-    s = min(max(s, -ha[i]), ha[i])
-    t = min(max(b * s + f, -hb[j]), hb[j])
-    for e in range(3):
-        out_point[0, e] = 0.5 * (ea[e] + s * ra[e, i] + eb[e] + t * rb[e, j])
+    s = min(max(s, -half_a), half_a)
+    t = min(max(b * s + f, -half_b), half_b)
+    s = min(max(b * t - d, -half_a), half_a)  # re-project once t was clamped
+    return (0.5 * (ca[0] + s * da[0] + cb[0] + t * db[0]), 0.5 * (ca[1] + s * da[1] + cb[1] + t * db[1]),
+            0.5 * (ca[2] + s * da[2] + cb[2] + t * db[2]))
 
 
 @njit(cache=True, nogil=True)
@@ -239,7 +234,11 @@ def box_box(pa, ra, ha, pb, rb, hb, margin, poly_a, poly_b, out_point, out_depth
     if kind < 0:
         return 0, normal
     if kind == 2:
-        edge_contact(pa, ra, ha, pb, rb, hb, index, normal, out_point)
+        ca, da, half_a = box_edge(pa, ra, ha, index // 3, normal)
+        cb, db, half_b = box_edge(pb, rb, hb, index % 3, (-normal[0], -normal[1], -normal[2]))
+        point = segments_midpoint(ca, da, half_a, cb, db, half_b)
+        for e in range(3):
+            out_point[0, e] = point[e]
         out_depth[0] = -separation
         return 1, normal
     if kind == 0:
@@ -253,6 +252,107 @@ def box_box(pa, ra, ha, pb, rb, hb, margin, poly_a, poly_b, out_point, out_depth
     n = clip_to_box_face(pb, rb, hb, index, flipped, poly_a, 4, poly_b, margin, out_point,
                          out_depth)
     return n, normal
+
+
+@njit(cache=True, nogil=True)
+def interval_separation(box_center, box_radius, t0, t1, t2):
+    """Gap between the box's [c - r, c + r] and the triangle's projections on an axis, and
+    +1 when the triangle lies on the axis' positive side (else -1)."""
+    low, high = min(t0, t1, t2), max(t0, t1, t2)
+    above, below = low - (box_center + box_radius), (box_center - box_radius) - high
+    return (above, 1.0) if above > below else (below, -1.0)
+
+
+@njit(cache=True, nogil=True)
+def box_triangle(p, r, h, tri, tri_normal, margin, poly_a, poly_b, out_point, out_depth):
+    """Manifold of a box and a one-sided triangle: (point count, normal box -> triangle).
+
+    13 axes: the triangle's normal, the box's 3 face axes, 9 crosses of box axes and triangle
+    edges. The triangle's face is the reference whenever the box is in front of it and sunk at
+    most SEAM_TOLERANCE below its plane: a box sliding over the seam between two coplanar
+    triangles then gets the face normal from the next triangle too, instead of an edge or side
+    axis that would point into the neighbour and catch it. A box deeper below the plane is
+    beside the triangle (at a step's riser, say), and the best axis decides: a box face clips
+    the triangle, or two edges give one point."""
+    v0, v1, v2 = tri[0], tri[1], tri[2]
+    n = (tri_normal[0], tri_normal[1], tri_normal[2])
+    front = (p[0] - v0[0]) * n[0] + (p[1] - v0[1]) * n[1] + (p[2] - v0[2]) * n[2]
+    if front <= 0.0:
+        return 0, (0.0, 0.0, 0.0)  # one-sided: behind the face is the inside of the solid
+    face_gap = front - (h[0] * abs(r[0, 0] * n[0] + r[1, 0] * n[1] + r[2, 0] * n[2])
+                        + h[1] * abs(r[0, 1] * n[0] + r[1, 1] * n[1] + r[2, 1] * n[2])
+                        + h[2] * abs(r[0, 2] * n[0] + r[1, 2] * n[1] + r[2, 2] * n[2]))
+    if face_gap > margin:
+        return 0, (0.0, 0.0, 0.0)
+    best, best_kind, best_axis, best_sign = face_gap, 0, 0, 1.0
+    best_dir = (0.0, 0.0, 0.0)
+    for k in range(3):
+        a = (r[0, k], r[1, k], r[2, k])
+        gap, sign = interval_separation(
+            p[0] * a[0] + p[1] * a[1] + p[2] * a[2], h[k],
+            v0[0] * a[0] + v0[1] * a[1] + v0[2] * a[2], v1[0] * a[0] + v1[1] * a[1] + v1[2] * a[2],
+            v2[0] * a[0] + v2[1] * a[1] + v2[2] * a[2])
+        if gap > margin:
+            return 0, (0.0, 0.0, 0.0)
+        if gap > best:
+            best, best_kind, best_axis, best_sign = gap, 1, k, sign
+    for j in range(3):
+        e0 = tri[(j + 1) % 3, 0] - tri[j, 0]
+        e1 = tri[(j + 1) % 3, 1] - tri[j, 1]
+        e2 = tri[(j + 1) % 3, 2] - tri[j, 2]
+        for k in range(3):
+            l0 = r[1, k] * e2 - r[2, k] * e1
+            l1 = r[2, k] * e0 - r[0, k] * e2
+            l2 = r[0, k] * e1 - r[1, k] * e0
+            length = np.sqrt(l0 * l0 + l1 * l1 + l2 * l2)
+            if length < 1e-9:
+                continue  # edge parallel to a box axis: the face axes cover it
+            l0, l1, l2 = l0 / length, l1 / length, l2 / length
+            radius = (h[0] * abs(r[0, 0] * l0 + r[1, 0] * l1 + r[2, 0] * l2)
+                      + h[1] * abs(r[0, 1] * l0 + r[1, 1] * l1 + r[2, 1] * l2)
+                      + h[2] * abs(r[0, 2] * l0 + r[1, 2] * l1 + r[2, 2] * l2))
+            gap, sign = interval_separation(
+                p[0] * l0 + p[1] * l1 + p[2] * l2, radius,
+                v0[0] * l0 + v0[1] * l1 + v0[2] * l2, v1[0] * l0 + v1[1] * l1 + v1[2] * l2,
+                v2[0] * l0 + v2[1] * l1 + v2[2] * l2)
+            if gap > margin:
+                return 0, (0.0, 0.0, 0.0)
+            if gap > best + EDGE_AXIS_TOLERANCE:
+                best, best_kind, best_axis, best_sign = gap, 2, 3 * k + j, sign
+                best_dir = (l0 * sign, l1 * sign, l2 * sign)
+    if best_kind == 0 or face_gap >= -SEAM_TOLERANCE:
+        # The triangle's face is the reference: clip the box's facing side to its edges.
+        incident_box_face(p, r, h, n, poly_a)
+        count = 4
+        for j in range(3):
+            a, b = tri[j], tri[(j + 1) % 3]
+            plane = ((b[1] - a[1]) * n[2] - (b[2] - a[2]) * n[1],
+                     (b[2] - a[2]) * n[0] - (b[0] - a[0]) * n[2],
+                     (b[0] - a[0]) * n[1] - (b[1] - a[1]) * n[0])  # edge x normal: outwards
+            offset = plane[0] * a[0] + plane[1] * a[1] + plane[2] * a[2]
+            count = clip_polygon(poly_a, count, poly_b, plane, offset)
+            poly_a, poly_b = poly_b, poly_a
+        count = keep_below(poly_a, count, v0, n, margin, out_point, out_depth)
+        return count, (-n[0], -n[1], -n[2])
+    if best_kind == 1:
+        k = best_axis
+        normal = (r[0, k] * best_sign, r[1, k] * best_sign, r[2, k] * best_sign)
+        for corner in range(3):
+            for e in range(3):
+                poly_a[corner, e] = tri[corner, e]
+        count = clip_to_box_face(p, r, h, k, normal, poly_a, 3, poly_b, margin, out_point, out_depth)
+        return count, normal
+    k, j = best_axis // 3, best_axis % 3
+    ca, da, half_a = box_edge(p, r, h, k, best_dir)
+    a, b = tri[j], tri[(j + 1) % 3]
+    length = np.sqrt((b[0] - a[0]) ** 2 + (b[1] - a[1]) ** 2 + (b[2] - a[2]) ** 2)
+    cb = (0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1]), 0.5 * (a[2] + b[2]))
+    db = ((b[0] - a[0]) / length, (b[1] - a[1]) / length, (b[2] - a[2]) / length)
+    point = segments_midpoint(ca, da, half_a, cb, db, 0.5 * length)
+    for e in range(3):
+        out_point[0, e] = point[e]
+    out_depth[0] = -best
+    return 1, best_dir
 
 
 @njit(cache=True, nogil=True)
@@ -305,9 +405,10 @@ def emit_manifold(contacts, bodies, a, b, key_b, normal, scratch_point, scratch_
 
 
 @njit(cache=True, nogil=True)
-def collide(contacts, bodies, pair_a, pair_b, pair_count, ground_enabled, ground_height):
-    """Manifolds of every candidate pair and of every awake body with the ground. Returns False
-    when the contact buffers are full (nothing of the step has been applied yet)."""
+def collide(contacts, bodies, broad, playground, ground_enabled, ground_height):
+    """Manifolds of every candidate pair, of every (body, playground triangle) candidate and of
+    every awake body with the ground. Returns False when the contact buffers are full (nothing
+    of the step has been applied yet)."""
     contacts.count[0] = 0
     contacts.manifold_count[0] = 0
     poly_a = np.empty((MAX_CLIP_POINTS, 3))
@@ -316,7 +417,8 @@ def collide(contacts, bodies, pair_a, pair_b, pair_count, ground_enabled, ground
     scratch_depth = np.empty(MAX_CLIP_POINTS)
     keep = np.empty(4, np.int64)
     reach = bodies.speculative_reach
-    for k in range(pair_count):
+    pair_a, pair_b = broad.pair_a, broad.pair_b
+    for k in range(broad.pair_count[0]):
         a, b = pair_a[k], pair_b[k]
         if not bodies.awake[a]:
             a, b = b, a  # the moving body first: the ground-contact code and solver expect it
@@ -325,6 +427,16 @@ def collide(contacts, bodies, pair_a, pair_b, pair_count, ground_enabled, ground
                             bodies.position[b], bodies.rotation[b], bodies.half_extents[b],
                             margin, poly_a, poly_b, scratch_point, scratch_depth)
         if not emit_manifold(contacts, bodies, a, b, b, normal, scratch_point, scratch_depth, n, keep):
+            return False
+    for k in range(broad.playground_count[0]):
+        i, t = broad.playground_body[k], broad.playground_triangle[k]
+        n, normal = box_triangle(bodies.position[i], bodies.rotation[i], bodies.half_extents[i],
+                                 playground.triangles[t], playground.normals[t],
+                                 CONTACT_MARGIN + reach[i], poly_a, poly_b, scratch_point,
+                                 scratch_depth)
+        # Each triangle is its own manifold (warm-start key -(3 + t)); all are the PLAYGROUND.
+        if not emit_manifold(contacts, bodies, i, PLAYGROUND, -3 - t, normal, scratch_point,
+                             scratch_depth, n, keep):
             return False
     if ground_enabled:
         down = (0.0, 0.0, -1.0)

@@ -12,6 +12,7 @@ from .contact_solver import collision_pass, contact_pass, prepare_contacts, warm
 from .freezing import update_freezing, wake_touched
 from .integrate import integrate_positions, integrate_velocities, update_bodies
 from .narrow_phase import collide
+from .playground import find_playground_pairs
 
 Settings = namedtuple("Settings", [
     "gravity", "dt", "resolve_iterations", "octree_depth",
@@ -24,7 +25,7 @@ Settings = namedtuple("Settings", [
 DONE, GROW_PAIRS, GROW_CONTACTS, GROW_INDEX = 0, 1, 2, 3
 
 # step_world's counters, summed over its steps (the caller zeroes them).
-STAT_WOKEN, STAT_FROZEN, STAT_PAIRS, STAT_POINTS = 0, 1, 2, 3
+STAT_WOKEN, STAT_FROZEN, STAT_PAIRS, STAT_POINTS, STAT_TRIANGLES = 0, 1, 2, 3, 4
 
 
 @njit(cache=True, nogil=True)
@@ -55,7 +56,7 @@ def static_index_outdated(bodies, broad):
 
 
 @njit(cache=True, nogil=True)
-def detect(bodies, broad, contacts, settings):
+def detect(bodies, broad, playground, contacts, settings):
     """Broad phase then narrow phase for the current positions. Returns a status."""
     s = settings
     moving_count = 0
@@ -74,14 +75,18 @@ def detect(bodies, broad, contacts, settings):
     if pairs < 0:
         return GROW_PAIRS
     broad.pair_count[0] = pairs
-    if not collide(contacts, bodies, broad.pair_a, broad.pair_b, pairs, s.ground_enabled,
-                   s.ground_height):
+    pairs = find_playground_pairs(playground, moving_ids, bodies, s.root_min, s.root_size,
+                                  broad.playground_body, broad.playground_triangle)
+    if pairs < 0:
+        return GROW_PAIRS
+    broad.playground_count[0] = pairs
+    if not collide(contacts, bodies, broad, playground, s.ground_enabled, s.ground_height):
         return GROW_CONTACTS
     return DONE
 
 
 @njit(cache=True, nogil=True)
-def step_world(steps, bodies, settings, broad, previous, current, stats):
+def step_world(steps, bodies, playground, settings, broad, previous, current, stats):
     """Runs up to `steps` steps. Returns (steps done, status). The contact buffers swap every
     step: after an odd number of steps the newest contacts are in the buffer passed as
     `current`, else in the one passed as `previous`. A status other than DONE means a buffer was
@@ -94,7 +99,7 @@ def step_world(steps, bodies, settings, broad, previous, current, stats):
             return done, GROW_INDEX
         # 2. Collision detection (octree broad phase, SAT narrow phase) at the current positions,
         #    with speculative margins covering this step's motion.
-        status = detect(bodies, broad, current, s)
+        status = detect(bodies, broad, playground, current, s)
         if status != DONE:
             return done, status
         # 3. Freezing: sleepers touched by moving bodies wake, and are detected again with their
@@ -103,7 +108,7 @@ def step_world(steps, bodies, settings, broad, previous, current, stats):
         if woken > 0:
             update_bodies(bodies, s.dt, s.root_size, s.octree_depth)
             broad.stale[0] += stale
-            status = detect(bodies, broad, current, s)
+            status = detect(bodies, broad, playground, current, s)
             if status != DONE:
                 return done, status
         # 4. Collision pass with the pre-step velocities and the bodies' elasticity.
@@ -125,5 +130,6 @@ def step_world(steps, bodies, settings, broad, previous, current, stats):
         stats[STAT_FROZEN] += frozen_now
         stats[STAT_PAIRS] += broad.pair_count[0]
         stats[STAT_POINTS] += current.count[0]
+        stats[STAT_TRIANGLES] += broad.playground_count[0]
         previous, current = current, previous
     return steps, DONE

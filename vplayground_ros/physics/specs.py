@@ -194,3 +194,79 @@ def validate_body_fields(raw, path, allowed=BODY_KEYS):
 def validate_body(raw, path="body"):
     """A complete body spec: the given keys over BODY_DEFAULTS (name stays optional)."""
     return {**BODY_DEFAULTS, **validate_body_fields(raw, path)}
+
+
+WHEEL_DEFAULTS = {
+    "radius": 0.35, "mass": 20.0, "power_gain": 0.0, "steered": False,
+    "spring_stiffness": 40000.0, "damper": 4000.0, "spring_length": 0.5,
+    "static_friction": 1.0, "dynamic_friction": 0.8,
+}
+VEHICLE_DEFAULTS = {
+    "position": [0.0, 0.0, 1.0], "engine_power": 6000.0, "brake_power": 9000.0, "max_steer": 0.6,
+}
+VEHICLE_KEYS = {"name", "position", "rpy", "quaternion", "linear_velocity", "angular_velocity",
+                "chassis", "engine_power", "brake_power", "max_steer", "wheels"}
+WHEEL_COUNT = 4  # front-left, front-right, rear-left, rear-right
+
+
+def validate_wheel(raw, path):
+    mapping(raw, path, set(WHEEL_DEFAULTS) | {"mount"})
+    if "mount" not in raw:
+        raise SpecError(child(path, "mount"), "missing (the wheel's mount point in the chassis frame)")
+    out = {"mount": vector(raw["mount"], child(path, "mount"), 3, -MAX_SIZE, MAX_SIZE)}
+    for key, default in WHEEL_DEFAULTS.items():
+        if key not in raw:
+            out[key] = default
+            continue
+        p = child(path, key)
+        if key == "steered":
+            out[key] = boolean(raw[key], p)
+        elif key in ("radius", "mass", "spring_stiffness", "spring_length"):
+            out[key] = number(raw[key], p, 0.0, 1.0e9, low_open=True)
+        elif key in ("static_friction", "dynamic_friction"):
+            out[key] = number(raw[key], p, 0.0, MAX_FRICTION)
+        else:  # power_gain, damper
+            out[key] = number(raw[key], p, 0.0, 1.0e9)
+    return out
+
+
+def validate_vehicle(raw, path="vehicle"):
+    """A complete vehicle spec (SPEC 3 `vehicles` entry) over the defaults."""
+    mapping(raw, path, VEHICLE_KEYS)
+    for key in ("chassis", "wheels"):
+        if key not in raw:
+            raise SpecError(child(path, key), "missing")
+    out = dict(VEHICLE_DEFAULTS)
+    for key, value in raw.items():
+        p = child(path, key)
+        if key == "name":
+            out[key] = name(value, p)
+        elif key == "position":
+            out[key] = vector(value, p, 3, -MAX_COORDINATE, MAX_COORDINATE)
+        elif key == "rpy":
+            out[key] = vector(value, p, 3, -1.0e3, 1.0e3)
+        elif key == "quaternion":
+            out[key] = quaternion(value, p)
+        elif key in ("linear_velocity", "angular_velocity"):
+            out[key] = vector(value, p, 3, -MAX_SPEED, MAX_SPEED)
+        elif key == "chassis":
+            mapping(value, p, {"size", "mass"})
+            for required in ("size", "mass"):
+                if required not in value:
+                    raise SpecError(child(p, required), "missing")
+            out[key] = {"size": vector(value["size"], child(p, "size"), 3, 0.0, MAX_SIZE, low_open=True),
+                        "mass": number(value["mass"], child(p, "mass"), 0.0, 1.0e12, low_open=True)}
+        elif key in ("engine_power", "brake_power"):
+            out[key] = number(value, p, 0.0, 1.0e9)
+        elif key == "max_steer":
+            out[key] = number(value, p, 0.0, 1.5)
+        else:  # wheels
+            if not isinstance(value, list):
+                raise SpecError(p, f"expected a list of {WHEEL_COUNT} wheels, got {type(value).__name__}")
+            if len(value) != WHEEL_COUNT:
+                raise SpecError(p, f"expected {WHEEL_COUNT} wheels (front-left, front-right, "
+                                   f"rear-left, rear-right), got {len(value)}")
+            out[key] = [validate_wheel(w, child(p, k)) for k, w in enumerate(value)]
+    if "rpy" in out and "quaternion" in out:
+        raise SpecError(path, "give either rpy or quaternion, not both")
+    return out

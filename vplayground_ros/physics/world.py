@@ -14,7 +14,8 @@ from .constants import CONTACT_MARGIN
 from .contact import allocate_contacts, index_manifolds
 from .math3d import rpy_to_quat
 from .pipeline import (DONE, GROW_CONTACTS, GROW_INDEX, GROW_PAIRS, STAT_FROZEN, STAT_PAIRS,
-                       STAT_POINTS, STAT_WOKEN, Settings, step_world)
+                       STAT_POINTS, STAT_TRIANGLES, STAT_WOKEN, Settings, step_world)
+from .playground import EMPTY_PLAYGROUND_ARGS, index_playground, make_playground
 
 # The root cube reaches this far past the bodies it was fitted to, and is at least this large.
 ROOT_PADDING = 4.0
@@ -50,14 +51,18 @@ class World:
         self._slots = {}
         self._free = list(range(capacity))
         self._generated = 0
+        self._vehicles = {}  # name -> validated vehicle spec; the chassis is the body of that name
         self._broad = allocate_broad_phase(capacity, 4 * capacity)
         # [newest, scratch]: the newest step's contacts, and the buffer the next step fills.
         self._contacts = [allocate_contacts(16 * capacity, 4 * capacity) for _ in range(2)]
         self._root = None  # (min corner, edge length) of the octree root cube; fitted lazily
-        self.stats = {"woken": 0, "frozen": 0, "pairs": 0, "points": 0}
+        self._playground = make_playground(*EMPTY_PLAYGROUND_ARGS)[0]
+        self.playground_spec = None  # how the scene described the playground, for saving
+        self.stats = {"woken": 0, "frozen": 0, "pairs": 0, "points": 0, "triangles": 0}
 
     # ----------------------------------------------------------------- bodies
     def body_names(self):
+        """Every body (vehicle chassis included), in the row order of state()."""
         return [self._names[s] for s in self._active_slots()]
 
     def add_body(self, spec):
@@ -65,7 +70,7 @@ class World:
         body = specs.validate_body(spec)
         name = body.get("name")
         if name is None:
-            name = self._generate_name()
+            name = self._generate_name("box")
         elif name in self._slots:
             raise ValueError(f"body.name: a body named {name!r} already exists")
         if not self._free:
@@ -83,6 +88,35 @@ class World:
         self._slots[name] = slot
         self._check_root(slot)
         return name
+
+    def add_vehicle(self, spec):
+        """Adds a vehicle from a SPEC 3 `vehicles` entry; returns its unique name. Its chassis is
+        an ordinary body of that name (it collides, can be pushed, edited, removed); the wheels
+        are data of the vehicle."""
+        vehicle = specs.validate_vehicle(spec)
+        name = vehicle.get("name") or self._generate_name("car")
+        if name in self._slots:
+            raise ValueError(f"vehicle.name: a body named {name!r} already exists")
+        chassis = {"name": name, "size": vehicle["chassis"]["size"],
+                   "mass": vehicle["chassis"]["mass"], "position": vehicle["position"]}
+        for key in ("rpy", "quaternion", "linear_velocity", "angular_velocity"):
+            if key in vehicle:
+                chassis[key] = vehicle[key]
+        self.add_body(chassis)
+        self._vehicles[name] = {**vehicle, "name": name}
+        return name
+
+    def vehicle_names(self):
+        return [name for name in self.body_names() if name in self._vehicles]
+
+    def vehicle(self, name):
+        """The vehicle's spec with its chassis' current pose (what a scene file holds)."""
+        if name not in self._vehicles:
+            raise KeyError(f"no vehicle named {name!r}")
+        chassis = self.body(name)
+        spec = {k: v for k, v in self._vehicles[name].items() if k not in ("rpy", "quaternion")}
+        state = ("position", "quaternion", "linear_velocity", "angular_velocity")
+        return {**spec, **{key: chassis[key] for key in state}}
 
     def edit_body(self, name, /, **fields):
         """Changes only the given SPEC 3 body keys (not name or shape). Size changes keep the
@@ -125,6 +159,7 @@ class World:
         b.external_impulse[slot] = 0.0
         b.external_angular_impulse[slot] = 0.0
         del self._slots[name]
+        self._vehicles.pop(name, None)
         self._names[slot] = None
         heapq.heappush(self._free, slot)
 
@@ -157,6 +192,23 @@ class World:
         self.settings = new_settings
         self.wake_all()
 
+    def set_playground(self, vertices, faces, spec=None):
+        """Makes the static triangle mesh (world-space vertices (V, 3), counter-clockwise
+        triangles (T, 3) facing outwards) the world's playground, replacing any other. `spec` is
+        kept for saving. Returns how many degenerate triangles were dropped; raises ValueError
+        for non-finite vertices or indices out of range, leaving the old playground."""
+        playground, dropped = make_playground(vertices, faces)
+        self._playground = playground
+        self.playground_spec = spec
+        self._root = None  # refit around the mesh, which indexes it
+        self.wake_all()
+        return dropped
+
+    @property
+    def playground_triangles(self):
+        """(T, 3, 3) the playground's triangles (a copy)."""
+        return self._playground.triangles.copy()
+
     # ------------------------------------------------------------------ stepping
     def step(self, n=1):
         """Runs n whole steps of 1/steps_per_second inside compiled code."""
@@ -165,12 +217,13 @@ class World:
         if self._root is None:
             self._fit_root()
         dt = 1.0 / self.settings["steps_per_second"]
-        counters = np.zeros(4, np.int64)
+        counters = np.zeros(5, np.int64)
         done = 0
         while done < n:
             newest, scratch = self._contacts
-            steps, status = step_world(n - done, self._bodies, self._kernel_settings(), self._broad,
-                                       newest, scratch, counters)
+            steps, status = step_world(n - done, self._bodies, self._playground,
+                                       self._kernel_settings(), self._broad, newest, scratch,
+                                       counters)
             if steps % 2:
                 self._contacts.reverse()
             done += steps
@@ -186,7 +239,7 @@ class World:
             else:
                 assert status == DONE
         for key, index in (("woken", STAT_WOKEN), ("frozen", STAT_FROZEN), ("pairs", STAT_PAIRS),
-                           ("points", STAT_POINTS)):
+                           ("points", STAT_POINTS), ("triangles", STAT_TRIANGLES)):
             self.stats[key] += int(counters[index])
 
     # ------------------------------------------------------------------ queries
@@ -255,10 +308,10 @@ class World:
         except (KeyError, TypeError):
             raise KeyError(f"no body named {name!r}") from None
 
-    def _generate_name(self):
+    def _generate_name(self, prefix):
         while True:
             self._generated += 1
-            name = f"box_{self._generated}"
+            name = f"{prefix}_{self._generated}"
             if name not in self._slots:
                 return name
 
@@ -327,21 +380,29 @@ class World:
             self._root = None
 
     def _fit_root(self):
-        """Fits the octree's root cube around the bodies (clamping keeps bodies that later leave
-        it correct, only less pruned) and has the static index rebuilt in it."""
+        """Fits the octree's root cube around the bodies and the playground (clamping keeps
+        bodies that later leave it correct, only less pruned), indexes the playground in it and
+        has the static index rebuilt in it."""
         slots = self._active_slots()
+        b, mesh = self._bodies, self._playground
+        lows, highs = [np.zeros((1, 3))], [np.zeros((1, 3))]
         if len(slots):
-            b = self._bodies
             lo, hi = box_bounds(b.position[slots], b.orientation[slots], b.half_extents[slots])
-            lo, hi = lo.min(axis=0), hi.max(axis=0)
-        else:
-            lo = hi = np.zeros(3)
+            lows.append(lo)
+            highs.append(hi)
+        if len(mesh.triangles):
+            lows.append(mesh.aabb_min)
+            highs.append(mesh.aabb_max)
+        lo, hi = np.concatenate(lows).min(axis=0), np.concatenate(highs).max(axis=0)
         size = max(float(np.max(hi - lo)) + 2.0 * ROOT_PADDING, MIN_ROOT_SIZE)
         self._root = (0.5 * (lo + hi) - 0.5 * size, size)
+        if not index_playground(mesh, self._root[0], size, self.settings["octree_depth"]):
+            raise RuntimeError("octree index overflow: the playground index is too small")
         self._broad.force_rebuild[0] = True
 
     def _kernel_settings(self):
         s, g = self.settings, self.ground
+        m = g or specs.DEFAULT_GROUND
         root_min, root_size = self._root
         freezing = s["freezing"]
         return Settings(
@@ -355,8 +416,9 @@ class World:
             freezing_angular_speed=float(freezing["angular_speed"]),
             ground_enabled=g is not None,
             ground_height=float(g["height"]) if g else 0.0,
-            ground_material=(float(g["elasticity"]), float(g["static_friction"]),
-                             float(g["dynamic_friction"])) if g else (0.0, 0.0, 0.0),
+            # The playground is made of the ground's material (the defaults without a ground).
+            ground_material=(float(m["elasticity"]), float(m["static_friction"]),
+                             float(m["dynamic_friction"])),
             root_min=np.asarray(root_min, dtype=np.float64),
             root_size=float(root_size),
         )
@@ -371,9 +433,11 @@ class World:
         self._bodies.static_indexed[:] = False  # the new static index starts empty
 
     def _grow_pairs(self):
+        """Doubles both pair buffers (body pairs and playground pairs); either may have filled."""
         size = 2 * len(self._broad.pair_a)
-        self._broad = self._broad._replace(pair_a=np.zeros(size, np.int64),
-                                           pair_b=np.zeros(size, np.int64))
+        self._broad = self._broad._replace(
+            pair_a=np.zeros(size, np.int64), pair_b=np.zeros(size, np.int64),
+            playground_body=np.zeros(size, np.int64), playground_triangle=np.zeros(size, np.int64))
 
     def _grow_contacts(self):
         newest, _ = self._contacts

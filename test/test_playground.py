@@ -1,0 +1,144 @@
+"""The triangle-mesh playground: boxes on the shipped ramp, on mesh floors and across seams."""
+import math
+
+import numpy as np
+import pytest
+
+from vplayground_ros.physics import World
+from vplayground_ros.resources import find_shared
+from vplayground_ros.scene import load_world
+
+G = 9.81
+# The shipped ramp rises from (8, y, 0) to (16, y, 2), for |y| <= 3: slope 1:4.
+RAMP_NORMAL = np.array([-2.0, 0.0, 8.0]) / math.hypot(2.0, 8.0)
+RAMP_POINT = np.array([8.0, 0.0, 0.0])
+
+
+def playground_world(**settings):
+    return load_world({"version": 1, "settings": settings, "playground": {"mesh": "playground.obj"}})
+
+
+def lowest_corner_above_ramp(world, name):
+    """Signed distance of the box's lowest corner to the ramp plane."""
+    s, row = world.state(), world.body_names().index(name)
+    x, y, z, w = s["quaternions"][row]
+    r = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                  [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                  [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+    half = s["sizes"][row] / 2
+    corners = s["positions"][row] + (np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1)
+                                               for sz in (-1, 1)]) * half) @ r.T
+    return float(np.min((corners - RAMP_POINT) @ RAMP_NORMAL))
+
+
+def over_ramp(world, name):
+    p = world.state()["positions"][world.body_names().index(name)]
+    return 8.5 < p[0] < 15.5 and abs(p[1]) < 2.5
+
+
+def test_box_slides_down_the_ramp_without_tunnelling():
+    world = playground_world()
+    slope = math.atan(0.25)
+    world.add_body({"name": "b", "size": [0.5] * 3, "position": [14.0, 0.0, 1.5 + 0.25 / math.cos(slope)],
+                    "rpy": [0, -slope, 0], "static_friction": 0.0, "dynamic_friction": 0.0})
+    lowest = []
+    for _ in range(3 * 128):
+        world.step(1)
+        if over_ramp(world, "b"):
+            lowest.append(lowest_corner_above_ramp(world, "b"))
+    assert world.state()["positions"][0, 0] < 8.0  # reached the bottom
+    assert min(lowest) > -0.01  # never more than 1 cm into the ramp
+
+
+def test_box_dropped_from_ten_metres_onto_the_ramp_does_not_pass_through():
+    world = playground_world()
+    world.add_body({"name": "b", "size": [0.5] * 3, "position": [12.0, 0.5, 12.0], "rpy": [0.3, 0.2, 0.1]})
+    lowest = []
+    for _ in range(4 * 128):
+        world.step(1)
+        if over_ramp(world, "b"):
+            lowest.append(lowest_corner_above_ramp(world, "b"))
+    assert min(lowest) > -0.05
+    p = world.state()["positions"][0]
+    assert np.all(np.isfinite(p)) and p[2] > 0.2  # on the ramp or the ground, never below
+
+
+def mesh_floor(cells=10, cell=2.0):
+    """A floor of cells x cells squares, each two triangles: seams every `cell` metres both
+    ways and along every diagonal."""
+    n = cells + 1
+    xs = (np.arange(n) - cells / 2) * cell
+    vertices = np.array([[x, y, 0.0] for y in xs for x in xs])
+    faces = []
+    for j in range(cells):
+        for i in range(cells):
+            a, b, c, d = j * n + i, j * n + i + 1, (j + 1) * n + i + 1, (j + 1) * n + i
+            faces += [[a, b, c], [a, c, d]]
+    return vertices, np.array(faces)
+
+
+def test_box_on_a_mesh_floor_rests_like_on_the_ground_plane():
+    heights = []
+    for use_mesh in (False, True):
+        world = World(ground=None if use_mesh else {"height": 0.0})
+        if use_mesh:
+            world.set_playground(*mesh_floor())
+        world.add_body({"name": "b", "size": [1.0, 0.8, 0.6], "position": [0.3, -0.7, 1.0], "rpy": [0, 0, 0.4]})
+        world.step(3 * 128)
+        heights.append(world.state()["positions"][0, 2])
+        assert world.state()["frozen"][0]
+    assert heights[1] == pytest.approx(heights[0], abs=1e-3)
+    assert heights[1] == pytest.approx(0.3, abs=6e-3)
+
+
+@pytest.mark.parametrize("heading", [0.0, 0.3, math.pi / 4])
+def test_box_slides_across_seams_without_a_jump(heading):
+    mu = 0.3
+    # No ground plane: the mesh floor alone carries the box (with the default ground material).
+    world = World(ground=None, settings={"freezing": {"enabled": False}})
+    world.set_playground(*mesh_floor())
+    speed = 4.0
+    world.add_body({"name": "b", "size": [0.6, 0.6, 0.4], "position": [-5.0, -3.0, 0.2],
+                    "rpy": [0, 0, heading], "static_friction": mu, "dynamic_friction": mu,
+                    "linear_velocity": [speed, 0.8, 0.0]})
+    world.step(8)
+    previous = world.state()["linear_velocities"][0].copy()
+    # Coulomb deceleration per step, pair coefficient the geometric mean with the material's 0.6.
+    expected_drop = math.sqrt(mu * 0.6) * G / 128
+    for _ in range(100):
+        world.step(1)
+        v = world.state()["linear_velocities"][0]
+        if np.linalg.norm(previous[:2]) < 0.2:
+            break
+        drop = np.linalg.norm(previous[:2]) - np.linalg.norm(v[:2])
+        assert drop == pytest.approx(expected_drop, rel=0.15), (world.time, previous, v)
+        assert abs(v[2]) < 0.02  # no hop at a seam
+        heading_change = abs(math.atan2(v[1], v[0]) - math.atan2(previous[1], previous[0]))
+        assert heading_change < 0.01
+        previous = v.copy()
+
+
+def test_default_scene_runs_ten_seconds_finite_and_above_the_ground():
+    world = load_world(find_shared("config/default_scene.yaml"))
+    assert len(world.playground_triangles) > 200
+    world.step(10 * 128)
+    s = world.state()
+    for key in ("positions", "quaternions", "linear_velocities", "angular_velocities"):
+        assert np.all(np.isfinite(s[key])), key
+    # Nothing below the ground: the lowest point of each box's bounds stays above z = 0.
+    half_diagonal = 0.5 * np.linalg.norm(s["sizes"], axis=1)
+    assert np.all(s["positions"][:, 2] > -0.01)
+    assert np.all(s["positions"][:, 2] + half_diagonal > 0.0)
+    # The octree keeps the triangle tests a small fraction of the mesh.
+    per_step = world.stats["triangles"] / world.step_count
+    assert per_step < 0.1 * len(world.playground_triangles)
+
+
+def test_box_pushed_against_a_step_stops_at_its_riser():
+    world = playground_world()
+    world.add_body({"name": "b", "size": [0.5] * 3, "position": [0.0, 9.0, 0.25],
+                    "linear_velocity": [0.0, 3.0, 0.0], "elasticity": 0.0})
+    world.step(2 * 128)
+    p = world.state()["positions"][0]
+    assert p[1] == pytest.approx(10.0 - 0.25, abs=0.02)  # against the first riser at y = 10
+    assert p[2] == pytest.approx(0.25, abs=0.01)  # still on the ground, not lifted onto the step

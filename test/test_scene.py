@@ -1,0 +1,109 @@
+"""Scene files with a playground and vehicles: loading, validation errors, round trips."""
+import copy
+import logging
+
+import numpy as np
+import pytest
+
+from vplayground_ros.scene import SceneError, load_world, save_world
+
+WHEEL = {"mount": [1.3, 0.8, -0.3], "radius": 0.35, "mass": 20, "power_gain": 0.5, "steered": True,
+         "spring_stiffness": 40000, "damper": 4000, "spring_length": 0.5,
+         "static_friction": 1.0, "dynamic_friction": 0.8}
+SCENE = {
+    "version": 1,
+    "settings": {"octree_depth": 6},
+    "playground": {"mesh": "playground.obj", "position": [1.0, 2.0, 0.0], "rpy": [0, 0, 0.5], "scale": 1.5},
+    "bodies": [{"name": "crate", "size": [1, 1, 1], "position": [0, 0, 3], "linear_velocity": [1, 0, 0]}],
+    "vehicles": [{"name": "car", "position": [5, -9, 1], "rpy": [0, 0, 0.2],
+                  "chassis": {"size": [4.0, 1.8, 0.6], "mass": 1200},
+                  "engine_power": 6000, "brake_power": 9000, "max_steer": 0.6,
+                  "wheels": [dict(WHEEL), dict(WHEEL), dict(WHEEL), dict(WHEEL)]}],
+}
+
+
+def write_obj(path, text):
+    path.write_text(text)
+    return path
+
+
+def test_playground_is_placed_scaled_and_turned():
+    world = load_world(SCENE)
+    reference = load_world({"version": 1, "playground": {"mesh": "playground.obj"}})
+    c, s = np.cos(0.5), np.sin(0.5)
+    rotation = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+    expected = 1.5 * reference.playground_triangles @ rotation.T + [1.0, 2.0, 0.0]
+    assert np.allclose(world.playground_triangles, expected)
+
+
+def test_round_trip_with_playground_and_vehicle(tmp_path):
+    world = load_world(SCENE)
+    world.step(40)
+    save_world(world, tmp_path / "saved.yaml")
+    again = load_world(tmp_path / "saved.yaml")
+    assert again.body_names() == world.body_names()
+    assert again.vehicle_names() == ["car"]
+    assert again.vehicle("car") == world.vehicle("car")
+    for name in world.body_names():
+        assert again.body(name) == world.body(name)
+    assert np.array_equal(again.playground_triangles, world.playground_triangles)
+    assert again.playground_spec["mesh"] == world.playground_spec["mesh"]
+    world.step(30)
+    again.step(30)
+    assert np.allclose(again.state()["positions"], world.state()["positions"], atol=1e-9)
+
+
+def test_mesh_is_found_next_to_the_scene_file_first(tmp_path):
+    write_obj(tmp_path / "tile.obj", "v 0 0 0\nv 4 0 0\nv 0 4 0\nf 1 2 3\n")
+    (tmp_path / "scene.yaml").write_text("version: 1\nplayground: {mesh: tile.obj}\n")
+    world = load_world(tmp_path / "scene.yaml")
+    assert len(world.playground_triangles) == 1
+
+
+def test_degenerate_triangles_are_dropped_with_a_warning(tmp_path, caplog):
+    write_obj(tmp_path / "tiles.obj", "v 0 0 0\nv 4 0 0\nv 0 4 0\nv 8 0 0\n"
+                                      "f 1 2 3\nf 1 2 4\nf 1 1 3\n")
+    with caplog.at_level(logging.WARNING):
+        world = load_world({"version": 1, "playground": {"mesh": str(tmp_path / "tiles.obj")}})
+    assert len(world.playground_triangles) == 1
+    assert "dropped 2 degenerate triangles" in caplog.text
+
+
+def broken(mutate):
+    scene = copy.deepcopy(SCENE)
+    mutate(scene)
+    with pytest.raises(SceneError) as error:
+        load_world(scene)
+    return str(error.value)
+
+
+@pytest.mark.parametrize("mutate, fragment", [
+    (lambda s: s["playground"].update(mesh="nowhere.obj"), "playground.mesh: mesh file 'nowhere.obj' not found"),
+    (lambda s: s["playground"].pop("mesh"), "playground.mesh: missing"),
+    (lambda s: s["playground"].update(scale=0), "playground.scale: must be > 0"),
+    (lambda s: s["playground"].update(rpy=[0, "x", 0]), "playground.rpy[1]: expected a number"),
+    (lambda s: s["playground"].update(colour="red"), "playground.colour: unknown key"),
+    (lambda s: s["vehicles"][0].pop("chassis"), "vehicles[0].chassis: missing"),
+    (lambda s: s["vehicles"][0]["chassis"].update(mass=-5), "vehicles[0].chassis.mass: must be > 0"),
+    (lambda s: s["vehicles"][0]["wheels"].pop(), "vehicles[0].wheels: expected 4 wheels"),
+    (lambda s: s["vehicles"][0]["wheels"][2].update(radius=0), "vehicles[0].wheels[2].radius: must be > 0"),
+    (lambda s: s["vehicles"][0]["wheels"][1].update(steered="yes"), "vehicles[0].wheels[1].steered: expected true or false"),
+    (lambda s: s["vehicles"][0]["wheels"][3].pop("mount"), "vehicles[0].wheels[3].mount: missing"),
+    (lambda s: s["vehicles"][0]["wheels"][0].update(static_friction=50), "vehicles[0].wheels[0].static_friction: must be <= 10"),
+    (lambda s: s["vehicles"][0].update(max_steer=float("nan")), "vehicles[0].max_steer: must be finite"),
+    (lambda s: s["vehicles"][0].update(name="crate"), "vehicles[0].name: duplicate name 'crate'"),
+    (lambda s: s["vehicles"][0].update(turbo=True), "vehicles[0].turbo: unknown key"),
+])
+def test_playground_and_vehicle_errors_name_the_key(mutate, fragment):
+    assert fragment in broken(mutate)
+
+
+@pytest.mark.parametrize("text, fragment", [
+    ("this is not a mesh\n", "no triangles"),
+    ("v 0 0 0\nv 1 0 0\n", "no triangles"),
+    ("v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n", "not finite"),
+])
+def test_bad_mesh_files_are_refused_with_the_file_named(tmp_path, text, fragment):
+    mesh = write_obj(tmp_path / "bad.obj", text)
+    message = broken(lambda s: s["playground"].update(mesh=str(mesh)))
+    assert "playground.mesh" in message and fragment in message
