@@ -13,6 +13,7 @@ from .freezing import update_freezing, wake_touched
 from .integrate import integrate_positions, integrate_velocities, update_bodies
 from .narrow_phase import collide
 from .playground import find_playground_pairs
+from .vehicle import drive_vehicles
 
 Settings = namedtuple("Settings", [
     "gravity", "dt", "resolve_iterations", "octree_depth",
@@ -86,7 +87,7 @@ def detect(bodies, broad, playground, contacts, settings):
 
 
 @njit(cache=True, nogil=True)
-def step_world(steps, bodies, playground, settings, broad, previous, current, stats):
+def step_world(steps, bodies, playground, vehicles, settings, broad, previous, current, stats):
     """Runs up to `steps` steps. Returns (steps done, status). The contact buffers swap every
     step: after an odd number of steps the newest contacts are in the buffer passed as
     `current`, else in the one passed as `previous`. A status other than DONE means a buffer was
@@ -115,7 +116,11 @@ def step_world(steps, bodies, playground, settings, broad, previous, current, st
         warm_start_from(previous, current)
         prepare_contacts(current, bodies, s.ground_material, s.gravity, s.dt)
         collision_pass(current, bodies, s.resolve_iterations)
-        # 5. Velocity update with external forces.
+        # 5. Velocity update with external forces: the cars' wheels (springs and dampers see the
+        #    velocities before gravity adds its share, or dampers would hold up the cars), then
+        #    gravity and pushes.
+        drive_vehicles(vehicles, bodies, broad, playground, s.ground_enabled, s.ground_height,
+                       s.root_min, s.root_size, s.octree_depth, s.dt)
         integrate_velocities(bodies, s.gravity, s.dt)
         # 6. Contact pass: zero elasticity, twice the iterations, split-impulse penetration fix.
         warm_start(current, bodies)

@@ -16,6 +16,9 @@ from .math3d import rpy_to_quat
 from .pipeline import (DONE, GROW_CONTACTS, GROW_INDEX, GROW_PAIRS, STAT_FROZEN, STAT_PAIRS,
                        STAT_POINTS, STAT_TRIANGLES, STAT_WOKEN, Settings, step_world)
 from .playground import EMPTY_PLAYGROUND_ARGS, index_playground, make_playground
+from .vehicle import allocate_vehicles, grow_vehicles
+
+DEFAULT_COMMAND_TIMEOUT = 1.2  # s: SPEC 6.4 cmd_vel_timeout
 
 # The root cube reaches this far past the bodies it was fitted to, and is at least this large.
 ROOT_PADDING = 4.0
@@ -52,6 +55,8 @@ class World:
         self._free = list(range(capacity))
         self._generated = 0
         self._vehicles = {}  # name -> validated vehicle spec; the chassis is the body of that name
+        self._vehicle_rows = {}  # name -> row of the vehicle arrays
+        self._vehicle_arrays = allocate_vehicles(2)
         self._broad = allocate_broad_phase(capacity, 4 * capacity)
         # [newest, scratch]: the newest step's contacts, and the buffer the next step fills.
         self._contacts = [allocate_contacts(16 * capacity, 4 * capacity) for _ in range(2)]
@@ -91,20 +96,84 @@ class World:
 
     def add_vehicle(self, spec):
         """Adds a vehicle from a SPEC 3 `vehicles` entry; returns its unique name. Its chassis is
-        an ordinary body of that name (it collides, can be pushed, edited, removed); the wheels
-        are data of the vehicle."""
+        an ordinary body of that name (it collides, can be pushed, edited, removed) that weighs
+        as much as the chassis and wheels together; the wheels are data of the vehicle."""
         vehicle = specs.validate_vehicle(spec)
         name = vehicle.get("name") or self._generate_name("car")
         if name in self._slots:
             raise ValueError(f"vehicle.name: a body named {name!r} already exists")
-        chassis = {"name": name, "size": vehicle["chassis"]["size"],
-                   "mass": vehicle["chassis"]["mass"], "position": vehicle["position"]}
+        wheels = vehicle["wheels"]
+        chassis = {"name": name, "size": vehicle["chassis"]["size"], "position": vehicle["position"],
+                   "mass": vehicle["chassis"]["mass"] + sum(w["mass"] for w in wheels)}
         for key in ("rpy", "quaternion", "linear_velocity", "angular_velocity"):
             if key in vehicle:
                 chassis[key] = vehicle[key]
-        self.add_body(chassis)
+        slot = self._slots[self.add_body(chassis)]
+        rows = self._vehicle_arrays
+        free = np.nonzero(~rows.active)[0]
+        if len(free) == 0:
+            self._vehicle_arrays = rows = grow_vehicles(rows, 2 * len(rows.active))
+            free = np.nonzero(~rows.active)[0]
+        row = int(free[0])
+        rows.active[row], rows.chassis[row] = True, slot
+        rows.engine_power[row] = vehicle["engine_power"]
+        rows.brake_power[row] = vehicle["brake_power"]
+        rows.max_steer[row] = vehicle["max_steer"]
+        for w, wheel in enumerate(wheels):
+            rows.mount[row, w] = wheel["mount"]
+            for field, key in (("radius", "radius"), ("power_gain", "power_gain"),
+                               ("steered", "steered"), ("stiffness", "spring_stiffness"),
+                               ("damper", "damper"), ("spring_length", "spring_length"),
+                               ("static_friction", "static_friction"),
+                               ("dynamic_friction", "dynamic_friction")):
+                getattr(rows, field)[row, w] = wheel[key]
+        # Wheels are front-left, front-right, rear-left, rear-right (SPEC 3).
+        rows.rear_axle[row] = 0.5 * (wheels[2]["mount"][0] + wheels[3]["mount"][0])
+        rows.wheelbase[row] = 0.5 * (wheels[0]["mount"][0] + wheels[1]["mount"][0]) - rows.rear_axle[row]
+        for field in ("command_speed", "command_yaw_rate", "command_age", "speed_integral",
+                      "throttle", "brake", "steer", "steer_angle", "spin_angle", "spin_rate",
+                      "compression", "in_contact"):
+            getattr(rows, field)[row] = 0
+        rows.command_timeout[row] = DEFAULT_COMMAND_TIMEOUT
         self._vehicles[name] = {**vehicle, "name": name}
+        self._vehicle_rows[name] = row
         return name
+
+    def drive(self, name, speed, yaw_rate, timeout=DEFAULT_COMMAND_TIMEOUT):
+        """Twist command for vehicle `name`: wanted forward speed (m/s, negative reverses) and
+        yaw rate (rad/s, counter-clockwise positive). After `timeout` seconds of simulated time
+        without a new command the car brakes to a stop."""
+        row = self._vehicle_row(name)
+        speed = specs.number(speed, "speed", -specs.MAX_SPEED, specs.MAX_SPEED)
+        yaw_rate = specs.number(yaw_rate, "yaw_rate", -specs.MAX_SPEED, specs.MAX_SPEED)
+        timeout = specs.number(timeout, "timeout", 0.0, 1.0e6, low_open=True)
+        rows = self._vehicle_arrays
+        rows.command_speed[row], rows.command_yaw_rate[row] = speed, yaw_rate
+        rows.command_age[row], rows.command_timeout[row] = 0.0, timeout
+        if speed or yaw_rate:
+            self._wake(self._slots[name])
+
+    def vehicle_state(self, name):
+        """What the car is doing: applied controls and per-wheel state (arrays of 4, wheels
+        front-left, front-right, rear-left, rear-right)."""
+        row = self._vehicle_row(name)
+        v = self._vehicle_arrays
+        return {
+            "command_speed": float(v.command_speed[row]),
+            "command_yaw_rate": float(v.command_yaw_rate[row]),
+            "command_age": float(v.command_age[row]),
+            "throttle": float(v.throttle[row]), "brake": float(v.brake[row]),
+            "steer": float(v.steer[row]),
+            "steer_angle": v.steer_angle[row].copy(), "spin_angle": v.spin_angle[row].copy(),
+            "spin_rate": v.spin_rate[row].copy(), "compression": v.compression[row].copy(),
+            "in_contact": v.in_contact[row].copy(), "contact_point": v.contact_point[row].copy(),
+        }
+
+    def _vehicle_row(self, name):
+        try:
+            return self._vehicle_rows[name]
+        except (KeyError, TypeError):
+            raise KeyError(f"no vehicle named {name!r}") from None
 
     def vehicle_names(self):
         return [name for name in self.body_names() if name in self._vehicles]
@@ -159,7 +228,8 @@ class World:
         b.external_impulse[slot] = 0.0
         b.external_angular_impulse[slot] = 0.0
         del self._slots[name]
-        self._vehicles.pop(name, None)
+        if self._vehicles.pop(name, None) is not None:
+            self._vehicle_arrays.active[self._vehicle_rows.pop(name)] = False
         self._names[slot] = None
         heapq.heappush(self._free, slot)
 
@@ -222,8 +292,8 @@ class World:
         while done < n:
             newest, scratch = self._contacts
             steps, status = step_world(n - done, self._bodies, self._playground,
-                                       self._kernel_settings(), self._broad, newest, scratch,
-                                       counters)
+                                       self._vehicle_arrays, self._kernel_settings(),
+                                       self._broad, newest, scratch, counters)
             if steps % 2:
                 self._contacts.reverse()
             done += steps

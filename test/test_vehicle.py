@@ -1,0 +1,187 @@
+"""The car (SPEC 5): suspension, drive, brakes, steering, Twist control, interaction."""
+import math
+
+import numpy as np
+import pytest
+
+from vplayground_ros.physics import World
+from vplayground_ros.scene import load_world
+
+G = 9.81
+CHASSIS_MASS, WHEEL_MASS, STIFFNESS = 1200.0, 20.0, 40000.0
+TOTAL_MASS = CHASSIS_MASS + 4 * WHEEL_MASS
+
+
+def wheels(friction=1.0, rear_friction=None):
+    out = []
+    for x, y, steered in ((1.3, 0.8, True), (1.3, -0.8, True), (-1.3, 0.8, False), (-1.3, -0.8, False)):
+        mu = friction if steered or rear_friction is None else rear_friction
+        out.append({"mount": [x, y, -0.3], "radius": 0.35, "mass": WHEEL_MASS,
+                    "power_gain": 0.0 if steered else 0.5, "steered": steered,
+                    "spring_stiffness": STIFFNESS, "damper": 4000, "spring_length": 0.5,
+                    "static_friction": mu, "dynamic_friction": 0.8 * mu})
+    return out
+
+
+def car_spec(position=(0.0, 0.0, 1.1), yaw=0.0, **wheel_options):
+    return {"name": "car", "position": list(position), "rpy": [0, 0, yaw],
+            "chassis": {"size": [4.0, 1.8, 0.6], "mass": CHASSIS_MASS},
+            "engine_power": 6000, "brake_power": 9000, "max_steer": 0.6,
+            "wheels": wheels(**wheel_options)}
+
+
+def car_world(freezing=True, **car):
+    world = World({"freezing": {"enabled": freezing}})
+    world.add_vehicle(car_spec(**car))
+    world.step(2 * 128)  # settle on the springs
+    return world
+
+
+def row(world, name="car"):
+    return world.body_names().index(name)
+
+
+def forward_speed(world):
+    s, i = world.state(), row(world)
+    x, y, z, w = s["quaternions"][i]
+    heading = np.array([1 - 2 * (y * y + z * z), 2 * (x * y + z * w), 2 * (x * z - y * w)])
+    return float(s["linear_velocities"][i] @ heading)
+
+
+def test_rests_at_the_spring_equilibrium_height_and_stops_bouncing():
+    world = car_world(freezing=False)
+    world.step(2 * 128)
+    compression = TOTAL_MASS * G / (4 * STIFFNESS)  # four equal springs carry the car
+    # Chassis centre = ground + spring + radius - compression - mount offset (-0.3).
+    expected = 0.5 + 0.35 - compression + 0.3
+    z = world.state()["positions"][row(world), 2]
+    assert z == pytest.approx(expected, rel=0.02)
+    assert world.vehicle_state("car")["compression"] == pytest.approx([compression] * 4, rel=0.02)
+    vertical = []
+    for _ in range(64):
+        world.step(1)
+        vertical.append(world.state()["linear_velocities"][row(world), 2])
+    assert np.max(np.abs(vertical)) < 1e-3  # the dampers have taken the bounce out
+
+
+@pytest.mark.parametrize("rear_friction", [None, 0.2])
+def test_full_throttle_acceleration_matches_power_mass_and_grip(rear_friction):
+    world = car_world(rear_friction=rear_friction)
+    world.drive("car", 100.0, 0.0, timeout=100)  # far beyond reach: throttle saturates at 1
+    world.step(64)
+    v0, x0 = forward_speed(world), world.state()["positions"][row(world), 0]
+    world.step(2 * 128)
+    v1, x1 = forward_speed(world), world.state()["positions"][row(world), 0]
+    if rear_friction is None:
+        expected = 6000.0 / TOTAL_MASS  # engine-limited: F = engine_power x (0.5 + 0.5)
+        assert world.vehicle_state("car")["throttle"] == 1.0
+    else:
+        # Grip-limited: the rear tyres slide, each giving dynamic friction x its load (the
+        # rear axle carries about half the weight, a little more under acceleration).
+        expected = 0.8 * rear_friction * (TOTAL_MASS * G / 2) / TOTAL_MASS
+    assert (v1 - v0) / 2.0 == pytest.approx(expected, rel=0.1)
+    assert x1 - x0 == pytest.approx(v0 * 2.0 + 0.5 * expected * 4.0, rel=0.1)
+
+
+def test_holds_a_commanded_speed():
+    world = car_world()
+    world.drive("car", 3.0, 0.0, timeout=100)
+    world.step(4 * 128)
+    speeds = []
+    for _ in range(4 * 16):
+        world.step(8)
+        speeds.append(forward_speed(world))
+    assert np.all(np.abs(np.array(speeds) - 3.0) < 0.3)
+
+
+def test_reverses():
+    world = car_world()
+    world.drive("car", -2.0, 0.0, timeout=100)
+    world.step(5 * 128)
+    assert forward_speed(world) == pytest.approx(-2.0, abs=0.2)
+    assert world.state()["positions"][row(world), 0] < -4.0
+
+
+@pytest.mark.parametrize("yaw_rate", [0.3, -0.3])
+def test_tracks_a_commanded_yaw_rate_counter_clockwise_positive(yaw_rate):
+    world = car_world()
+    world.drive("car", 3.0, yaw_rate, timeout=100)
+    world.step(4 * 128)
+    measured = world.state()["angular_velocities"][row(world), 2]
+    assert measured == pytest.approx(yaw_rate, rel=0.2)
+    assert forward_speed(world) == pytest.approx(3.0, abs=0.3)
+    # REP-103: a positive yaw rate turns left, so the car heading +x drifts to +y.
+    assert np.sign(world.state()["positions"][row(world), 1]) == np.sign(yaw_rate)
+    steer = world.vehicle_state("car")["steer_angle"]
+    assert abs(steer[0 if yaw_rate > 0 else 1]) > abs(steer[1 if yaw_rate > 0 else 0])  # Ackermann: inner wheel turns more
+
+
+def test_brakes_stop_it_and_it_does_not_creep():
+    world = car_world(freezing=False)
+    world.drive("car", 5.0, 0.0, timeout=100)
+    world.step(4 * 128)
+    world.drive("car", 0.0, 0.0, timeout=100)
+    world.step(2 * 128)
+    assert abs(forward_speed(world)) < 0.01
+    stopped = world.state()["positions"][row(world)].copy()
+    world.step(3 * 128)
+    assert np.linalg.norm(world.state()["positions"][row(world)] - stopped) < 0.01
+
+
+def test_command_timeout_brings_it_to_rest():
+    world = car_world(freezing=False)
+    world.drive("car", 4.0, 0.2, timeout=0.5)
+    world.step(128)
+    assert world.vehicle_state("car")["brake"] == 1.0  # timed out after 0.5 s
+    world.step(3 * 128)
+    assert abs(forward_speed(world)) < 0.01
+    assert world.vehicle_state("car")["command_speed"] == 0.0
+
+
+def test_drives_up_the_ramp_and_over_a_box():
+    world = load_world({"version": 1, "playground": {"mesh": "playground.obj"},
+                        "bodies": [{"name": "bump", "size": [0.6, 3.0, 0.2], "position": [4.0, 0.0, 0.1],
+                                    "immovable": True}],
+                        "vehicles": [car_spec(position=(0.0, 0.0, 1.1))]})
+    world.step(128)
+    world.drive("car", 4.0, 0.0, timeout=100)
+    highest_bump_wheel, on_platform = 0.0, []
+    for _ in range(6 * 16):
+        world.step(8)
+        p = world.state()["positions"][row(world)]
+        if 17.0 < p[0] < 19.0:
+            on_platform.append(p[2])
+        state = world.vehicle_state("car")
+        for w in range(4):
+            if state["in_contact"][w] and abs(state["contact_point"][w, 0] - 4.0) < 0.25:
+                highest_bump_wheel = max(highest_bump_wheel, state["contact_point"][w, 2])
+    assert highest_bump_wheel == pytest.approx(0.2, abs=0.01)  # its wheels rolled over the bump
+    # Up the 1:4 ramp onto the 2 m platform: the chassis rides 2 m above its height on the ground.
+    assert on_platform and min(on_platform) == pytest.approx(2.0 + 1.0715, abs=0.05)
+
+
+def test_pushes_a_pile_of_boxes():
+    world = car_world()
+    for k in range(6):
+        world.add_body({"name": f"crate_{k}", "size": [1.0, 1.0, 1.0], "density": 80,
+                        "position": [4.0 + (k // 2) * 1.05, -0.6 + (k % 2) * 1.2, 0.5]})
+    world.drive("car", 3.0, 0.0, timeout=100)
+    world.step(3 * 128)
+    crates = [world.body_names().index(f"crate_{k}") for k in range(6)]
+    moved = world.state()["positions"][crates, 0] - np.array([4.0 + (k // 2) * 1.05 for k in range(6)])
+    assert np.max(moved) > 1.0
+    assert world.state()["positions"][row(world), 0] > 3.0
+
+
+def test_vehicle_api_errors_and_removal():
+    world = car_world()
+    with pytest.raises(KeyError, match="no vehicle named 'truck'"):
+        world.drive("truck", 1.0, 0.0)
+    with pytest.raises(ValueError, match="speed: must be finite"):
+        world.drive("car", math.nan, 0.0)
+    with pytest.raises(ValueError, match="vehicle.wheels: expected 4 wheels"):
+        world.add_vehicle({**car_spec(), "name": "other", "wheels": wheels()[:3]})
+    assert world.vehicle_names() == ["car"]
+    world.remove_body("car")
+    assert world.vehicle_names() == [] and world.body_names() == []
+    world.step(10)  # the removed car's wheels no longer act

@@ -1,0 +1,101 @@
+"""Ray casts (the wheels' contact with the world): against the ground plane, the playground's
+triangles and the boxes, each found through the octree rather than by testing everything."""
+import numpy as np
+from numba import njit
+
+from .broad_phase import cell_box, object_level, query_index
+from .contact import GROUND, PLAYGROUND
+
+NO_HIT = np.inf
+
+
+@njit(cache=True, nogil=True)
+def ray_box(origin, direction, reach, p, r, h):
+    """Slab test in the box's frame: (distance, outward normal of the face hit), or NO_HIT for a
+    ray that misses or starts inside."""
+    t_in, t_out = 0.0, reach
+    axis_in, sign_in = -1, 1.0
+    for k in range(3):
+        o = (origin[0] - p[0]) * r[0, k] + (origin[1] - p[1]) * r[1, k] + (origin[2] - p[2]) * r[2, k]
+        d = direction[0] * r[0, k] + direction[1] * r[1, k] + direction[2] * r[2, k]
+        if abs(d) < 1e-12:
+            if abs(o) > h[k]:
+                return NO_HIT, (0.0, 0.0, 0.0)
+            continue
+        t0, t1 = (-h[k] - o) / d, (h[k] - o) / d
+        sign = -1.0
+        if t0 > t1:
+            t0, t1 = t1, t0
+            sign = 1.0
+        if t0 > t_in:
+            t_in, axis_in, sign_in = t0, k, sign
+        t_out = min(t_out, t1)
+        if t_in > t_out:
+            return NO_HIT, (0.0, 0.0, 0.0)
+    if axis_in < 0:
+        return NO_HIT, (0.0, 0.0, 0.0)  # the origin is inside the box
+    return t_in, (r[0, axis_in] * sign_in, r[1, axis_in] * sign_in, r[2, axis_in] * sign_in)
+
+
+@njit(cache=True, nogil=True)
+def ray_triangle(origin, direction, reach, tri, normal):
+    """Moeller-Trumbore against the triangle's front face only (playground triangles are
+    one-sided): the distance, or NO_HIT."""
+    if direction[0] * normal[0] + direction[1] * normal[1] + direction[2] * normal[2] >= 0.0:
+        return NO_HIT
+    e1 = (tri[1, 0] - tri[0, 0], tri[1, 1] - tri[0, 1], tri[1, 2] - tri[0, 2])
+    e2 = (tri[2, 0] - tri[0, 0], tri[2, 1] - tri[0, 1], tri[2, 2] - tri[0, 2])
+    pv = (direction[1] * e2[2] - direction[2] * e2[1], direction[2] * e2[0] - direction[0] * e2[2],
+          direction[0] * e2[1] - direction[1] * e2[0])
+    det = e1[0] * pv[0] + e1[1] * pv[1] + e1[2] * pv[2]
+    if abs(det) < 1e-14:
+        return NO_HIT
+    inv = 1.0 / det
+    s = (origin[0] - tri[0, 0], origin[1] - tri[0, 1], origin[2] - tri[0, 2])
+    u = (s[0] * pv[0] + s[1] * pv[1] + s[2] * pv[2]) * inv
+    if u < 0.0 or u > 1.0:
+        return NO_HIT
+    q = (s[1] * e1[2] - s[2] * e1[1], s[2] * e1[0] - s[0] * e1[2], s[0] * e1[1] - s[1] * e1[0])
+    v = (direction[0] * q[0] + direction[1] * q[1] + direction[2] * q[2]) * inv
+    if v < 0.0 or u + v > 1.0:
+        return NO_HIT
+    t = (e2[0] * q[0] + e2[1] * q[1] + e2[2] * q[2]) * inv
+    return t if 0.0 <= t <= reach else NO_HIT
+
+
+@njit(cache=True, nogil=True)
+def cast_ray(origin, direction, reach, exclude, query_id, bodies, broad, playground, ground_enabled,
+             ground_height, root_min, root_size, depth):
+    """Nearest hit of the segment origin + t direction, 0 <= t <= reach (direction unit), with
+    anything but body `exclude`: (t, what: a body slot, GROUND or PLAYGROUND, normal), t NO_HIT
+    when nothing is hit. `query_id` (negative, unique per ray in a step) marks objects seen."""
+    best, hit, best_normal = NO_HIT, GROUND, (0.0, 0.0, 1.0)
+    if ground_enabled and direction[2] < 0.0:
+        t = (ground_height - origin[2]) / direction[2]
+        if 0.0 <= t <= reach:
+            best = t
+    end = (origin[0] + reach * direction[0], origin[1] + reach * direction[1], origin[2] + reach * direction[2])
+    lo = np.array((min(origin[0], end[0]), min(origin[1], end[1]), min(origin[2], end[2])))
+    hi = np.array((max(origin[0], end[0]), max(origin[1], end[1]), max(origin[2], end[2])))
+    level = object_level(lo, hi, root_size, depth)
+    box = cell_box(lo, hi, level, root_min, root_size)
+    for index in (broad.moving, broad.static):
+        n = query_index(index, level, box, True, broad.stamp, query_id, broad.scratch)
+        for m in range(n):
+            j = broad.scratch[m]
+            if j == exclude or not bodies.active[j]:
+                continue
+            t, normal = ray_box(origin, direction, reach, bodies.position[j], bodies.rotation[j],
+                                bodies.half_extents[j])
+            if t < best:
+                best, hit, best_normal = t, j, normal
+    if len(playground.triangles):
+        n = query_index(playground.index, level, box, True, playground.stamp, query_id,
+                        playground.scratch)
+        for m in range(n):
+            tri = playground.scratch[m]
+            t = ray_triangle(origin, direction, reach, playground.triangles[tri], playground.normals[tri])
+            if t < best:
+                nt = playground.normals[tri]
+                best, hit, best_normal = t, PLAYGROUND, (nt[0], nt[1], nt[2])
+    return best, hit, best_normal

@@ -1,0 +1,252 @@
+"""Vehicles (SPEC 5): a chassis body on four spring-damper wheels that touch the world by ray
+casts, driven by a Twist controller, all inside the compiled step.
+
+Per wheel and step: a ray along the chassis' down axis from the mount, spring_length + radius
+long. A hit compresses the spring: force stiffness x compression + damper x compression rate,
+along the chassis' up axis at the mount (the chassis sways on it). The tyre's force, in the plane
+perpendicular to the spring, goes straight to the chassis at the contact point:
+- drive engine_power x power_gain x throttle along the wheel's heading, brake up to brake_power
+  against the rolling direction, and whatever stops sideways slip;
+- limited by a friction circle: up to static_friction x load the tyre grips; asked for more, it
+  slides with dynamic_friction x load.
+What is hit (a box) gets the opposite force. Wheels roll at v / r and keep a spin angle.
+
+The car's mass is the chassis' plus its wheels' (one rigid body); every force above acts on it.
+The Twist controller turns a wanted forward speed and yaw rate into throttle, brake and steering:
+a PI loop on speed (braking when the wanted direction reverses or the car is to stop), the
+bicycle model tan(steer) = yaw_rate x wheelbase / speed plus yaw-rate feedback, Ackermann angles
+per steered wheel from the mounts; a command older than its timeout means stop.
+"""
+from collections import namedtuple
+
+import numpy as np
+from numba import njit
+
+from .raycast import NO_HIT, cast_ray
+
+WHEELS = 4
+
+VehicleArrays = namedtuple("VehicleArrays", [
+    "active", "chassis",          # (V,) bool, body slot of the chassis
+    "engine_power", "brake_power", "max_steer",  # (V,) N, N per wheel, rad
+    "wheelbase", "rear_axle",     # (V,) m along the chassis x axis (from the mounts)
+    # Wheels (V, 4): mount (V, 4, 3) in the chassis frame, then the SPEC 3 wheel properties.
+    "mount", "radius", "power_gain", "steered", "stiffness", "damper", "spring_length",
+    "static_friction", "dynamic_friction",
+    # Command (Twist) and controller state (V,).
+    "command_speed", "command_yaw_rate", "command_age", "command_timeout", "speed_integral",
+    "throttle", "brake", "steer",  # (V,) applied: throttle -1..1, brake 0..1, steer rad
+    # Wheel state (V, 4), for the node's joint states and markers.
+    "steer_angle", "spin_angle", "spin_rate", "compression", "in_contact",
+    "contact_point", "contact_normal",  # (V, 4, 3)
+])
+
+SPEED_GAIN = 1.0          # throttle per m/s of speed error
+SPEED_INTEGRAL_GAIN = 0.5  # throttle per m of accumulated speed error
+YAW_GAIN = 0.5            # rad of extra steer per rad/s of yaw-rate error
+MIN_STEER_SPEED = 0.5     # m/s: below this the bicycle model is evaluated at this speed
+STOP_SPEED = 0.05         # m/s: slower than this the car counts as standing (may reverse)
+
+
+def allocate_vehicles(capacity):
+    f = lambda *shape: np.zeros((capacity,) + shape)  # noqa: E731
+    return VehicleArrays(
+        active=np.zeros(capacity, np.bool_), chassis=np.zeros(capacity, np.int64),
+        engine_power=f(), brake_power=f(), max_steer=f(), wheelbase=f(), rear_axle=f(),
+        mount=f(WHEELS, 3), radius=f(WHEELS), power_gain=f(WHEELS),
+        steered=np.zeros((capacity, WHEELS), np.bool_), stiffness=f(WHEELS), damper=f(WHEELS),
+        spring_length=f(WHEELS), static_friction=f(WHEELS), dynamic_friction=f(WHEELS),
+        command_speed=f(), command_yaw_rate=f(), command_age=f(), command_timeout=f(),
+        speed_integral=f(), throttle=f(), brake=f(), steer=f(), steer_angle=f(WHEELS),
+        spin_angle=f(WHEELS), spin_rate=f(WHEELS), compression=f(WHEELS),
+        in_contact=np.zeros((capacity, WHEELS), np.bool_), contact_point=f(WHEELS, 3),
+        contact_normal=f(WHEELS, 3))
+
+
+def grow_vehicles(vehicles, capacity):
+    grown = allocate_vehicles(capacity)
+    n = len(vehicles.active)
+    for field, old in zip(VehicleArrays._fields, vehicles):
+        getattr(grown, field)[:n] = old
+    return grown
+
+
+@njit(cache=True, nogil=True)
+def control(vehicles, v, speed, yaw_rate, dt):
+    """The Twist controller of vehicle v: sets throttle, brake and steer from its command."""
+    vehicles.command_age[v] += dt
+    if vehicles.command_age[v] > vehicles.command_timeout[v]:
+        vehicles.command_speed[v] = 0.0
+        vehicles.command_yaw_rate[v] = 0.0
+    target = vehicles.command_speed[v]
+    throttle, brake = 0.0, 0.0
+    if target == 0.0 or (target * speed < 0.0 and abs(speed) > STOP_SPEED):
+        # Told to stop, or going the wrong way: full brakes (limited by the tyres' grip).
+        brake = 1.0
+        vehicles.speed_integral[v] = 0.0
+    else:
+        error = target - speed
+        wanted = SPEED_GAIN * error + SPEED_INTEGRAL_GAIN * vehicles.speed_integral[v]
+        throttle = min(max(wanted, -1.0), 1.0)  # negative: the engine holds the car back
+        if throttle == wanted:  # integrate only while not saturated (no wind-up)
+            vehicles.speed_integral[v] += error * dt
+    wanted_yaw = vehicles.command_yaw_rate[v]
+    reference = speed
+    if abs(speed) < MIN_STEER_SPEED:
+        reference = MIN_STEER_SPEED if target >= 0.0 else -MIN_STEER_SPEED
+    steer = np.arctan(wanted_yaw * vehicles.wheelbase[v] / reference)
+    if abs(speed) > MIN_STEER_SPEED:
+        steer += YAW_GAIN * (wanted_yaw - yaw_rate) * (1.0 if speed > 0.0 else -1.0)
+    limit = vehicles.max_steer[v]
+    vehicles.throttle[v] = throttle
+    vehicles.brake[v] = brake
+    vehicles.steer[v] = min(max(steer, -limit), limit)
+
+
+@njit(cache=True, nogil=True)
+def ackermann(vehicles, v, w):
+    """Steer angle of wheel w: every steered wheel points square to the line from it to one
+    turning centre, on the rear axle line at wheelbase / tan(steer) to the left (REP-103)."""
+    steer = vehicles.steer[v]
+    if not vehicles.steered[v, w]:
+        return 0.0
+    if abs(steer) < 1e-6:
+        return steer
+    centre = vehicles.wheelbase[v] / np.tan(steer)
+    return np.arctan((vehicles.mount[v, w, 0] - vehicles.rear_axle[v]) / (centre - vehicles.mount[v, w, 1]))
+
+
+@njit(cache=True, nogil=True)
+def drive_vehicles(vehicles, bodies, broad, playground, ground_enabled, ground_height, root_min,
+                   root_size, depth, dt):
+    """Controller, wheel ray casts, suspension and tyre forces of every vehicle for one step,
+    applied as impulses to the chassis (and the opposite to any box a wheel stands on). The four
+    springs are evaluated on the same state, then applied; the tyres follow one by one, each
+    seeing what the others already did (so four wheels never cancel the same slip four times)."""
+    position, velocity = bodies.position, bodies.velocity
+    for v in range(len(vehicles.active)):
+        if not vehicles.active[v]:
+            continue
+        c = vehicles.chassis[v]
+        r = bodies.rotation[c]
+        forward, left, up = (r[0, 0], r[1, 0], r[2, 0]), (r[0, 1], r[1, 1], r[2, 1]), (r[0, 2], r[1, 2], r[2, 2])
+        down = (-up[0], -up[1], -up[2])
+        speed = velocity[c, 0] * forward[0] + velocity[c, 1] * forward[1] + velocity[c, 2] * forward[2]
+        yaw_rate = velocity[c, 3] * up[0] + velocity[c, 4] * up[1] + velocity[c, 5] * up[2]
+        control(vehicles, v, speed, yaw_rate, dt)
+        loads = np.zeros(WHEELS)
+        hits = np.zeros(WHEELS, np.int64)  # what each wheel stands on (slot, GROUND, PLAYGROUND)
+        for w in range(WHEELS):  # suspension: ray casts and spring loads on the step's state
+            vehicles.steer_angle[v, w] = ackermann(vehicles, v, w)
+            m = vehicles.mount[v, w]
+            mount = (position[c, 0] + r[0, 0] * m[0] + r[0, 1] * m[1] + r[0, 2] * m[2],
+                     position[c, 1] + r[1, 0] * m[0] + r[1, 1] * m[1] + r[1, 2] * m[2],
+                     position[c, 2] + r[2, 0] * m[0] + r[2, 1] * m[1] + r[2, 2] * m[2])
+            reach = vehicles.spring_length[v, w] + vehicles.radius[v, w]
+            t, hit, normal = cast_ray(mount, down, reach, c, -10 - WHEELS * v - w, bodies, broad,
+                                      playground, ground_enabled, ground_height, root_min,
+                                      root_size, depth)
+            vehicles.in_contact[v, w] = t != NO_HIT
+            if t == NO_HIT:
+                vehicles.compression[v, w] = 0.0
+                continue
+            hits[w] = hit
+            for e in range(3):
+                vehicles.contact_point[v, w, e] = mount[e] + t * down[e]
+                vehicles.contact_normal[v, w, e] = normal[e]
+            compression = min(reach - t, vehicles.spring_length[v, w])
+            vehicles.compression[v, w] = compression
+            rel = contact_velocity(bodies, c, hit, vehicles.contact_point[v, w])
+            compression_rate = -(rel[0] * up[0] + rel[1] * up[1] + rel[2] * up[2])
+            loads[w] = max(vehicles.stiffness[v, w] * compression
+                           + vehicles.damper[v, w] * compression_rate, 0.0)
+        for w in range(WHEELS):  # the springs push the chassis at the mounts, what is hit back
+            if not vehicles.in_contact[v, w]:
+                continue
+            m = vehicles.mount[v, w]
+            mount = (position[c, 0] + r[0, 0] * m[0] + r[0, 1] * m[1] + r[0, 2] * m[2],
+                     position[c, 1] + r[1, 0] * m[0] + r[1, 1] * m[1] + r[1, 2] * m[2],
+                     position[c, 2] + r[2, 0] * m[0] + r[2, 1] * m[1] + r[2, 2] * m[2])
+            spring = loads[w] * dt
+            push(bodies, c, mount, (spring * up[0], spring * up[1], spring * up[2]))
+            if hits[w] >= 0:
+                push(bodies, hits[w], vehicles.contact_point[v, w], (-spring * up[0], -spring * up[1], -spring * up[2]))
+        for w in range(WHEELS):  # tyres, in the plane perpendicular to the spring
+            if not vehicles.in_contact[v, w]:
+                vehicles.spin_angle[v, w] += vehicles.spin_rate[v, w] * dt
+                continue
+            hit, point = hits[w], vehicles.contact_point[v, w]
+            ca, sa = np.cos(vehicles.steer_angle[v, w]), np.sin(vehicles.steer_angle[v, w])
+            heading = (ca * forward[0] + sa * left[0], ca * forward[1] + sa * left[1], ca * forward[2] + sa * left[2])
+            side = (up[1] * heading[2] - up[2] * heading[1], up[2] * heading[0] - up[0] * heading[2],
+                    up[0] * heading[1] - up[1] * heading[0])
+            rel = contact_velocity(bodies, c, hit, point)
+            v_long = rel[0] * heading[0] + rel[1] * heading[1] + rel[2] * heading[2]
+            v_side = rel[0] * side[0] + rel[1] * side[1] + rel[2] * side[2]
+            vehicles.spin_rate[v, w] = v_long / vehicles.radius[v, w]
+            vehicles.spin_angle[v, w] += vehicles.spin_rate[v, w] * dt
+            k_long = point_response(bodies, c, point, heading) + point_response(bodies, hit, point, heading)
+            k_side = point_response(bodies, c, point, side) + point_response(bodies, hit, point, side)
+            if k_long <= 0.0 or k_side <= 0.0:
+                continue  # a frozen chassis on something static: nothing moves
+            drive = vehicles.engine_power[v] * vehicles.power_gain[v, w] * vehicles.throttle[v] * dt
+            # The brake stops the rolling at most, never reverses it.
+            brake = vehicles.brake_power[v] * vehicles.brake[v] * dt
+            impulse_long = drive + min(max(-v_long / k_long, -brake), brake)
+            impulse_side = -v_side / k_side
+            # Friction circle: the tyre grips up to static friction x load, and slides with
+            # dynamic friction x load when more is asked of it.
+            magnitude = np.sqrt(impulse_long ** 2 + impulse_side ** 2)
+            if magnitude > vehicles.static_friction[v, w] * loads[w] * dt:
+                scale = vehicles.dynamic_friction[v, w] * loads[w] * dt / magnitude
+                impulse_long *= scale
+                impulse_side *= scale
+            p = (impulse_long * heading[0] + impulse_side * side[0],
+                 impulse_long * heading[1] + impulse_side * side[1],
+                 impulse_long * heading[2] + impulse_side * side[2])
+            push(bodies, c, point, p)
+            if hit >= 0:
+                push(bodies, hit, point, (-p[0], -p[1], -p[2]))
+
+
+@njit(cache=True, nogil=True)
+def contact_velocity(bodies, body, other, point):
+    """Velocity of `body` at a world point relative to `other` (a slot, or static if < 0)."""
+    vel, pos = bodies.velocity, bodies.position
+    arm = (point[0] - pos[body, 0], point[1] - pos[body, 1], point[2] - pos[body, 2])
+    vx = vel[body, 0] + vel[body, 4] * arm[2] - vel[body, 5] * arm[1]
+    vy = vel[body, 1] + vel[body, 5] * arm[0] - vel[body, 3] * arm[2]
+    vz = vel[body, 2] + vel[body, 3] * arm[1] - vel[body, 4] * arm[0]
+    if other >= 0:
+        arm = (point[0] - pos[other, 0], point[1] - pos[other, 1], point[2] - pos[other, 2])
+        vx -= vel[other, 0] + vel[other, 4] * arm[2] - vel[other, 5] * arm[1]
+        vy -= vel[other, 1] + vel[other, 5] * arm[0] - vel[other, 3] * arm[2]
+        vz -= vel[other, 2] + vel[other, 3] * arm[1] - vel[other, 4] * arm[0]
+    return vx, vy, vz
+
+
+@njit(cache=True, nogil=True)
+def point_response(bodies, body, point, d):
+    """1 / effective mass of `body` at a world point along unit d (0 if it does not move)."""
+    if body < 0 or not bodies.awake[body]:
+        return 0.0
+    inv_i, x = bodies.inv_inertia_world[body], bodies.position[body]
+    arm = (point[0] - x[0], point[1] - x[1], point[2] - x[2])
+    cx, cy, cz = arm[1] * d[2] - arm[2] * d[1], arm[2] * d[0] - arm[0] * d[2], arm[0] * d[1] - arm[1] * d[0]
+    return bodies.solver_inv_mass[body] + (
+        cx * (inv_i[0, 0] * cx + inv_i[0, 1] * cy + inv_i[0, 2] * cz)
+        + cy * (inv_i[1, 0] * cx + inv_i[1, 1] * cy + inv_i[1, 2] * cz)
+        + cz * (inv_i[2, 0] * cx + inv_i[2, 1] * cy + inv_i[2, 2] * cz))
+
+
+@njit(cache=True, nogil=True)
+def push(bodies, body, point, p):
+    """Impulse p at a world point on an awake body (others ignore it)."""
+    if not bodies.awake[body]:
+        return
+    m, inv_i, x = bodies.solver_inv_mass[body], bodies.inv_inertia_world[body], bodies.position[body]
+    arm = (point[0] - x[0], point[1] - x[1], point[2] - x[2])
+    torque = (arm[1] * p[2] - arm[2] * p[1], arm[2] * p[0] - arm[0] * p[2], arm[0] * p[1] - arm[1] * p[0])
+    for e in range(3):
+        bodies.velocity[body, e] += p[e] * m
+        bodies.velocity[body, 3 + e] += inv_i[e, 0] * torque[0] + inv_i[e, 1] * torque[1] + inv_i[e, 2] * torque[2]
