@@ -185,3 +185,26 @@ def test_vehicle_api_errors_and_removal():
     world.remove_body("car")
     assert world.vehicle_names() == [] and world.body_names() == []
     world.step(10)  # the removed car's wheels no longer act
+
+
+def test_edit_vehicle_changes_only_given_keys_and_acts():
+    world = car_world()
+    before = world.vehicle("car")
+    world.edit_vehicle("car", engine_power=3000.0, wheels={2: {"power_gain": 1.0}, 3: {"power_gain": 1.0}})
+    after = world.vehicle("car")
+    assert after["engine_power"] == 3000.0 and after["brake_power"] == before["brake_power"]
+    assert [w["power_gain"] for w in after["wheels"]] == [0.0, 0.0, 1.0, 1.0]
+    assert after["wheels"][0] == before["wheels"][0]
+    for bad, fragment in (({"wheels": {7: {}}}, "wheel index must be 0-3"),
+                          ({"wheels": {0: {"radius": -1}}}, "car.wheels[0].radius: must be > 0"),
+                          ({"turbo": 1}, "car.turbo: unknown key")):
+        with pytest.raises(ValueError, match=None) as error:
+            world.edit_vehicle("car", **bad)
+        assert fragment in str(error.value)
+    assert world.vehicle("car") == after
+    world.drive("car", 100.0, 0.0, timeout=100)
+    world.step(64)
+    v0 = forward_speed(world)
+    world.step(128)
+    # engine_power 3000 N shared by power gains 1 + 1: 6000 N for one second.
+    assert forward_speed(world) - v0 == pytest.approx(2 * 3000.0 / TOTAL_MASS, rel=0.1)

@@ -230,6 +230,36 @@ def validate_wheel(raw, path):
     return out
 
 
+def validate_wheel_fields(raw, path):
+    """The given keys of a wheel (for edits): checked like validate_wheel, no defaults."""
+    mapping(raw, path, set(WHEEL_DEFAULTS) | {"mount"})
+    full = validate_wheel({"mount": [0.0, 0.0, 0.0], **raw}, path)
+    return {key: full[key] for key in raw}
+
+
+VEHICLE_EDIT_KEYS = {"engine_power", "brake_power", "max_steer", "wheels"}
+
+
+def validate_vehicle_edit(raw, path):
+    """A partial vehicle edit: engine_power, brake_power, max_steer, and wheels as a mapping
+    from wheel index (0-3: front-left, front-right, rear-left, rear-right) to wheel keys."""
+    mapping(raw, path, VEHICLE_EDIT_KEYS)
+    full = validate_vehicle({"chassis": {"size": [1, 1, 1], "mass": 1},
+                             "wheels": [{"mount": [0, 0, 0]}] * WHEEL_COUNT,
+                             **{k: v for k, v in raw.items() if k != "wheels"}}, path)
+    out = {key: full[key] for key in raw if key != "wheels"}
+    if "wheels" in raw:
+        wheels = raw["wheels"]
+        if not isinstance(wheels, dict):
+            raise SpecError(child(path, "wheels"), "expected a mapping from wheel index (0-3) to wheel keys")
+        out["wheels"] = {}
+        for index, fields in wheels.items():
+            if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < WHEEL_COUNT:
+                raise SpecError(child(path, "wheels"), f"wheel index must be 0-3, got {index!r:.20}")
+            out["wheels"][index] = validate_wheel_fields(fields, child(child(path, "wheels"), index))
+    return out
+
+
 def validate_vehicle(raw, path="vehicle"):
     """A complete vehicle spec (SPEC 3 `vehicles` entry) over the defaults."""
     mapping(raw, path, VEHICLE_KEYS)

@@ -113,7 +113,9 @@ def ackermann(vehicles, v, w):
     if abs(steer) < 1e-6:
         return steer
     centre = vehicles.wheelbase[v] / np.tan(steer)
-    return np.arctan((vehicles.mount[v, w, 0] - vehicles.rear_axle[v]) / (centre - vehicles.mount[v, w, 1]))
+    angle = np.arctan((vehicles.mount[v, w, 0] - vehicles.rear_axle[v]) / (centre - vehicles.mount[v, w, 1]))
+    limit = vehicles.max_steer[v]
+    return min(max(angle, -limit), limit)  # the inner wheel too stays within max_steer
 
 
 @njit(cache=True, nogil=True)

@@ -119,17 +119,7 @@ class World:
         rows.engine_power[row] = vehicle["engine_power"]
         rows.brake_power[row] = vehicle["brake_power"]
         rows.max_steer[row] = vehicle["max_steer"]
-        for w, wheel in enumerate(wheels):
-            rows.mount[row, w] = wheel["mount"]
-            for field, key in (("radius", "radius"), ("power_gain", "power_gain"),
-                               ("steered", "steered"), ("stiffness", "spring_stiffness"),
-                               ("damper", "damper"), ("spring_length", "spring_length"),
-                               ("static_friction", "static_friction"),
-                               ("dynamic_friction", "dynamic_friction")):
-                getattr(rows, field)[row, w] = wheel[key]
-        # Wheels are front-left, front-right, rear-left, rear-right (SPEC 3).
-        rows.rear_axle[row] = 0.5 * (wheels[2]["mount"][0] + wheels[3]["mount"][0])
-        rows.wheelbase[row] = 0.5 * (wheels[0]["mount"][0] + wheels[1]["mount"][0]) - rows.rear_axle[row]
+        self._load_wheels(row, wheels)
         for field in ("command_speed", "command_yaw_rate", "command_age", "speed_integral",
                       "throttle", "brake", "steer", "steer_angle", "spin_angle", "spin_rate",
                       "compression", "in_contact"):
@@ -138,6 +128,23 @@ class World:
         self._vehicles[name] = {**vehicle, "name": name}
         self._vehicle_rows[name] = row
         return name
+
+    def edit_vehicle(self, name, /, **fields):
+        """Changes only the given vehicle keys: engine_power, brake_power, max_steer, and wheels
+        as {index: {wheel keys}} (0-3: front-left, front-right, rear-left, rear-right). The
+        chassis is edited as a body (edit_body)."""
+        row = self._vehicle_row(name)
+        edit = specs.validate_vehicle_edit(fields, name)
+        spec = self._vehicles[name]
+        rows = self._vehicle_arrays
+        for key in ("engine_power", "brake_power", "max_steer"):
+            if key in edit:
+                spec[key] = edit[key]
+                getattr(rows, key)[row] = edit[key]
+        for index, wheel in edit.get("wheels", {}).items():
+            spec["wheels"][index] = {**spec["wheels"][index], **wheel}
+        self._load_wheels(row, spec["wheels"])
+        self._wake(self._slots[name])
 
     def drive(self, name, speed, yaw_rate, timeout=DEFAULT_COMMAND_TIMEOUT):
         """Twist command for vehicle `name`: wanted forward speed (m/s, negative reverses) and
@@ -168,6 +175,20 @@ class World:
             "spin_rate": v.spin_rate[row].copy(), "compression": v.compression[row].copy(),
             "in_contact": v.in_contact[row].copy(), "contact_point": v.contact_point[row].copy(),
         }
+
+    def _load_wheels(self, row, wheels):
+        rows = self._vehicle_arrays
+        for w, wheel in enumerate(wheels):
+            rows.mount[row, w] = wheel["mount"]
+            for field, key in (("radius", "radius"), ("power_gain", "power_gain"),
+                               ("steered", "steered"), ("stiffness", "spring_stiffness"),
+                               ("damper", "damper"), ("spring_length", "spring_length"),
+                               ("static_friction", "static_friction"),
+                               ("dynamic_friction", "dynamic_friction")):
+                getattr(rows, field)[row, w] = wheel[key]
+        # Wheels are front-left, front-right, rear-left, rear-right (SPEC 3).
+        rows.rear_axle[row] = 0.5 * (wheels[2]["mount"][0] + wheels[3]["mount"][0])
+        rows.wheelbase[row] = 0.5 * (wheels[0]["mount"][0] + wheels[1]["mount"][0]) - rows.rear_axle[row]
 
     def _vehicle_row(self, name):
         try:
