@@ -170,6 +170,11 @@ def packaged_mesh_name(path):
 
 def save_world(world, path):
     """Writes the world as a scene file that load_world turns back into the same world."""
+    Path(path).write_text(yaml.safe_dump(world_to_scene(world), sort_keys=False), encoding="utf-8")
+
+
+def world_to_scene(world):
+    """The world as a scene dict (SPEC 3) that load_world turns back into the same world."""
     vehicles = world.vehicle_names()
     scene = {
         "version": SCENE_VERSION,
@@ -181,4 +186,4 @@ def save_world(world, path):
                                "mesh": packaged_mesh_name(world.playground_spec["mesh"])}
     scene["bodies"] = [world.body(name) for name in world.body_names() if name not in vehicles]
     scene["vehicles"] = [world.vehicle(name) for name in vehicles]
-    Path(path).write_text(yaml.safe_dump(scene, sort_keys=False), encoding="utf-8")
+    return scene

@@ -1,0 +1,150 @@
+"""The SPEC 6.3 request handlers, ROS-free (the node and the Foxglove server share them)."""
+import numpy as np
+import pytest
+import yaml
+
+from vplayground_ros.api import (INVALID_MAP_DATA, MAP_DOES_NOT_EXIST, MAP_SUCCESS, Requests)
+from vplayground_ros.scene import load_world
+from vplayground_ros.simulation import Simulation
+
+SCENE = {"version": 1, "bodies": [{"name": "a", "position": [0, 0, 0.5]},
+                                  {"name": "b", "position": [3, 0, 0.5]}]}
+
+
+@pytest.fixture
+def requests():
+    return Requests(Simulation(load_world(SCENE)))
+
+
+def snapshot(world):
+    return world.body_names(), {k: v.copy() for k, v in world.state().items()}
+
+
+def unchanged(requests, before):
+    names, state = snapshot(requests.sim.world)
+    return names == before[0] and all(np.array_equal(state[k], before[1][k]) for k in state)
+
+
+def test_spawn_one_and_a_list_all_or_nothing(requests):
+    ok, message = requests.spawn("{name: c, size: [1, 1, 1], position: [0, 3, 2]}")
+    assert ok and message == "RESULT_OK: c"
+    before = snapshot(requests.sim.world)
+    ok, message = requests.spawn("[{name: d}, {name: e, size: [1, -1, 1]}]")
+    assert not ok and message.startswith("RESULT_OPERATION_FAILED: [1].size[1]: must be > 0")
+    assert unchanged(requests, before)
+    ok, message = requests.spawn("[{name: d}, {name: e, initial_pose: {position: {x: 1, y: 2, z: 3}}}]")
+    assert ok and message == "RESULT_OK: d, e"
+    assert requests.sim.world.body("e")["position"] == [1.0, 2.0, 3.0]
+
+
+@pytest.mark.parametrize("payload, code", [
+    ("{name: a}", "NAME_NOT_UNIQUE:"),
+    ("{name: 'bad name!'}", "NAME_INVALID:"),
+    ("{size: [1, 1", "RESULT_OPERATION_FAILED: request is not valid YAML/JSON"),
+    ("[]", "RESULT_OPERATION_FAILED: nothing to spawn"),
+    ("42", "RESULT_OPERATION_FAILED: spawn must be a mapping"),
+    ("{mass: .nan}", "RESULT_OPERATION_FAILED: spawn.mass: must be finite"),
+    ("{wheels: []}", "RESULT_OPERATION_FAILED: spawn.chassis: missing"),
+])
+def test_bad_spawns_are_coded_and_change_nothing(requests, payload, code):
+    before = snapshot(requests.sim.world)
+    ok, message = requests.spawn(payload)
+    assert not ok and message.startswith(code), message
+    assert unchanged(requests, before)
+
+
+def test_spawn_with_renaming(requests):
+    ok, message = requests.spawn("{name: a, allow_renaming: true}")
+    assert ok and message == "RESULT_OK: a_2"
+
+
+def test_edit_pose_twist_and_properties(requests):
+    ok, message = requests.edit(yaml.safe_dump({
+        "entity": "a", "state": {"pose": {"position": {"x": 1, "y": 2, "z": 3}},
+                                 "twist": {"linear": [0, 0, 1]}}, "mass": 7.0}))
+    assert ok, message
+    body = requests.sim.world.body("a")
+    assert body["position"] == [1.0, 2.0, 3.0] and body["linear_velocity"] == [0.0, 0.0, 1.0]
+    assert body["mass"] == 7.0
+    ok, _ = requests.edit("{entity: a, state: {pose: {position: [5, 5, 5]}}, set_pose: false}")
+    assert ok and requests.sim.world.body("a")["position"] == [1.0, 2.0, 3.0]
+
+
+@pytest.mark.parametrize("payload, code", [
+    ("{entity: nobody, mass: 1}", "RESULT_NOT_FOUND:"),
+    ("{mass: 1}", "RESULT_OPERATION_FAILED: edit.entity"),
+    ("{entity: a, state: {pose: {position: [0, .inf, 0]}}}", "INVALID_POSE:"),
+    ("{entity: a, mass: 2, size: [1, 0, 1]}", "RESULT_OPERATION_FAILED: a.size[1]"),
+    ("{entity: a, vehicle: {engine_power: 5}}", "RESULT_OPERATION_FAILED: a.vehicle: 'a' is not a vehicle"),
+])
+def test_bad_edits_are_coded_and_change_nothing(requests, payload, code):
+    before = snapshot(requests.sim.world)
+    ok, message = requests.edit(payload)
+    assert not ok and message.startswith(code), message
+    assert unchanged(requests, before)
+
+
+def test_remove_by_name_filter_and_all(requests):
+    requests.spawn("[{name: crate_1}, {name: crate_2}, {name: barrel}]")
+    assert requests.remove("{entity: barrel}") == (True, "RESULT_OK: barrel")
+    assert requests.remove("{filter: '^crate_[0-9]+$'}") == (True, "RESULT_OK: crate_1, crate_2")
+    assert requests.remove("{entity: barrel}")[1].startswith("RESULT_NOT_FOUND:")
+    assert requests.remove("{filter: '('}")[1].startswith("RESULT_OPERATION_FAILED:")
+    assert requests.remove("{all: true}") == (True, "RESULT_OK: a, b")
+    assert requests.sim.world.body_names() == []
+
+
+def test_pause_step_and_their_codes(requests):
+    assert requests.step(1)[1].startswith("RESULT_INCORRECT_STATE:")
+    assert requests.pause(True) == (True, "RESULT_OK: paused")
+    assert requests.pause(True)[1].startswith("ALREADY_IN_TARGET_STATE:")
+    assert requests.step(3)[0]
+    assert requests.pause(False) == (True, "RESULT_OK: playing")
+
+
+def test_reset_scopes(requests):
+    world = requests.sim.world
+    requests.spawn("{name: extra}")
+    world.step(64)
+    requests.edit("{entity: a, state: {pose: {position: [9, 9, 9]}}}")
+    assert requests.reset(4)[0] and "extra" not in world.body_names()
+    assert requests.reset(2)[0] and world.body("a")["position"] == [0.0, 0.0, 0.5]
+    assert world.time > 0 and requests.reset(1)[0] and world.time == 0.0
+    requests.spawn("{name: extra}")
+    assert requests.reset(255)[0]
+    assert requests.sim.world.body_names() == ["a", "b"]
+    assert requests.reset(8)[1].startswith("RESULT_OPERATION_FAILED:")
+
+
+def test_load_and_save_scene(requests, tmp_path):
+    path = tmp_path / "out.yaml"
+    assert requests.save_scene(str(path)) == (True, f"RESULT_OK: {path}")
+    assert requests.save_scene(str(path))[1].startswith("RESULT_OPERATION_FAILED:")  # no overwrite
+    assert requests.save_scene(yaml.safe_dump({"path": str(path), "overwrite": True}, default_flow_style=True))[0]
+    requests.remove("{entity: a}")
+    assert requests.load_scene(str(path))[0] == MAP_SUCCESS
+    assert requests.sim.world.body_names() == ["a", "b"]
+    assert requests.load_scene(str(tmp_path / "missing.yaml"))[0] == MAP_DOES_NOT_EXIST
+    (tmp_path / "bad.yaml").write_text("version: 9\n")
+    before = requests.sim.world
+    assert requests.load_scene(str(tmp_path / "bad.yaml"))[0] == INVALID_MAP_DATA
+    assert requests.sim.world is before
+
+
+def test_get_entity_and_features(requests):
+    ok, text = requests.get_entity("{entity: b}")
+    entity = yaml.safe_load(text)
+    assert ok and entity["frame"] == "world" and entity["pose"]["position"] == [3.0, 0.0, 0.5]
+    assert requests.get_entity("{entity: zz}")[1].startswith("RESULT_NOT_FOUND:")
+    ok, text = requests.features()
+    assert ok and 0 in yaml.safe_load(text)["features"]
+
+
+def test_runner_steps_in_real_time_and_applies_commands_between_batches():
+    sim = Simulation(load_world(SCENE), real_time_factor=0.0, duration=1.0)
+    seen = []
+    sim.add_listener(lambda snap: seen.append(snap.time))
+    sim.start()
+    assert sim.wait(30)
+    assert sim.world.time == pytest.approx(1.0)
+    assert seen == sorted(seen) and seen[-1] == pytest.approx(1.0)

@@ -1,0 +1,176 @@
+"""The real-time runner: a World stepped in its own thread, commands queued between batches,
+snapshots for whoever publishes. ROS-free, so the node and the Foxglove server share it.
+
+Data flows one way per batch: queued commands are applied -> the world steps (compiled, GIL
+released) -> a snapshot is taken -> listeners read the snapshot. Nothing outside this thread
+touches the World while it steps.
+"""
+import queue
+import threading
+import time
+from concurrent.futures import Future
+from dataclasses import dataclass, field
+
+# A batch runs this long at most in wall time, so commands and snapshots stay fresh.
+BATCH_PERIOD = 0.01
+# Steps per batch when running as fast as possible.
+FAST_BATCH_STEPS = 16
+# Falling further behind than this many batches is not caught up on: the loop drops the debt
+# (counted as late ticks) instead of spiralling into ever longer catch-up batches.
+MAX_DEBT_BATCHES = 5
+
+STOPPED, PLAYING, PAUSED = 0, 1, 2  # simulation_interfaces SimulationState
+
+
+@dataclass
+class Snapshot:
+    """What the world looked like after a batch (copies, safe to read from any thread)."""
+    time: float
+    step: int
+    names: list
+    state: dict
+    vehicles: dict = field(default_factory=dict)  # name -> vehicle_state()
+    contacts: dict = None
+
+
+class Simulation:
+    def __init__(self, world, real_time_factor=1.0, start_paused=False, duration=None,
+                 with_contacts=True):
+        self.world = world
+        self.real_time_factor = real_time_factor
+        self.duration = duration
+        self.with_contacts = with_contacts
+        self.paused = start_paused
+        self.late_ticks = 0
+        self.step_seconds = 0.0     # wall time spent inside world.step, for diagnostics
+        self.achieved_rtf = 0.0
+        self._commands = queue.SimpleQueue()
+        self._listeners = []
+        self._stop = threading.Event()
+        self._finished = threading.Event()
+        self._pending_steps = 0
+        self._thread = None
+        self.snapshot = self._take_snapshot()
+
+    # ---------------------------------------------------------------- control (any thread)
+    @property
+    def state(self):
+        if self._finished.is_set():
+            return STOPPED
+        return PAUSED if self.paused else PLAYING
+
+    def submit(self, fn):
+        """Runs fn(world) on the simulation thread between batches; returns a Future."""
+        future = Future()
+        self._commands.put((fn, future))
+        if self._thread is None:  # not started (tests, batch use): run it now
+            self._apply_commands()
+        return future
+
+    def call(self, fn, timeout=10.0):
+        return self.submit(fn).result(timeout)
+
+    def add_listener(self, fn):
+        """fn(snapshot) runs on the simulation thread after every batch: keep it short."""
+        self._listeners.append(fn)
+
+    def start(self):
+        self._thread = threading.Thread(target=self._run, name="vplayground-physics", daemon=True)
+        self._thread.start()
+
+    def stop(self, timeout=5.0):
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout)
+
+    def wait(self, timeout=None):
+        """Blocks until the run ends (duration reached or stop()). True if it ended."""
+        return self._finished.wait(timeout)
+
+    # ------------------------------------------------ commands run on the simulation thread
+    def request_steps(self, count):
+        """While paused: advance exactly `count` steps (the ~/step service)."""
+        self._pending_steps += count
+
+    # ---------------------------------------------------------------------- the loop
+    def _run(self):
+        try:
+            self._loop()
+        finally:
+            self._finished.set()
+
+    def _loop(self):
+        world = self.world
+        origin_wall, origin_sim = time.perf_counter(), world.time
+        rtf_wall, rtf_sim = origin_wall, world.time
+        while not self._stop.is_set():
+            self._apply_commands()
+            rate = world.settings["steps_per_second"]
+            steps = 0
+            if self.paused:
+                steps, self._pending_steps = self._pending_steps, 0
+                origin_wall, origin_sim = time.perf_counter(), world.time
+            elif self.real_time_factor <= 0.0:
+                steps = FAST_BATCH_STEPS
+            else:
+                due = (time.perf_counter() - origin_wall) * self.real_time_factor * rate
+                steps = int(due - (world.time - origin_sim) * rate + 1e-9)
+                per_batch = max(1, int(round(BATCH_PERIOD * self.real_time_factor * rate)))
+                if steps > MAX_DEBT_BATCHES * per_batch:
+                    self.late_ticks += steps - per_batch
+                    steps = per_batch
+                    origin_wall, origin_sim = time.perf_counter(), world.time
+            if self.duration is not None:
+                steps = min(steps, max(0, int(round((self.duration - world.time) * rate))))
+            if steps > 0:
+                started = time.perf_counter()
+                world.step(steps)
+                self.step_seconds += time.perf_counter() - started
+                self._publish()
+            if self.duration is not None and world.time >= self.duration - 0.5 / rate:
+                break
+            now = time.perf_counter()
+            if now - rtf_wall >= 0.5:
+                self.achieved_rtf = (world.time - rtf_sim) / (now - rtf_wall)
+                rtf_wall, rtf_sim = now, world.time
+            if steps == 0:
+                self._wait_for_work()
+
+    def _wait_for_work(self):
+        """Sleeps until the next step is due or a command arrives."""
+        if self.paused or self.real_time_factor > 0.0:
+            period = 1.0 / (self.world.settings["steps_per_second"] * max(self.real_time_factor, 1e-3))
+            try:
+                item = self._commands.get(timeout=min(period, BATCH_PERIOD) if not self.paused else BATCH_PERIOD)
+            except queue.Empty:
+                return
+            self._commands.put(item)  # keep order: applied at the top of the loop
+
+    def _apply_commands(self):
+        applied = False
+        while True:
+            try:
+                fn, future = self._commands.get_nowait()
+            except queue.Empty:
+                break
+            if not future.set_running_or_notify_cancel():
+                continue
+            try:
+                future.set_result(fn(self.world))
+            except BaseException as error:  # the caller gets it; the loop goes on
+                future.set_exception(error)
+            applied = True
+        if applied:
+            self._publish()
+
+    def _publish(self):
+        self.snapshot = self._take_snapshot()
+        for listener in self._listeners:
+            listener(self.snapshot)
+
+    def _take_snapshot(self):
+        world = self.world
+        return Snapshot(
+            time=world.time, step=world.step_count, names=world.body_names(), state=world.state(),
+            vehicles={name: world.vehicle_state(name) for name in world.vehicle_names()},
+            contacts=world.contacts() if self.with_contacts else None)
