@@ -1,4 +1,4 @@
-# make run  : set up .venv and run the simulator on the built-in default scene
+# make run  : set up .venv and run the simulator node on the built-in default scene
 # make test : set up .venv and run the whole test suite
 # make bench: quick engine benchmark (not part of make test)
 PYTHON ?= python3.11
@@ -10,11 +10,15 @@ STAMP   = $(VENV)/.installed
 
 setup: $(STAMP)
 
+# A sourced ROS install's rclpy is reused (the venv sees its site packages); without one the
+# Jazzy wheels come from PyPI.
 $(STAMP): setup.py setup.cfg package.xml
 	@command -v $(PYTHON) >/dev/null || { echo "$(PYTHON) not found (Python 3.11 needed)"; exit 1; }
-	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	test -x $(PY) || if $(PYTHON) -c "import rclpy" 2>/dev/null; then \
+		$(PYTHON) -m venv --system-site-packages $(VENV); else $(PYTHON) -m venv $(VENV); fi
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e ".[test]"
+	$(PY) -c "import rclpy" 2>/dev/null || $(PY) -m pip install --quiet -e ".[ros]"
 	touch $(STAMP)
 
 run: $(STAMP)

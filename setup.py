@@ -21,7 +21,11 @@ setup(
     ],
     python_requires=">=3.10",
     install_requires=["numpy>=1.24", "numba>=0.59", "pyyaml>=6", "trimesh>=4"],
-    extras_require={"test": ["pytest>=7"]},
+    extras_require={
+        "test": ["pytest>=7"],
+        # The ROS 2 Jazzy Python wheels, for machines without a ROS install (make does this).
+        "ros": ["ros-jazzy-rclpy[fastrtps]", "ros-jazzy-common-interfaces"],
+    },
     zip_safe=False,
     entry_points={"console_scripts": [f"vplayground = {PACKAGE}.cli:main"]},
 )

@@ -1,72 +1,123 @@
-"""Console entry point `vplayground`.
+"""Console entry point `vplayground` (SPEC 2).
 
-Until the ROS node lands, this runs a scene headless in real time (or as fast as possible) and
-reports progress: the engine's main job without ROS.
+With rclpy importable it runs the ROS node; without it (or with --no-ros) the same simulation
+runs headless. Either way it prints a status line and stops cleanly (exit 0) on Ctrl-C, SIGTERM
+or when --duration of simulated time has passed.
 """
 import argparse
+import signal
 import sys
+import threading
 import time
 from pathlib import Path
 
 from .resources import find_shared
 from .scene import SceneError, load_world
+from .simulation import Simulation
+
+STATUS_PERIOD = 2.0  # s of wall time between status lines
 
 
 def parse_args(argv):
     parser = argparse.ArgumentParser(prog="vplayground", description="Real-time rigid-body sandbox.")
     parser.add_argument("--scene", type=Path, default=None, help="scene file (default: built-in)")
-    parser.add_argument("--duration", type=float, default=5.0, help="simulated seconds to run")
+    parser.add_argument("--duration", type=float, default=None,
+                        help="stop after this many simulated seconds (default: run until stopped)")
     parser.add_argument("--real-time-factor", type=float, default=1.0,
                         help="simulated seconds per wall-clock second; 0 = as fast as possible")
+    parser.add_argument("--start-paused", action="store_true", help="start paused")
+    parser.add_argument("--no-ros", action="store_true", help="run headless even where rclpy imports")
     args = parser.parse_args(argv)
-    if args.duration <= 0:
+    if args.duration is not None and args.duration <= 0:
         parser.error("--duration must be > 0")
     if args.real_time_factor < 0:
         parser.error("--real-time-factor must be >= 0")
+    if args.scene is None:
+        args.scene = find_shared("config/default_scene.yaml")
+        if args.scene is None:
+            parser.error("the default scene config/default_scene.yaml is not installed")
     return args
 
 
+def split_ros_args(argv):
+    """Our options, and everything from --ros-args on (for rclpy)."""
+    if "--ros-args" in argv:
+        k = argv.index("--ros-args")
+        return argv[:k], argv[k:]
+    return argv, []
+
+
+def status_line(sim):
+    snap = sim.snapshot
+    frozen = int(snap.state["frozen"].sum())
+    steps = max(snap.step, 1)
+    return (f"t={snap.time:8.2f} s  bodies={len(snap.names)}  frozen={frozen}  "
+            f"rtf={sim.achieved_rtf:.2f}  step={1e3 * sim.step_seconds / steps:.3f} ms  "
+            f"late={sim.late_ticks}")
+
+
 def main(argv=None):
-    args = parse_args(sys.argv[1:] if argv is None else argv)
-    scene = args.scene or find_shared("config/default_scene.yaml")
-    if scene is None:
-        print("vplayground: the default scene config/default_scene.yaml is not installed",
-              file=sys.stderr)
-        return 2
+    argv = sys.argv[1:] if argv is None else list(argv)
+    own, ros_args = split_ros_args(argv)
+    options = parse_args(own)
     try:
-        world = load_world(scene)
+        world = load_world(options.scene)
     except SceneError as error:
         print(f"vplayground: {error}", file=sys.stderr)
         return 2
-    rate = world.settings["steps_per_second"]
-    batch = max(1, rate // 16)  # steps per compiled call: 16 progress ticks per second
-    total = int(round(args.duration * rate))
-    started = time.perf_counter()
-    stepping = 0.0
-    print(f"vplayground: {scene} ({len(world.body_names())} bodies), {args.duration:g} s at "
-          f"{rate} steps/s, real-time factor {args.real_time_factor:g}", flush=True)
-    done = 0
-    while done < total:
-        n = min(batch, total - done)
-        t0 = time.perf_counter()
-        world.step(n)
-        stepping += time.perf_counter() - t0
-        done += n
-        if args.real_time_factor > 0:
-            wait = started + world.time / args.real_time_factor - time.perf_counter()
-            if wait > 0:
-                time.sleep(wait)
-        if done % rate == 0 or done == total:
-            frozen = int(world.state()["frozen"].sum())
-            print(f"  t={world.time:6.2f} s  bodies={len(world.body_names())}  frozen={frozen}  "
-                  f"physics {done / max(stepping, 1e-9):.0f} steps/s", flush=True)
-    wall = time.perf_counter() - started
-    frozen = int(world.state()["frozen"].sum())
-    print(f"summary: {len(world.body_names())} bodies, {frozen} frozen, {done} steps in "
-          f"{wall:.2f} s wall ({done / max(stepping, 1e-9):.0f} steps/s of physics, achieved "
-          f"real-time factor {world.time / wall:.2f}); per step {world.stats['pairs'] / done:.0f} "
-          f"body pairs and {world.stats['triangles'] / done:.1f} of "
-          f"{len(world.playground_triangles)} playground triangles tested")
+    sim = Simulation(world, real_time_factor=options.real_time_factor,
+                     start_paused=options.start_paused, duration=options.duration)
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    try:
+        import rclpy  # noqa: F401
+    except ImportError:
+        rclpy = None
+    if rclpy is None or options.no_ros:
+        return run_headless(sim, options, stop)
+    return run_node(sim, options, ros_args, stop)
+
+
+def run_headless(sim, options, stop):
+    print(f"vplayground: {options.scene} ({len(sim.world.body_names())} bodies), headless", flush=True)
+    sim.start()
+    last = time.perf_counter()
+    while not stop.is_set() and not sim.wait(0.1):
+        if time.perf_counter() - last >= STATUS_PERIOD:
+            last = time.perf_counter()
+            print(status_line(sim), flush=True)
+    sim.stop()
+    print(f"summary: {status_line(sim)}, {sim.world.step_count} steps", flush=True)
+    return 0
+
+
+def run_node(sim, options, ros_args, stop):
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+
+    from .node import SimulatorNode
+
+    rclpy.init(args=["vplayground", *ros_args], signal_handler_options=SignalHandlerOptions.NO)
+    node = SimulatorNode(sim, options)
+    log = node.get_logger()
+    node.create_timer(STATUS_PERIOD, lambda: log.info(status_line(sim)))
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    log.info(f"{options.scene}: {len(sim.world.body_names())} bodies; real-time factor "
+             f"{options.real_time_factor:g}{'' if options.duration is None else f', {options.duration:g} s'}")
+    sim.start()
+    try:
+        while not stop.is_set() and not sim.wait(0):
+            executor.spin_once(timeout_sec=0.05)
+    finally:
+        sim.stop()
+        executor.spin_once(timeout_sec=0.05)  # the last state and /clock go out
+        log.info(f"stopped: {status_line(sim)}")
+        executor.remove_node(node)
+        node.destroy_node()
+        rclpy.try_shutdown()
     return 0
 
 

@@ -13,7 +13,7 @@ def share_directories():
         from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
         try:
             roots.append(Path(get_package_share_directory(PACKAGE)))
-        except PackageNotFoundError:
+        except (PackageNotFoundError, OSError):  # not in an ament index, or none is set up
             pass
     except ImportError:
         pass

@@ -100,11 +100,14 @@ class Simulation:
             self._finished.set()
 
     def _loop(self):
-        world = self.world
-        origin_wall, origin_sim = time.perf_counter(), world.time
-        rtf_wall, rtf_sim = origin_wall, world.time
+        world, origin_sim = None, 0.0
         while not self._stop.is_set():
             self._apply_commands()
+            if self.world is not world or world.time < origin_sim:
+                # Started, or a command loaded another scene or reset the time.
+                world = self.world
+                origin_wall, origin_sim = time.perf_counter(), world.time
+                rtf_wall, rtf_sim = origin_wall, world.time
             rate = world.settings["steps_per_second"]
             steps = 0
             if self.paused:

@@ -1,0 +1,280 @@
+"""The node through real rclpy clients (SPEC 6): topics, services and codes, parameters,
+pause/step exactness, driving, Foxglove's publish tools, clean shutdown."""
+import math
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import pytest
+import yaml
+
+rclpy = pytest.importorskip("rclpy")
+
+from diagnostic_msgs.srv import AddDiagnostics  # noqa: E402
+from geometry_msgs.msg import PointStamped, PoseArray, PoseWithCovarianceStamped, Twist  # noqa: E402
+from nav_msgs.msg import Odometry  # noqa: E402
+from nav_msgs.srv import LoadMap  # noqa: E402
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue  # noqa: E402
+from rcl_interfaces.srv import SetParameters  # noqa: E402
+from rclpy.executors import MultiThreadedExecutor  # noqa: E402
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+from rosgraph_msgs.msg import Clock  # noqa: E402
+from std_msgs.msg import UInt8  # noqa: E402
+from std_srvs.srv import SetBool, Trigger  # noqa: E402
+from visualization_msgs.srv import GetInteractiveMarkers  # noqa: E402
+
+from vplayground_ros.cli import parse_args  # noqa: E402
+from vplayground_ros.node import SimulatorNode  # noqa: E402
+from vplayground_ros.scene import load_world  # noqa: E402
+from vplayground_ros.simulation import Simulation  # noqa: E402
+
+NS = "/vplayground"
+
+
+def wait_for(predicate, timeout=10.0):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if predicate():
+            return True
+        time.sleep(0.02)
+    return False
+
+
+class Harness:
+    """The node on its own executor thread, and a client node beside it."""
+
+    def __init__(self, rtf=4.0):
+        rclpy.init(args=["test"])
+        options = parse_args(["--real-time-factor", str(rtf)])
+        self.sim = Simulation(load_world(options.scene), real_time_factor=rtf)
+        self.node = SimulatorNode(self.sim, options)
+        self.client = rclpy.create_node("vplayground_test_client")
+        self.executor = MultiThreadedExecutor(num_threads=4)
+        self.executor.add_node(self.node)
+        self.executor.add_node(self.client)
+        self.sim.start()
+        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self.thread.start()
+        self.latest = {}
+        self.clients = {}
+
+    def listen(self, kind, topic, qos=10):
+        self.client.create_subscription(kind, topic, lambda msg: self.latest.__setitem__(topic, msg), qos)
+
+    def call(self, kind, name, request, timeout=10.0):
+        client = self.clients.get(name)
+        if client is None:
+            client = self.clients[name] = self.client.create_client(kind, name)
+        assert client.wait_for_service(timeout_sec=timeout), name
+        future = client.call_async(request)
+        assert wait_for(future.done, timeout), name
+        return future.result()
+
+    def text(self, service, payload):
+        response = self.call(AddDiagnostics, f"{NS}/{service}", AddDiagnostics.Request(load_namespace=payload))
+        return response.success, response.message
+
+    def set_parameter(self, name, value, kind):
+        field = {ParameterType.PARAMETER_DOUBLE: "double_value", ParameterType.PARAMETER_INTEGER: "integer_value",
+                 ParameterType.PARAMETER_BOOL: "bool_value", ParameterType.PARAMETER_STRING: "string_value",
+                 ParameterType.PARAMETER_DOUBLE_ARRAY: "double_array_value"}[kind]
+        value_msg = ParameterValue(type=kind, **{field: value})
+        response = self.call(SetParameters, f"{NS}/set_parameters",
+                             SetParameters.Request(parameters=[Parameter(name=name, value=value_msg)]))
+        return response.results[0]
+
+    def close(self):
+        self.sim.stop()
+        self.executor.shutdown()
+        self.thread.join(10)
+        self.node.destroy_node()
+        self.client.destroy_node()
+        rclpy.try_shutdown()
+
+
+@pytest.fixture(scope="module")
+def ros():
+    harness = Harness()
+    yield harness
+    harness.close()
+
+
+def test_every_topic_is_advertised_with_its_type(ros):
+    expected = {
+        "/clock": "rosgraph_msgs/msg/Clock", f"{NS}/bodies/markers": "visualization_msgs/msg/MarkerArray",
+        f"{NS}/bodies/poses": "geometry_msgs/msg/PoseArray", f"{NS}/scene/markers": "visualization_msgs/msg/MarkerArray",
+        f"{NS}/contacts/points": "sensor_msgs/msg/PointCloud2", f"{NS}/contacts/markers": "visualization_msgs/msg/MarkerArray",
+        f"{NS}/transforms": "geometry_msgs/msg/TransformStamped", "/odom": "nav_msgs/msg/Odometry",
+        f"{NS}/car/ground_truth": "nav_msgs/msg/Odometry", "/joint_states": "sensor_msgs/msg/JointState",
+        f"{NS}/car/command": "geometry_msgs/msg/TwistStamped", f"{NS}/car/markers": "visualization_msgs/msg/MarkerArray",
+        f"{NS}/state": "std_msgs/msg/UInt8", f"{NS}/real_time_factor": "std_msgs/msg/Float64",
+        "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
+    }
+
+    def advertised():
+        topics = dict(ros.client.get_topic_names_and_types())
+        return all(expected[t] in topics.get(t, []) for t in expected)
+    assert wait_for(advertised)
+
+
+def test_poses_and_clock_carry_sim_time(ros):
+    ros.listen(PoseArray, f"{NS}/bodies/poses")
+    ros.listen(Clock, "/clock", QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE))
+    assert wait_for(lambda: f"{NS}/bodies/poses" in ros.latest and "/clock" in ros.latest
+                    and ros.latest[f"{NS}/bodies/poses"].header.stamp.nanosec > 0)
+    poses = ros.latest[f"{NS}/bodies/poses"]
+    assert poses.header.frame_id == "world"
+    assert len(poses.poses) == len(ros.sim.snapshot.names) or wait_for(
+        lambda: len(ros.latest[f"{NS}/bodies/poses"].poses) == len(ros.sim.snapshot.names))
+    stamp = poses.header.stamp.sec + 1e-9 * poses.header.stamp.nanosec
+    assert 0.0 < stamp <= ros.sim.snapshot.time + 1e-6
+
+
+def test_pause_and_step_advance_exactly_one_step(ros):
+    assert ros.call(SetBool, f"{NS}/pause", SetBool.Request(data=True)).success
+    assert ros.call(SetBool, f"{NS}/pause", SetBool.Request(data=True)).message.startswith("ALREADY_IN_TARGET_STATE:")
+    time.sleep(0.2)
+    before = ros.sim.snapshot.time
+    time.sleep(0.2)
+    assert ros.sim.snapshot.time == before  # paused: nothing moves
+    response = ros.call(Trigger, f"{NS}/step", Trigger.Request())
+    assert response.success, response.message
+    assert wait_for(lambda: ros.sim.snapshot.time > before)
+    clock = lambda: ros.latest["/clock"].clock.sec + 1e-9 * ros.latest["/clock"].clock.nanosec  # noqa: E731
+    assert wait_for(lambda: abs(clock() - (before + 1 / 128)) < 1e-9)
+    assert ros.sim.snapshot.time == pytest.approx(before + 1 / 128, abs=1e-12)
+    assert ros.call(SetBool, f"{NS}/pause", SetBool.Request(data=False)).success
+    assert ros.call(Trigger, f"{NS}/step", Trigger.Request()).message.startswith("RESULT_INCORRECT_STATE:")
+
+
+def test_state_topic_is_latched(ros):
+    qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    ros.listen(UInt8, f"{NS}/state", qos)
+    assert wait_for(lambda: f"{NS}/state" in ros.latest and ros.latest[f"{NS}/state"].data == 1)
+
+
+def test_entity_services_and_codes(ros):
+    assert ros.text("spawn", "{name: node_box, position: [2, -4, 5]}") == (True, "RESULT_OK: node_box")
+    assert ros.text("spawn", "{name: node_box}")[1].startswith("NAME_NOT_UNIQUE:")
+    assert ros.text("spawn", "{size: [1, 1")[1].startswith("RESULT_OPERATION_FAILED:")
+    ok, message = ros.text("edit", "{entity: node_box, mass: 3.0, state: {twist: {linear: [1, 0, 0]}}}")
+    assert ok, message
+    ok, text = ros.text("get_entity", "{entity: node_box}")
+    assert ok and yaml.safe_load(text)["mass"] == 3.0
+    assert ros.text("get_entity", "{entity: ghost}")[1].startswith("RESULT_NOT_FOUND:")
+    entities = ros.call(GetInteractiveMarkers, f"{NS}/get_entities", GetInteractiveMarkers.Request())
+    names = [m.name for m in entities.markers]
+    assert "node_box" in names and "car" in names
+    marker = entities.markers[names.index("node_box")]
+    assert yaml.safe_load(marker.description)["category"] == "box"
+    assert marker.controls[0].markers[0].scale.x == 1.0
+    assert ros.text("remove", "{entity: node_box}") == (True, "RESULT_OK: node_box")
+    assert ros.text("remove", "{entity: node_box}")[1].startswith("RESULT_NOT_FOUND:")
+
+
+def test_scene_services(ros, tmp_path):
+    path = tmp_path / "saved.yaml"
+    assert ros.text("save_scene", str(path)) == (True, f"RESULT_OK: {path}")
+    assert path.exists()
+    assert ros.call(LoadMap, f"{NS}/load_scene", LoadMap.Request(map_url=str(tmp_path / "none.yaml"))).result == 1
+    (tmp_path / "bad.yaml").write_text("version: 1\nbodies: [{size: [0, 1, 1]}]\n")
+    names = list(ros.sim.snapshot.names)
+    assert ros.call(LoadMap, f"{NS}/load_scene", LoadMap.Request(map_url=str(tmp_path / "bad.yaml"))).result == 2
+    assert ros.sim.snapshot.names == names  # the old world stays
+    assert ros.call(LoadMap, f"{NS}/load_scene", LoadMap.Request(map_url=str(path))).result == 0
+    assert ros.call(Trigger, f"{NS}/wake_all", Trigger.Request()).success
+    assert ros.call(SetBool, f"{NS}/set_freezing", SetBool.Request(data=True)).message.startswith("ALREADY_IN_TARGET_STATE:")
+    features = ros.call(Trigger, f"{NS}/get_simulator_features", Trigger.Request())
+    assert features.success and "vplayground_yaml" in features.message
+    ros.text("spawn", "{name: temporary}")
+    ros.set_parameter("reset_scope", 4, ParameterType.PARAMETER_INTEGER)
+    assert ros.call(Trigger, f"{NS}/reset", Trigger.Request()).success
+    assert wait_for(lambda: "temporary" not in ros.sim.snapshot.names)
+    ros.set_parameter("reset_scope", 255, ParameterType.PARAMETER_INTEGER)
+
+
+def test_parameters_accepted_and_rejected(ros):
+    assert ros.set_parameter("steps_per_second", 200, ParameterType.PARAMETER_INTEGER).successful
+    assert wait_for(lambda: ros.sim.world.settings["steps_per_second"] == 200)
+    result = ros.set_parameter("octree_depth", 40, ParameterType.PARAMETER_INTEGER)
+    assert not result.successful and result.reason
+    result = ros.set_parameter("gravity", [0.0, 0.0, math.nan], ParameterType.PARAMETER_DOUBLE_ARRAY)
+    assert not result.successful and "gravity" in result.reason
+    result = ros.set_parameter("gravity", [0.0, 0.0], ParameterType.PARAMETER_DOUBLE_ARRAY)
+    assert not result.successful and "gravity" in result.reason
+    assert not ros.set_parameter("scene", "other.yaml", ParameterType.PARAMETER_STRING).successful
+    assert not ros.set_parameter("steps_per_second", "fast", ParameterType.PARAMETER_STRING).successful
+    assert ros.sim.world.settings["octree_depth"] == 5
+    assert ros.set_parameter("freezing.time", 1.0, ParameterType.PARAMETER_DOUBLE).successful
+    assert wait_for(lambda: ros.sim.world.settings["freezing"]["time"] == 1.0)
+    assert ros.set_parameter("steps_per_second", 128, ParameterType.PARAMETER_INTEGER).successful
+
+
+def test_twist_drives_the_car_and_the_timeout_stops_it(ros):
+    ros.listen(Odometry, "/odom")
+    publisher = ros.client.create_publisher(Twist, "cmd_vel", 10)
+    command = Twist()
+    command.linear.x, command.angular.z = 3.0, 1.0  # a 3 m circle, clear of the playground
+    driving = threading.Event()
+    driving.set()
+
+    def keep_publishing():
+        while driving.is_set():
+            publisher.publish(command)
+            time.sleep(0.05)
+    threading.Thread(target=keep_publishing, daemon=True).start()
+    speed = lambda: ros.latest["/odom"].twist.twist.linear.x  # noqa: E731
+    try:
+        assert wait_for(lambda: "/odom" in ros.latest and abs(speed() - 3.0) < 0.3, timeout=20)
+        assert ros.latest["/odom"].child_frame_id == "base_link"
+        assert ros.latest["/odom"].header.frame_id == "odom"
+        assert wait_for(lambda: ros.latest["/odom"].twist.twist.angular.z > 0.5)  # CCW (REP-103)
+    finally:
+        driving.clear()
+    # No more commands: after cmd_vel_timeout (1.2 s simulated) the car brakes to rest.
+    assert wait_for(lambda: ros.sim.snapshot.vehicles["car"]["command_speed"] == 0.0, timeout=10)
+    assert wait_for(lambda: abs(speed()) < 0.05, timeout=10)
+
+
+def test_clicked_point_drops_a_box_and_initialpose_teleports_the_car(ros):
+    before = set(ros.sim.snapshot.names)
+    click = ros.client.create_publisher(PointStamped, "clicked_point", 10)
+    msg = PointStamped()
+    msg.header.frame_id = "world"
+    msg.point.x, msg.point.y = -10.0, 5.0
+    assert wait_for(lambda: click.get_subscription_count() > 0)
+    click.publish(msg)
+    assert wait_for(lambda: len(set(ros.sim.snapshot.names) - before) == 1)
+    name = (set(ros.sim.snapshot.names) - before).pop()
+    assert ros.sim.world.body(name)["size"] == [0.5, 0.5, 0.5]
+    teleport = ros.client.create_publisher(PoseWithCovarianceStamped, "initialpose", 10)
+    pose = PoseWithCovarianceStamped()
+    pose.header.frame_id = "world"
+    pose.pose.pose.position.x, pose.pose.pose.position.y = -15.0, 15.0
+    pose.pose.pose.orientation.z, pose.pose.pose.orientation.w = math.sin(0.5), math.cos(0.5)
+    assert wait_for(lambda: teleport.get_subscription_count() > 0)
+    teleport.publish(pose)
+    assert wait_for(lambda: abs(ros.sim.world.body("car")["position"][0] + 15.0) < 0.1)
+    assert ros.sim.world.body("car")["position"][1] == pytest.approx(15.0, abs=0.1)
+
+
+def run_console(*args, **kwargs):
+    env = dict(os.environ)
+    return subprocess.Popen([sys.executable, "-m", "vplayground_ros.cli", *args], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, **kwargs)
+
+
+def test_duration_and_sigterm_stop_cleanly():
+    finished = run_console("--duration", "2", "--real-time-factor", "0")
+    output, _ = finished.communicate(timeout=120)
+    assert finished.returncode == 0, output
+    assert "stopped: t=    2.00 s" in output
+    running = run_console("--real-time-factor", "1")
+    time.sleep(8.0)
+    running.send_signal(signal.SIGTERM)
+    output, _ = running.communicate(timeout=30)
+    assert running.returncode == 0, output
+    assert "stopped:" in output
