@@ -221,3 +221,17 @@ def test_settings_change_on_the_running_world():
     assert world.settings["freezing"]["linear_speed"] == before["freezing"]["linear_speed"]
     world.step(64)  # woken, and gravity now points up
     assert world.state()["positions"][0, 2] > 1.0
+
+
+def test_bodies_that_go_non_finite_or_fly_away_are_removed():
+    world = World()
+    for k, name in enumerate(("keep", "nan", "away")):
+        world.add_body({"name": name, "position": [0, 3.0 * k, 0.5]})
+    world.step(1)
+    world._bodies.velocity[world._slots["nan"], 0] = float("nan")  # injected fault
+    world.edit_body("away", linear_velocity=[0, 0, 5000.0])
+    world.step(128)
+    assert sorted(world.remove_escaped()) == ["away", "nan"]
+    assert world.body_names() == ["keep"]
+    world.step(10)
+    assert np.all(np.isfinite(world.state()["positions"]))

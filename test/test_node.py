@@ -278,3 +278,28 @@ def test_duration_and_sigterm_stop_cleanly():
     output, _ = running.communicate(timeout=30)
     assert running.returncode == 0, output
     assert "stopped:" in output
+
+
+def test_marker_and_contact_topics_carry_the_bodies(ros):
+    from sensor_msgs.msg import JointState, PointCloud2
+    from visualization_msgs.msg import MarkerArray
+    ros.listen(MarkerArray, f"{NS}/bodies/markers", 1)
+    ros.listen(MarkerArray, f"{NS}/scene/markers",
+               QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    ros.listen(MarkerArray, f"{NS}/car/markers", 1)
+    ros.listen(PointCloud2, f"{NS}/contacts/points", 1)
+    ros.listen(JointState, "/joint_states")
+    topics = (f"{NS}/bodies/markers", f"{NS}/scene/markers", f"{NS}/car/markers", f"{NS}/contacts/points", "/joint_states")
+    assert wait_for(lambda: all(t in ros.latest for t in topics))
+    bodies = ros.latest[f"{NS}/bodies/markers"].markers
+    assert bodies[0].action == 3 and len(bodies) - 1 == len(ros.latest[f"{NS}/bodies/poses"].poses)
+    assert {m.ns for m in bodies[1:]} <= {"box", "immovable", "vehicle"}
+    scene = ros.latest[f"{NS}/scene/markers"].markers
+    playground = [m for m in scene if m.ns == "playground"]
+    assert playground and len(playground[0].points) == 3 * len(ros.sim.world.playground_triangles)
+    car = ros.latest[f"{NS}/car/markers"].markers
+    assert sorted({m.ns for m in car[1:]}) == ["chassis", "ray_hits", "springs", "wheels"]
+    cloud = ros.latest[f"{NS}/contacts/points"]
+    assert [f.name for f in cloud.fields] == ["x", "y", "z", "nx", "ny", "nz", "depth", "impulse", "body_a", "body_b"]
+    joints = ros.latest["/joint_states"]
+    assert len(joints.name) == 12 and "front_left_suspension" in joints.name

@@ -9,13 +9,14 @@ import math
 import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import Point, Pose, PoseArray, TransformStamped, TwistStamped
+from geometry_msgs.msg import Point, Pose, TransformStamped, TwistStamped
 from nav_msgs.msg import Odometry
 from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import JointState, PointCloud2, PointField
+from sensor_msgs.msg import JointState, PointField
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
+from . import cdr
 from .physics.world import quaternions_to_matrices
 
 WHEEL_NAMES = ("front_left", "front_right", "rear_left", "rear_right")
@@ -55,9 +56,8 @@ def colour(rgba):
 
 
 def pose_array(snapshot, frame):
-    s = snapshot.state
-    return PoseArray(header=header(snapshot.time, frame),
-                     poses=[pose(p, q) for p, q in zip(s["positions"], s["quaternions"])])
+    """~/bodies/poses as CDR bytes, in the order of ~/get_entities."""
+    return cdr.pose_array(snapshot.time, frame, snapshot.state["positions"], snapshot.state["quaternions"])
 
 
 def category(snapshot, row):
@@ -67,20 +67,16 @@ def category(snapshot, row):
     return "immovable" if snapshot.state["immovable"][row] else "box"
 
 
-def body_markers(snapshot, frame, marker_ids):
-    """DELETEALL, then one CUBE per body (ns = category, id stable per name, frozen grey)."""
+def body_markers(snapshot, frame, marker_ids, encoder):
+    """~/bodies/markers as CDR bytes: DELETEALL, then one CUBE per body (ns = category, id
+    stable per name, frozen grey)."""
     s = snapshot.state
-    stamp_header = header(snapshot.time, frame)
-    markers = [Marker(header=stamp_header, action=Marker.DELETEALL)]
-    for row, name in enumerate(snapshot.names):
-        kind = category(snapshot, row)
-        m = Marker(header=stamp_header, ns=kind, id=marker_ids(name), type=Marker.CUBE,
-                   action=Marker.ADD, pose=pose(s["positions"][row], s["quaternions"][row]))
-        m.scale.x, m.scale.y, m.scale.z = (float(v) for v in s["sizes"][row])
-        m.color = colour(COLOURS["frozen" if s["frozen"][row] else kind])
-        m.frame_locked = True
-        markers.append(m)
-    return MarkerArray(markers=markers)
+    namespaces = [category(snapshot, row) for row in range(len(snapshot.names))]
+    colours = np.array([COLOURS["frozen" if frozen else kind] for kind, frozen in zip(namespaces, s["frozen"])],
+                       dtype=np.float32).reshape(-1, 4)
+    ids = [marker_ids(name) for name in snapshot.names]
+    poses = np.concatenate([s["positions"], s["quaternions"]], axis=1)
+    return encoder.encode(snapshot.time, frame, namespaces, ids, poses, s["sizes"], colours)
 
 
 def scene_markers(seconds, frame, ground, triangles):
@@ -115,7 +111,11 @@ CONTACT_DTYPE = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("nx", "<f4"
                           ("body_b", "<i4")])
 
 
+CONTACT_FIELD_LAYOUT = [(f.name, f.offset, f.datatype, f.count) for f in CONTACT_FIELDS]
+
+
 def contact_cloud(snapshot, frame, max_points):
+    """~/contacts/points as CDR bytes."""
     c = snapshot.contacts
     n = min(len(c["depths"]), max_points)
     rows = np.zeros(n, CONTACT_DTYPE)
@@ -124,9 +124,7 @@ def contact_cloud(snapshot, frame, max_points):
         rows["n" + key] = c["normals"][:n, k]
     rows["depth"], rows["impulse"] = c["depths"][:n], c["impulses"][:n]
     rows["body_a"], rows["body_b"] = c["body_a"][:n], c["body_b"][:n]
-    return PointCloud2(header=header(snapshot.time, frame), height=1, width=n,
-                       fields=CONTACT_FIELDS, is_bigendian=False, point_step=CONTACT_DTYPE.itemsize,
-                       row_step=CONTACT_DTYPE.itemsize * n, data=rows.tobytes(), is_dense=True)
+    return cdr.point_cloud(snapshot.time, frame, CONTACT_FIELD_LAYOUT, rows)
 
 
 def contact_markers(snapshot, frame, max_points):
@@ -207,6 +205,49 @@ def car_transforms(snapshot, name, frames, wheels):
                                        (0.0, math.sin(spin), 0.0, math.cos(spin)))
         out.append(transform(snapshot.time, base_frame, f"wheel_{wheel}", centre, rotation))
     return out
+
+
+def car_markers(snapshot, name, frame, wheels):
+    """The car as Foxglove draws it: chassis, wheels (cylinders, steered and spun), springs
+    (mount to wheel centre) and the wheels' ray hits."""
+    row = snapshot.names.index(name)
+    s, v = snapshot.state, snapshot.vehicles[name]
+    q = s["quaternions"][row]
+    rotation = quaternions_to_matrices(q[None])[0]
+    position = s["positions"][row]
+    stamp_header = header(snapshot.time, frame)
+    chassis = Marker(header=stamp_header, ns="chassis", id=0, type=Marker.CUBE, action=Marker.ADD,
+                     pose=pose(position, q))
+    chassis.scale.x, chassis.scale.y, chassis.scale.z = (float(x) for x in s["sizes"][row])
+    chassis.color = colour(COLOURS["vehicle"])
+    springs = Marker(header=stamp_header, ns="springs", id=0, type=Marker.LINE_LIST, action=Marker.ADD)
+    springs.pose.orientation.w = 1.0
+    springs.scale.x = 0.04
+    springs.color = colour((0.9, 0.9, 0.2, 1.0))
+    hits = Marker(header=stamp_header, ns="ray_hits", id=0, type=Marker.SPHERE_LIST, action=Marker.ADD)
+    hits.pose.orientation.w = 1.0
+    hits.scale.x = hits.scale.y = hits.scale.z = 0.08
+    hits.color = colour(COLOURS["contact"])
+    markers = [Marker(header=stamp_header, action=Marker.DELETEALL), chassis]
+    for w, wheel in enumerate(wheels):
+        mount = np.asarray(wheel["mount"], dtype=float)
+        centre_local = mount - [0.0, 0.0, wheel["spring_length"] - v["compression"][w]]
+        mount_world, centre_world = position + rotation @ mount, position + rotation @ centre_local
+        half = 0.5 * v["steer_angle"][w]
+        # A cylinder's axis is its z: turn it onto the wheel's axle (y), then steer about z.
+        axle = quaternion_multiply(quaternion_multiply(tuple(q), (0.0, 0.0, math.sin(half), math.cos(half))),
+                                   (math.sin(math.pi / 4), 0.0, 0.0, math.cos(math.pi / 4)))
+        m = Marker(header=stamp_header, ns="wheels", id=w, type=Marker.CYLINDER, action=Marker.ADD,
+                   pose=pose(centre_world, axle))
+        m.scale.x = m.scale.y = 2.0 * wheel["radius"]
+        m.scale.z = 0.25
+        m.color = colour((0.1, 0.1, 0.1, 1.0))
+        markers.append(m)
+        springs.points += [Point(x=float(a), y=float(b), z=float(c)) for a, b, c in (mount_world, centre_world)]
+        if v["in_contact"][w]:
+            x, y, z = v["contact_point"][w]
+            hits.points.append(Point(x=float(x), y=float(y), z=float(z)))
+    return MarkerArray(markers=markers + [springs, hits])
 
 
 def quaternion_multiply(a, b):

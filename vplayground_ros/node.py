@@ -25,7 +25,7 @@ from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import InteractiveMarker, InteractiveMarkerControl, Marker, MarkerArray
 from visualization_msgs.srv import GetInteractiveMarkers
 
-from . import messages
+from . import cdr, messages
 from .api import Requests
 from .physics import specs
 from .physics.math3d import rpy_to_quat
@@ -101,6 +101,8 @@ class SimulatorNode(Node):
         self._last_clock = -math.inf
         self._last_static = -math.inf
         self._last_state = None
+        self._removed_reported = 0
+        self.marker_encoder = cdr.BodyMarkerEncoder()
         self._declare_parameters(options)
         if self.get_parameter("use_sim_time").value:
             self.get_logger().warning("use_sim_time is set: ignored, this node is the time source")
@@ -189,7 +191,12 @@ class SimulatorNode(Node):
         return next(iter(snapshot.vehicles), None)
 
     def _after_batch(self, snapshot):
-        """On the simulation thread after each batch: /clock, capped by clock_rate."""
+        """On the simulation thread after each batch: warnings for bodies the world removed,
+        and /clock, capped by clock_rate."""
+        while self._removed_reported < len(self.sim.removed):
+            name = self.sim.removed[self._removed_reported]
+            self._removed_reported += 1
+            self.get_logger().warning(f"removed {name}: its state went non-finite or it left the world")
         rate = self.get_parameter("clock_rate").value
         if rate > 0.0 and snapshot.time - self._last_clock < 1.0 / rate - 1e-9:
             return
@@ -210,7 +217,7 @@ class SimulatorNode(Node):
             self.truth_pub.publish(messages.car_odometry(snap, car, world_frame, base_frame))
             self.joints_pub.publish(messages.joint_states(snap, car))
             self.command_pub.publish(messages.car_command(snap, car, base_frame))
-            wheels = self.sim.world.vehicle(car)["wheels"] if car in self.sim.world.vehicle_names() else None
+            wheels = self.car_wheels(car)
             if wheels is not None:
                 for t in messages.car_transforms(snap, car, self.frames, wheels):
                     self.transforms_pub.publish(t)
@@ -219,6 +226,13 @@ class SimulatorNode(Node):
             for row, name in enumerate(snap.names):
                 self.transforms_pub.publish(messages.transform(
                     snap.time, world_frame, name, s["positions"][row], s["quaternions"][row]))
+
+    def car_wheels(self, car):
+        """The car's wheel specs (they change only through ~/edit), or None once it is gone."""
+        try:
+            return self.sim.world.vehicle(car)["wheels"]
+        except KeyError:
+            return None
 
     def marker_id(self, name):
         if name not in self.marker_ids:
@@ -229,7 +243,13 @@ class SimulatorNode(Node):
         snap = self.sim.snapshot
         world_frame = self.frames[0]
         if self.markers_pub.get_subscription_count():
-            self.markers_pub.publish(messages.body_markers(snap, world_frame, self.marker_id))
+            self.markers_pub.publish(messages.body_markers(snap, world_frame, self.marker_id,
+                                                           self.marker_encoder))
+        car = self.car(snap)
+        if car is not None and self.car_markers_pub.get_subscription_count():
+            wheels = self.car_wheels(car)
+            if wheels is not None:
+                self.car_markers_pub.publish(messages.car_markers(snap, car, world_frame, wheels))
         if self.get_parameter("contacts.publish").value and snap.contacts is not None:
             limit = self.get_parameter("contacts.max_points").value
             if self.contacts_pub.get_subscription_count():
@@ -259,8 +279,9 @@ class SimulatorNode(Node):
              {"target_real_time_factor": sim.real_time_factor, "achieved_real_time_factor": round(sim.achieved_rtf, 3),
               "step_ms": round(1e3 * sim.step_seconds / steps, 4), "late_ticks": sim.late_ticks,
               "time": round(snap.time, 4)}),
-            ("vplayground: bodies", 0, f"{len(snap.names)} bodies",
-             {"active": len(snap.names) - frozen, "frozen": frozen}),
+            ("vplayground: bodies", 1 if sim.removed else 0, f"{len(snap.names)} bodies",
+             {"active": len(snap.names) - frozen, "frozen": frozen, "removed": len(sim.removed),
+              "last_removed": sim.removed[-1] if sim.removed else ""}),
         ]
         car = self.car(snap)
         if car is not None:

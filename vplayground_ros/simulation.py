@@ -44,6 +44,7 @@ class Simulation:
         self.late_ticks = 0
         self.step_seconds = 0.0     # wall time spent inside world.step, for diagnostics
         self.achieved_rtf = 0.0
+        self.removed = []          # names of bodies removed for going non-finite or away
         self._commands = queue.SimpleQueue()
         self._listeners = []
         self._stop = threading.Event()
@@ -129,6 +130,7 @@ class Simulation:
                 started = time.perf_counter()
                 world.step(steps)
                 self.step_seconds += time.perf_counter() - started
+                self.removed += world.remove_escaped()
                 self._publish()
             if self.duration is not None and world.time >= self.duration - 0.5 / rate:
                 break

@@ -19,6 +19,9 @@ def update_bodies(bodies, dt, root_size, depth):
     for i in range(len(bodies.active)):
         if not bodies.active[i]:
             continue
+        if not finite_state(bodies, i):
+            quarantine(bodies, i)
+            continue
         awake = not bodies.frozen[i] and not bodies.immovable[i]
         bodies.awake[i] = awake
         r = bodies.rotation[i]
@@ -48,6 +51,31 @@ def update_bodies(bodies, dt, root_size, depth):
             bodies.aabb_min[i, e] = position[i, e] - extent + min(step, 0.0)
             bodies.aabb_max[i, e] = position[i, e] + extent + max(step, 0.0)
         bodies.octree_level[i] = object_level(bodies.aabb_min[i], bodies.aabb_max[i], root_size, depth)
+
+
+@njit(cache=True, nogil=True)
+def finite_state(bodies, i):
+    total = 0.0
+    for e in range(3):
+        total += bodies.position[i, e]
+    for e in range(4):
+        total += bodies.orientation[i, e]
+    for e in range(6):
+        total += bodies.velocity[i, e]
+    return np.isfinite(total)
+
+
+@njit(cache=True, nogil=True)
+def quarantine(bodies, i):
+    """A body whose state went non-finite takes no part in the step (empty bounds, no mass), so
+    it cannot spread NaN to others before the World removes it (World.remove_escaped)."""
+    bodies.awake[i] = False
+    bodies.solver_inv_mass[i] = 0.0
+    bodies.inv_inertia_world[i, :, :] = 0.0
+    bodies.speculative_reach[i] = 0.0
+    bodies.aabb_min[i, :] = np.inf
+    bodies.aabb_max[i, :] = -np.inf
+    bodies.octree_level[i] = 0
 
 
 @njit(cache=True, nogil=True)

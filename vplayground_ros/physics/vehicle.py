@@ -130,6 +130,8 @@ def drive_vehicles(vehicles, bodies, broad, playground, ground_enabled, ground_h
         if not vehicles.active[v]:
             continue
         c = vehicles.chassis[v]
+        if not np.isfinite(bodies.speculative_reach[c]) or not np.isfinite(position[c, 0] + position[c, 1] + position[c, 2]):
+            continue  # quarantined until the World removes it
         r = bodies.rotation[c]
         forward, left, up = (r[0, 0], r[1, 0], r[2, 0]), (r[0, 1], r[1, 1], r[2, 1]), (r[0, 2], r[1, 2], r[2, 2])
         down = (-up[0], -up[1], -up[2])

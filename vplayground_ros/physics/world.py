@@ -20,6 +20,10 @@ from .vehicle import allocate_vehicles, grow_vehicles
 
 DEFAULT_COMMAND_TIMEOUT = 1.2  # s: SPEC 6.4 cmd_vel_timeout
 
+# Bodies farther than this from the octree root's centre have left the world (they fell off the
+# edge or were flung away) and are removed, as are bodies whose state went non-finite.
+WORLD_RADIUS = 2000.0
+
 # The root cube reaches this far past the bodies it was fitted to, and is at least this large.
 ROOT_PADDING = 4.0
 MIN_ROOT_SIZE = 16.0
@@ -265,6 +269,23 @@ class World:
         self._wake(slot)
         self._bodies.external_impulse[slot] += imp
         self._bodies.external_angular_impulse[slot] += ang
+
+    def remove_escaped(self):
+        """Removes bodies whose state is not finite or that left the world (WORLD_RADIUS from
+        the octree root's centre, or that far below the ground). Returns their names."""
+        slots = self._active_slots()
+        b = self._bodies
+        state = np.concatenate([b.position[slots], b.orientation[slots], b.velocity[slots]], axis=1)
+        bad = ~np.all(np.isfinite(state), axis=1)
+        if self._root is not None:
+            centre = self._root[0] + 0.5 * self._root[1]
+            bad |= np.linalg.norm(np.nan_to_num(b.position[slots] - centre), axis=1) > WORLD_RADIUS
+        if self.ground is not None:
+            bad |= b.position[slots, 2] < self.ground["height"] - WORLD_RADIUS
+        names = [self._names[slot] for slot in slots[bad]]
+        for name in names:
+            self.remove_body(name)
+        return names
 
     def wake_all(self):
         for slot in self._active_slots():

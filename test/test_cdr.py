@@ -1,0 +1,56 @@
+"""Our CDR encoders against rclpy's own deserialiser (compare decoded messages, not bytes)."""
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+
+from geometry_msgs.msg import PoseArray  # noqa: E402
+from rclpy.serialization import deserialize_message  # noqa: E402
+from sensor_msgs.msg import PointCloud2  # noqa: E402
+from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
+
+from vplayground_ros import cdr, messages  # noqa: E402
+
+
+def stamp_of(header):
+    return header.stamp.sec + 1e-9 * header.stamp.nanosec
+
+
+@pytest.mark.parametrize("count", [0, 1, 7, 50])
+def test_body_markers_round_trip(count):
+    rng = np.random.default_rng(count)
+    namespaces = rng.choice(["box", "immovable", "vehicle"], count)
+    ids = np.arange(count) * 3 + 1
+    poses = rng.normal(size=(count, 7))
+    sizes, colours = rng.uniform(0.1, 3, (count, 3)), rng.uniform(0, 1, (count, 4)).astype(np.float32)
+    data = cdr.BodyMarkerEncoder().encode(12.25, "world", namespaces, ids, poses, sizes, colours)
+    msg = deserialize_message(data, MarkerArray)
+    assert len(msg.markers) == count + 1
+    assert msg.markers[0].action == Marker.DELETEALL
+    for k, m in enumerate(msg.markers[1:]):
+        assert m.header.frame_id == "world" and stamp_of(m.header) == pytest.approx(12.25)
+        assert m.ns == namespaces[k] and m.id == ids[k] and m.type == Marker.CUBE
+        assert [m.pose.position.x, m.pose.position.y, m.pose.position.z, m.pose.orientation.x,
+                m.pose.orientation.y, m.pose.orientation.z, m.pose.orientation.w] == list(poses[k])
+        assert [m.scale.x, m.scale.y, m.scale.z] == list(sizes[k])
+        assert [m.color.r, m.color.g, m.color.b, m.color.a] == pytest.approx(list(colours[k]))
+        assert m.frame_locked and list(m.points) == [] and m.text == ""
+
+
+def test_pose_array_round_trip():
+    positions, quaternions = np.random.default_rng(1).normal(size=(5, 3)), np.random.default_rng(2).normal(size=(5, 4))
+    msg = deserialize_message(cdr.pose_array(3.5, "world", positions, quaternions), PoseArray)
+    assert msg.header.frame_id == "world" and stamp_of(msg.header) == 3.5
+    assert [[p.position.x, p.position.y, p.position.z] for p in msg.poses] == positions.tolist()
+    assert [[p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w] for p in msg.poses] == quaternions.tolist()
+
+
+def test_contact_cloud_round_trip():
+    rows = np.zeros(3, messages.CONTACT_DTYPE)
+    rows["x"], rows["body_b"] = [1.0, 2.0, 3.0], [-1, 4, -2]
+    fields = [(f.name, f.offset, f.datatype, f.count) for f in messages.CONTACT_FIELDS]
+    msg = deserialize_message(cdr.point_cloud(1.0, "world", fields, rows), PointCloud2)
+    assert [f.name for f in msg.fields] == [f.name for f in messages.CONTACT_FIELDS]
+    assert msg.width == 3 and msg.point_step == 40 and msg.is_dense
+    decoded = np.frombuffer(bytes(msg.data), messages.CONTACT_DTYPE)
+    assert decoded["x"].tolist() == [1.0, 2.0, 3.0] and decoded["body_b"].tolist() == [-1, 4, -2]
