@@ -29,6 +29,7 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) bench/pile.py
+	$(PY) bench/node_overhead.py
 
 clean:
 	rm -rf $(VENV) build *.egg-info

@@ -85,3 +85,18 @@ def test_crossed_edges_give_one_point_on_both_edges():
 def test_separated_boxes_give_nothing():
     points, _, _ = manifold([1, 1, 1], ([0, 0, 0], [0, 0, 0]), [1, 1, 1], ([1.1, 0.3, 0], [0, 0, 0.2]))
     assert len(points) == 0
+
+
+def test_octree_cells_cover_every_body():
+    rng = np.random.default_rng(5)
+    world = World({"octree_depth": 4, "gravity": [0, 0, 0]}, ground=None)
+    for k in range(40):
+        world.add_body({"size": [rng.choice([0.3, 2.0])] * 3, "position": list(rng.uniform(-6, 6, 3))})
+    world.step(1)
+    cells = world.octree_cells()
+    assert cells and all(0 <= level <= 4 for level, _, _ in cells)
+    centres = np.concatenate([c for _, c, _ in cells])
+    edges = np.concatenate([[e] * len(c) for _, c, e in cells])
+    for p in world.state()["positions"]:  # every body's centre lies in some occupied cell
+        inside = np.all(np.abs(centres - p) <= edges[:, None] / 2 + 0.05, axis=1)
+        assert inside.any()

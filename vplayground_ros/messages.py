@@ -79,8 +79,9 @@ def body_markers(snapshot, frame, marker_ids, encoder):
     return encoder.encode(snapshot.time, frame, namespaces, ids, poses, s["sizes"], colours)
 
 
-def scene_markers(seconds, frame, ground, triangles):
-    """The static scenery: the ground plane and the playground as a TRIANGLE_LIST."""
+def scene_markers(seconds, frame, ground, triangles, octree_cells=()):
+    """The static scenery: the ground plane, the playground as a TRIANGLE_LIST, and (when
+    asked) the occupied octree cells as one translucent CUBE_LIST per level."""
     stamp_header = header(seconds, frame)
     markers = [Marker(header=stamp_header, action=Marker.DELETEALL)]
     if ground is not None:
@@ -98,6 +99,13 @@ def scene_markers(seconds, frame, ground, triangles):
         m.scale.x = m.scale.y = m.scale.z = 1.0
         m.color = colour(COLOURS["playground"])
         m.points = [Point(x=float(x), y=float(y), z=float(z)) for x, y, z in triangles.reshape(-1, 3)]
+        markers.append(m)
+    for level, centres, edge in octree_cells:
+        m = Marker(header=stamp_header, ns="octree", id=level, type=Marker.CUBE_LIST, action=Marker.ADD)
+        m.pose.orientation.w = 1.0
+        m.scale.x = m.scale.y = m.scale.z = float(edge)
+        m.color = colour((0.2, 0.6, 1.0, 0.12))
+        m.points = [Point(x=float(x), y=float(y), z=float(z)) for x, y, z in centres]
         markers.append(m)
     return MarkerArray(markers=markers)
 

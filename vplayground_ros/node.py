@@ -258,14 +258,20 @@ class SimulatorNode(Node):
                 self.contact_markers_pub.publish(messages.contact_markers(snap, world_frame, limit))
 
     def _publish_static(self):
+        """The scenery, latched: at start, after a scene load, every static_republish_period
+        (so a bag seeks into a full scene), and at marker_rate while the octree is shown."""
         snap = self.sim.snapshot
         period = self.get_parameter("static_republish_period").value
+        show_octree = self.get_parameter("show_octree").value
+        if show_octree:
+            period = min(period, 1.0 / self.get_parameter("marker_rate").value)
         if snap.time - self._last_static < period and self._last_static >= 0:
             return
         self._last_static = snap.time
+        cells = self.sim.call(lambda world: world.octree_cells()) if show_octree else ()
         world = self.sim.world
         self.scene_pub.publish(messages.scene_markers(snap.time, self.frames[0], world.ground,
-                                                      world.playground_triangles))
+                                                      world.playground_triangles, cells))
 
     def _publish_rtf(self):
         self.rtf_pub.publish(Float64(data=float(self.sim.achieved_rtf)))
@@ -278,6 +284,7 @@ class SimulatorNode(Node):
             ("vplayground: simulation", 0, ["stopped", "playing", "paused"][sim.state],
              {"target_real_time_factor": sim.real_time_factor, "achieved_real_time_factor": round(sim.achieved_rtf, 3),
               "step_ms": round(1e3 * sim.step_seconds / steps, 4), "late_ticks": sim.late_ticks,
+              "simulation_thread_cpu_s": round(sim.thread_cpu_seconds, 3),
               "time": round(snap.time, 4)}),
             ("vplayground: bodies", 1 if sim.removed else 0, f"{len(snap.names)} bodies",
              {"active": len(snap.names) - frozen, "frozen": frozen, "removed": len(sim.removed),

@@ -43,6 +43,7 @@ class Simulation:
         self.paused = start_paused
         self.late_ticks = 0
         self.step_seconds = 0.0     # wall time spent inside world.step, for diagnostics
+        self.thread_cpu_seconds = 0.0  # CPU time of the simulation thread (physics, snapshots)
         self.achieved_rtf = 0.0
         self.removed = []          # names of bodies removed for going non-finite or away
         self._commands = queue.SimpleQueue()
@@ -138,6 +139,7 @@ class Simulation:
             if now - rtf_wall >= 0.5:
                 self.achieved_rtf = (world.time - rtf_sim) / (now - rtf_wall)
                 rtf_wall, rtf_sim = now, world.time
+            self.thread_cpu_seconds = time.thread_time()
             if steps == 0:
                 self._wait_for_work()
 

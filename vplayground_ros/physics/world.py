@@ -39,6 +39,16 @@ def quaternions_to_matrices(q):
     ], -2)
 
 
+def compact_bits(code):
+    """Every third bit of a Morton code, packed (the inverse of broad_phase.spread_bits)."""
+    code = np.asarray(code, dtype=np.int64) & 0x09249249
+    code = (code | (code >> 2)) & 0x030C30C3
+    code = (code | (code >> 4)) & 0x0300F00F
+    code = (code | (code >> 8)) & 0x030000FF
+    code = (code | (code >> 16)) & 0x000003FF
+    return code
+
+
 def box_bounds(position, orientation, half_extents):
     """World AABBs (min, max) of boxes, (N, 3) each."""
     extent = np.einsum("nij,nj->ni", np.abs(quaternions_to_matrices(orientation)), half_extents)
@@ -355,6 +365,26 @@ class World:
             self.stats[key] += int(counters[index])
 
     # ------------------------------------------------------------------ queries
+    def octree_cells(self):
+        """The occupied octree cells of the last step, [(level, centres (K, 3), edge)], for
+        drawing (the 2008 program could show its octree)."""
+        if self._root is None:
+            return []
+        root_min, root_size = self._root
+        keys = [index.keys[:index.count[0]] for index in
+                (self._broad.moving, self._broad.static, self._playground.index)]
+        keys = np.unique(np.concatenate(keys))
+        cells = []
+        for level in range(self.settings["octree_depth"] + 1):
+            offset = ((1 << (3 * level)) - 1) // 7
+            codes = keys[(keys >= offset) & (keys < offset + (1 << (3 * level)))] - offset
+            if len(codes) == 0:
+                continue
+            xyz = np.stack([compact_bits(codes >> axis) for axis in range(3)], axis=1)
+            edge = root_size / (1 << level)
+            cells.append((level, root_min + (xyz + 0.5) * edge, edge))
+        return cells
+
     def state(self):
         """One row per body, in body_names() order (copies)."""
         slots = self._active_slots()
