@@ -25,6 +25,11 @@ from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import InteractiveMarker, InteractiveMarkerControl, Marker, MarkerArray
 from visualization_msgs.srv import GetInteractiveMarkers
 
+try:  # only a real ROS install has tf2_msgs (SPEC 6.1); ~/transforms serves Foxglove without it
+    from tf2_msgs.msg import TFMessage
+except ImportError:
+    TFMessage = None
+
 from . import cdr, messages
 from .api import Requests
 from .physics import specs
@@ -185,6 +190,7 @@ class SimulatorNode(Node):
         self.state_pub = self.create_publisher(UInt8, "~/state", LATCHED)
         self.rtf_pub = self.create_publisher(Float64, "~/real_time_factor", RELIABLE_10)
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", RELIABLE_10)
+        self.tf_pub = self.create_publisher(TFMessage, "/tf", RELIABLE_100) if TFMessage else None
 
     def car(self, snapshot):
         """The driven car: the first vehicle of the world, or None."""
@@ -219,8 +225,11 @@ class SimulatorNode(Node):
             self.command_pub.publish(messages.car_command(snap, car, base_frame))
             wheels = self.car_wheels(car)
             if wheels is not None:
-                for t in messages.car_transforms(snap, car, self.frames, wheels):
+                transforms = messages.car_transforms(snap, car, self.frames, wheels)
+                for t in transforms:
                     self.transforms_pub.publish(t)
+                if self.tf_pub is not None:
+                    self.tf_pub.publish(TFMessage(transforms=transforms))
         if self.get_parameter("publish_body_frames").value:
             s = snap.state
             for row, name in enumerate(snap.names):
