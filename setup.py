@@ -13,6 +13,7 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(exclude=["test", "bench"]),
+    package_data={PACKAGE: ["msg_definitions/*/msg/*.msg"]},
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
@@ -20,12 +21,14 @@ setup(
         (f"share/{PACKAGE}/meshes", glob("meshes/*.obj")),
     ],
     python_requires=">=3.10",
-    install_requires=["numpy>=1.24", "numba>=0.59", "pyyaml>=6", "trimesh>=4"],
+    install_requires=["numpy>=1.24", "numba>=0.59", "pyyaml>=6", "trimesh>=4", "mcap>=1.1",
+                      "zstandard>=0.22"],
     extras_require={
-        "test": ["pytest>=7"],
+        "test": ["pytest>=7", "mcap-ros2-support>=0.5"],
         # The ROS 2 Jazzy Python wheels, for machines without a ROS install (make does this).
         "ros": ["ros-jazzy-rclpy[fastrtps]", "ros-jazzy-common-interfaces"],
     },
     zip_safe=False,
-    entry_points={"console_scripts": [f"vplayground = {PACKAGE}.cli:main"]},
+    entry_points={"console_scripts": [f"vplayground = {PACKAGE}.cli:main",
+                                      f"vplayground-recover = {PACKAGE}.recorder:recover_main"]},
 )

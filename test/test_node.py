@@ -48,7 +48,7 @@ class Harness:
 
     def __init__(self, rtf=4.0):
         rclpy.init(args=["test"])
-        options = parse_args(["--real-time-factor", str(rtf)])
+        options = parse_args(["--real-time-factor", str(rtf), "--no-record"])
         self.sim = Simulation(load_world(options.scene), real_time_factor=rtf)
         self.node = SimulatorNode(self.sim, options)
         self.client = rclpy.create_node("vplayground_test_client")
@@ -268,11 +268,11 @@ def run_console(*args, **kwargs):
 
 
 def test_duration_and_sigterm_stop_cleanly():
-    finished = run_console("--duration", "2", "--real-time-factor", "0")
+    finished = run_console("--duration", "2", "--real-time-factor", "0", "--no-record")
     output, _ = finished.communicate(timeout=120)
     assert finished.returncode == 0, output
     assert "stopped: t=    2.00 s" in output
-    running = run_console("--real-time-factor", "1")
+    running = run_console("--real-time-factor", "1", "--no-record")
     time.sleep(8.0)
     running.send_signal(signal.SIGTERM)
     output, _ = running.communicate(timeout=30)

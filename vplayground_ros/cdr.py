@@ -93,25 +93,55 @@ class Writer:
         return offsets
 
 
+    def transform(self, stamp, parent, child, pose):
+        """A geometry_msgs/TransformStamped; pose = translation xyz + rotation xyzw."""
+        offsets = {}
+        self.header(stamp, parent)
+        self.string(child)
+        self.align(8)
+        offsets["pose"] = self.position
+        self.f64s(pose)
+        return offsets
+
+
 def split_stamp(seconds):
     sec = int(np.floor(seconds))
     return sec, int(round((seconds - sec) * 1e9)) % 1_000_000_000
 
 
-class BodyMarkerEncoder:
-    """~/bodies/markers: DELETEALL, then one CUBE per body. Each body marker is copied from a
-    template (per namespace, frame and alignment) and only its numbers are written in."""
+class TemplateEncoder:
+    """Sequences of one message type whose elements differ only in numbers: each element is
+    copied from a template written once per (strings, alignment) and its numbers patched in.
+    Every element starts with a header, so its first 8 bytes are the stamp."""
 
-    def __init__(self):
+    def __init__(self, write_element):
+        self._write = write_element  # (writer, key) -> {field: offset}, with zero numbers
         self._templates = {}
 
-    def template(self, frame, ns, alignment):
-        key = (frame, ns, alignment)
-        if key not in self._templates:
+    def template(self, key, alignment):
+        if (key, alignment) not in self._templates:
             w = Writer(start=alignment)
-            offsets = w.marker((0, 0), frame, ns, 0, CUBE, 0, [0.0] * 7, [0.0] * 3, [0.0] * 4, True)
-            self._templates[key] = (bytes(w.data), {k: v - alignment for k, v in offsets.items()})
-        return self._templates[key]
+            offsets = self._write(w, key)
+            self._templates[(key, alignment)] = (bytes(w.data), {k: v - alignment for k, v in offsets.items()})
+        return self._templates[(key, alignment)]
+
+    def append(self, w, stamp_bytes, key, numbers):
+        """Appends one element; numbers: {field: (struct format, values)}."""
+        w.align(4)
+        start = w.position
+        template, offsets = self.template(key, start % 8)
+        w.data += template
+        w.data[start:start + 8] = stamp_bytes
+        for field, (fmt, values) in numbers.items():
+            struct.pack_into(fmt, w.data, start + offsets[field], *values)
+
+
+class BodyMarkerEncoder:
+    """~/bodies/markers: DELETEALL, then one CUBE per body."""
+
+    def __init__(self):
+        self._elements = TemplateEncoder(lambda w, key: w.marker(
+            (0, 0), key[0], key[1], 0, CUBE, 0, [0.0] * 7, [0.0] * 3, [0.0] * 4, True))
 
     def encode(self, seconds, frame, namespaces, ids, poses, sizes, colours):
         """namespaces (N,) str, ids (N,) int, poses (N, 7) xyz + xyzw, sizes (N, 3), colours
@@ -121,20 +151,28 @@ class BodyMarkerEncoder:
         w.u32(len(ids) + 1)
         w.marker(stamp, frame, "", 0, 0, DELETEALL, [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0], [1.0] * 3,
                  [0.0] * 4, False)
-        # The template's stamp is patched too: it is the first 8 bytes of every marker.
         stamp_bytes = struct.pack("<iI", *stamp)
-        data = w.data
         for k in range(len(ids)):
-            w.align(4)  # a Marker starts with its header's int32
-            start = w.position
-            template, offsets = self.template(frame, namespaces[k], start % 8)
-            data += template
-            data[start:start + 8] = stamp_bytes
-            struct.pack_into("<i", data, start + offsets["id"], int(ids[k]))
-            struct.pack_into("<7d", data, start + offsets["pose"], *poses[k])
-            struct.pack_into("<3d", data, start + offsets["scale"], *sizes[k])
-            struct.pack_into("<4f", data, start + offsets["color"], *colours[k])
-        return ENCAPSULATION + bytes(data)
+            self._elements.append(w, stamp_bytes, (frame, namespaces[k]), {
+                "id": ("<i", (int(ids[k]),)), "pose": ("<7d", poses[k]), "scale": ("<3d", sizes[k]),
+                "color": ("<4f", colours[k])})
+        return ENCAPSULATION + bytes(w.data)
+
+
+class TransformEncoder:
+    """tf2_msgs/TFMessage of many transforms (the bag's /tf), written without tf2_msgs."""
+
+    def __init__(self):
+        self._elements = TemplateEncoder(lambda w, key: w.transform((0, 0), key[0], key[1], [0.0] * 7))
+
+    def encode(self, seconds, parents, children, poses):
+        stamp = split_stamp(seconds)
+        w = Writer()
+        w.u32(len(children))
+        stamp_bytes = struct.pack("<iI", *stamp)
+        for k in range(len(children)):
+            self._elements.append(w, stamp_bytes, (parents[k], children[k]), {"pose": ("<7d", poses[k])})
+        return ENCAPSULATION + bytes(w.data)
 
 
 def pose_array(seconds, frame, positions, quaternions):

@@ -27,11 +27,23 @@ def parse_args(argv):
                         help="simulated seconds per wall-clock second; 0 = as fast as possible")
     parser.add_argument("--start-paused", action="store_true", help="start paused")
     parser.add_argument("--no-ros", action="store_true", help="run headless even where rclpy imports")
+    record = parser.add_mutually_exclusive_group()
+    record.add_argument("--record", type=Path, default=None, metavar="PATH.mcap",
+                        help="write the MCAP bag here (default: bags/<date-time>.mcap)")
+    record.add_argument("--no-record", action="store_true", help="write no bag")
+    parser.add_argument("--record-split-size", type=int, default=0, metavar="BYTES",
+                        help="continue the bag in a new file past this size (0 = one file)")
     args = parser.parse_args(argv)
     if args.duration is not None and args.duration <= 0:
         parser.error("--duration must be > 0")
     if args.real_time_factor < 0:
         parser.error("--real-time-factor must be >= 0")
+    if args.record_split_size < 0:
+        parser.error("--record-split-size must be >= 0")
+    if args.no_record:
+        args.record = None
+    elif args.record is None:
+        args.record = Path("bags") / f"{time.strftime('%Y-%m-%d_%H-%M-%S')}.mcap"
     if args.scene is None:
         args.scene = find_shared("config/default_scene.yaml")
         if args.scene is None:
@@ -99,14 +111,24 @@ def run_node(sim, options, ros_args, stop):
 
     from .node import SimulatorNode
 
+    from .recorder import Recorder
+
+    recorder = None
+    if options.record is not None:
+        try:
+            recorder = Recorder(options.record, options.record_split_size)
+        except OSError as error:
+            print(f"vplayground: cannot record to {options.record}: {error.strerror or error}", file=sys.stderr)
+            return 2
     rclpy.init(args=["vplayground", *ros_args], signal_handler_options=SignalHandlerOptions.NO)
-    node = SimulatorNode(sim, options)
+    node = SimulatorNode(sim, options, recorder)
     log = node.get_logger()
     node.create_timer(STATUS_PERIOD, lambda: log.info(status_line(sim)))
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     log.info(f"{options.scene}: {len(sim.world.body_names())} bodies; real-time factor "
-             f"{options.real_time_factor:g}{'' if options.duration is None else f', {options.duration:g} s'}")
+             f"{options.real_time_factor:g}{'' if options.duration is None else f', {options.duration:g} s'}; "
+             f"{'recording to ' + str(options.record) if recorder else 'not recording'}")
     sim.start()
     try:
         while not stop.is_set() and not sim.wait(0):
@@ -114,6 +136,10 @@ def run_node(sim, options, ros_args, stop):
     finally:
         sim.stop()
         executor.spin_once(timeout_sec=0.05)  # the last state and /clock go out
+        if recorder is not None:
+            recorder.close()
+            log.info(f"bag: {', '.join(str(f) for f in recorder.files)} ({recorder.bytes_written} bytes of "
+                     f"messages, {recorder.dropped} dropped){'; error: ' + recorder.error if recorder.error else ''}")
         log.info(f"stopped: {status_line(sim)}")
         executor.remove_node(node)
         node.destroy_node()

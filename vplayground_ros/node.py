@@ -18,6 +18,7 @@ from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescr
                                 SetParametersResult)
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState, PointCloud2
 from std_msgs.msg import Float64, UInt8
@@ -94,13 +95,18 @@ def parameter_table(world, options):
         ("reset_scope", 255, "~/reset scope bits: 1 TIME, 2 STATE, 4 SPAWNED, 255 ALL", int_range(1, 255)),
         ("click_spawn_size", 0.5, "edge of the box a clicked_point drops, m", float_range(0.01, 100)),
         ("click_spawn_height", 2.0, "height above the clicked point it drops from, m", float_range(0, 1000)),
+        ("record", str(options.record or ""), "MCAP bag being written ('' = not recording)", dict(read_only=True)),
+        ("record_split_size", int(options.record_split_size), "bytes after which the bag continues in a new file (0 = one file)",
+         dict(read_only=True, **int_range(0, 1 << 50))),
     ]
 
 
 class SimulatorNode(Node):
-    def __init__(self, simulation, options):
+    def __init__(self, simulation, options, recorder=None):
         super().__init__("vplayground")
         self.sim = simulation
+        self.recorder = recorder
+        self.tf_encoder = cdr.TransformEncoder()
         self.requests = Requests(simulation, str(options.scene))
         self.marker_ids = {}
         self._last_clock = -math.inf
@@ -118,6 +124,8 @@ class SimulatorNode(Node):
         self.sim.add_listener(self._after_batch)
         self._publish_timers = {}
         self._restart_timers()
+        if self.recorder is not None:
+            self._record_tf_static(self.sim.snapshot.time)
         self._static_timer = self.create_timer(0.1, self._publish_static)
         self.create_timer(0.5, self._publish_rtf)
         self.create_timer(1.0, self._publish_diagnostics)
@@ -192,6 +200,41 @@ class SimulatorNode(Node):
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", RELIABLE_10)
         self.tf_pub = self.create_publisher(TFMessage, "/tf", RELIABLE_100) if TFMessage else None
 
+    def send(self, publisher, msg, seconds, latched=False):
+        """Serialises once (or takes CDR bytes as they are), publishes, and records the same
+        bytes with log time = simulation time."""
+        data = msg if isinstance(msg, bytes) else serialize_message(msg)
+        publisher.publish(data)
+        if self.recorder is not None:
+            kind = publisher.msg_type
+            self.recorder.write(publisher.topic_name, f"{kind.__module__.split('.')[0]}/msg/{kind.__name__}",
+                                data, seconds, latched)
+
+    def wanted(self, publisher):
+        """Visual topics are built only for a subscriber or the bag."""
+        return self.recorder is not None or publisher.get_subscription_count() > 0
+
+    def _record_tf(self, snap, car, wheels):
+        """The bag's /tf (tf2_msgs/TFMessage, written without tf2_msgs): world -> every body
+        (child = its name), odom -> base_link and base_link -> each wheel."""
+        s = snap.state
+        parents = [self.frames[0]] * len(snap.names)
+        children = list(snap.names)
+        poses = [np.concatenate([p, q]) for p, q in zip(s["positions"], s["quaternions"])]
+        if car is not None and wheels is not None:
+            for t in messages.car_transforms(snap, car, self.frames, wheels)[1:]:
+                parents.append(t.header.frame_id)
+                children.append(t.child_frame_id)
+                tr, rot = t.transform.translation, t.transform.rotation
+                poses.append([tr.x, tr.y, tr.z, rot.x, rot.y, rot.z, rot.w])
+        self.recorder.write("/tf", "tf2_msgs/msg/TFMessage",
+                            self.tf_encoder.encode(snap.time, parents, children, poses), snap.time)
+
+    def _record_tf_static(self, seconds):
+        """/tf_static: the fixed world -> odom (the car's start)."""
+        data = self.tf_encoder.encode(seconds, [self.frames[0]], [self.frames[1]], [[0, 0, 0, 0, 0, 0, 1.0]])
+        self.recorder.write("/tf_static", "tf2_msgs/msg/TFMessage", data, seconds, latched=True)
+
     def car(self, snapshot):
         """The driven car: the first vehicle of the world, or None."""
         return next(iter(snapshot.vehicles), None)
@@ -207,34 +250,36 @@ class SimulatorNode(Node):
         if rate > 0.0 and snapshot.time - self._last_clock < 1.0 / rate - 1e-9:
             return
         self._last_clock = snapshot.time
-        self.clock_pub.publish(messages.clock(snapshot.time))
+        self.send(self.clock_pub, messages.clock(snapshot.time), snapshot.time)
 
     def _publish_state(self):
         snap = self.sim.snapshot
         world_frame, odom_frame, base_frame = self.frames
-        self.poses_pub.publish(messages.pose_array(snap, world_frame))
+        self.send(self.poses_pub, messages.pose_array(snap, world_frame), snap.time)
         state = self.sim.state
         if state != self._last_state:
             self._last_state = state
-            self.state_pub.publish(UInt8(data=state))
+            self.send(self.state_pub, UInt8(data=state), snap.time, latched=True)
         car = self.car(snap)
         if car is not None:
-            self.odom_pub.publish(messages.car_odometry(snap, car, odom_frame, base_frame))
-            self.truth_pub.publish(messages.car_odometry(snap, car, world_frame, base_frame))
-            self.joints_pub.publish(messages.joint_states(snap, car))
-            self.command_pub.publish(messages.car_command(snap, car, base_frame))
+            self.send(self.odom_pub, messages.car_odometry(snap, car, odom_frame, base_frame), snap.time)
+            self.send(self.truth_pub, messages.car_odometry(snap, car, world_frame, base_frame), snap.time)
+            self.send(self.joints_pub, messages.joint_states(snap, car), snap.time)
+            self.send(self.command_pub, messages.car_command(snap, car, base_frame), snap.time)
             wheels = self.car_wheels(car)
             if wheels is not None:
                 transforms = messages.car_transforms(snap, car, self.frames, wheels)
                 for t in transforms:
-                    self.transforms_pub.publish(t)
+                    self.send(self.transforms_pub, t, snap.time)
                 if self.tf_pub is not None:
-                    self.tf_pub.publish(TFMessage(transforms=transforms))
+                    self.tf_pub.publish(TFMessage(transforms=transforms))  # the bag's /tf: _record_tf
+        if self.recorder is not None:
+            self._record_tf(snap, car, self.car_wheels(car) if car is not None else None)
         if self.get_parameter("publish_body_frames").value:
             s = snap.state
             for row, name in enumerate(snap.names):
-                self.transforms_pub.publish(messages.transform(
-                    snap.time, world_frame, name, s["positions"][row], s["quaternions"][row]))
+                self.send(self.transforms_pub, messages.transform(
+                    snap.time, world_frame, name, s["positions"][row], s["quaternions"][row]), snap.time)
 
     def car_wheels(self, car):
         """The car's wheel specs (they change only through ~/edit), or None once it is gone."""
@@ -251,20 +296,20 @@ class SimulatorNode(Node):
     def _publish_markers(self):
         snap = self.sim.snapshot
         world_frame = self.frames[0]
-        if self.markers_pub.get_subscription_count():
-            self.markers_pub.publish(messages.body_markers(snap, world_frame, self.marker_id,
-                                                           self.marker_encoder))
+        if self.wanted(self.markers_pub):
+            self.send(self.markers_pub, messages.body_markers(snap, world_frame, self.marker_id,
+                                                              self.marker_encoder), snap.time)
         car = self.car(snap)
-        if car is not None and self.car_markers_pub.get_subscription_count():
+        if car is not None and self.wanted(self.car_markers_pub):
             wheels = self.car_wheels(car)
             if wheels is not None:
-                self.car_markers_pub.publish(messages.car_markers(snap, car, world_frame, wheels))
+                self.send(self.car_markers_pub, messages.car_markers(snap, car, world_frame, wheels), snap.time)
         if self.get_parameter("contacts.publish").value and snap.contacts is not None:
             limit = self.get_parameter("contacts.max_points").value
-            if self.contacts_pub.get_subscription_count():
-                self.contacts_pub.publish(messages.contact_cloud(snap, world_frame, limit))
-            if self.contact_markers_pub.get_subscription_count():
-                self.contact_markers_pub.publish(messages.contact_markers(snap, world_frame, limit))
+            if self.wanted(self.contacts_pub):
+                self.send(self.contacts_pub, messages.contact_cloud(snap, world_frame, limit), snap.time)
+            if self.wanted(self.contact_markers_pub):
+                self.send(self.contact_markers_pub, messages.contact_markers(snap, world_frame, limit), snap.time)
 
     def _publish_static(self):
         """The scenery, latched: at start, after a scene load, every static_republish_period
@@ -279,11 +324,12 @@ class SimulatorNode(Node):
         self._last_static = snap.time
         cells = self.sim.call(lambda world: world.octree_cells()) if show_octree else ()
         world = self.sim.world
-        self.scene_pub.publish(messages.scene_markers(snap.time, self.frames[0], world.ground,
-                                                      world.playground_triangles, cells))
+        self.send(self.scene_pub, messages.scene_markers(snap.time, self.frames[0], world.ground,
+                                                         world.playground_triangles, cells),
+                  snap.time, latched=True)
 
     def _publish_rtf(self):
-        self.rtf_pub.publish(Float64(data=float(self.sim.achieved_rtf)))
+        self.send(self.rtf_pub, Float64(data=float(self.sim.achieved_rtf)), self.sim.snapshot.time)
 
     def _publish_diagnostics(self):
         snap, sim = self.sim.snapshot, self.sim
@@ -299,11 +345,17 @@ class SimulatorNode(Node):
              {"active": len(snap.names) - frozen, "frozen": frozen, "removed": len(sim.removed),
               "last_removed": sim.removed[-1] if sim.removed else ""}),
         ]
+        if self.recorder is not None:
+            r = self.recorder
+            level = 2 if r.error else (1 if r.dropped else 0)
+            statuses.append(("vplayground: recorder", level, r.error or str(r.files[-1]),
+                             {"path": r.files[-1], "files": len(r.files), "bytes": r.bytes_written,
+                              "dropped": r.dropped}))
         car = self.car(snap)
         if car is not None:
             age = snap.vehicles[car]["command_age"]
             statuses.append(("vplayground: car", 0, car, {"command_age": round(age, 3)}))
-        self.diagnostics_pub.publish(messages.diagnostics(snap.time, statuses))
+        self.send(self.diagnostics_pub, messages.diagnostics(snap.time, statuses), snap.time)
 
     # ------------------------------------------------------------------ subscriptions
     def _make_subscriptions(self):

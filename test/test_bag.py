@@ -1,0 +1,175 @@
+"""MCAP bags (SPEC 7), read back with independent readers: the `mcap` library with
+mcap_ros2's decoder, and Foxglove's own JavaScript stack where node and npm are installed."""
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("rclpy")
+from mcap.reader import make_reader  # noqa: E402
+from mcap_ros2.decoder import DecoderFactory  # noqa: E402
+
+from vplayground_ros.recorder import recover  # noqa: E402
+
+LATCHED = {"/vplayground/scene/markers", "/tf_static", "/vplayground/state"}
+
+
+def run(*args, wait=True):
+    process = subprocess.Popen([sys.executable, "-m", "vplayground_ros.cli", *args],
+                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    if not wait:
+        return process
+    output, _ = process.communicate(timeout=180)
+    assert process.returncode == 0, output
+    return output
+
+
+def read_all(path):
+    with open(path, "rb") as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        header, summary = reader.get_header(), reader.get_summary()
+        decoded = [(channel.topic, message.log_time, message.publish_time, msg)
+                   for _, channel, message, msg in reader.iter_decoded_messages(log_time_order=False)]
+    return header, summary, decoded
+
+
+def stamp_ns(msg):
+    for holder in (msg, getattr(msg, "clock", None)):
+        if holder is None:
+            continue
+        if hasattr(holder, "header"):
+            return holder.header.stamp.sec * 10**9 + holder.header.stamp.nanosec
+        if hasattr(holder, "sec"):
+            return holder.sec * 10**9 + holder.nanosec
+    return None
+
+
+@pytest.fixture(scope="module")
+def bag(tmp_path_factory):
+    path = tmp_path_factory.mktemp("bag") / "run.mcap"
+    run("--duration", "3", "--real-time-factor", "2", "--record", str(path))
+    return path
+
+
+def test_bag_opens_with_an_independent_reader_and_every_message_decodes(bag):
+    header, summary, messages = read_all(bag)
+    assert header.profile == "ros2"
+    assert all(s.encoding == "ros2msg" for s in summary.schemas.values())
+    assert all(c.message_encoding == "cdr" for c in summary.channels.values())
+    assert summary.statistics.message_count == len(messages) > 100
+    topics = {topic for topic, *_ in messages}
+    for topic in ("/clock", "/vplayground/bodies/poses", "/vplayground/bodies/markers", "/odom",
+                  "/joint_states", "/tf", "/tf_static", "/vplayground/scene/markers", "/diagnostics",
+                  "/vplayground/contacts/points", "/vplayground/car/markers"):
+        assert topic in topics, topic
+    last = {}
+    for topic, log_time, publish_time, msg in messages:
+        assert log_time == publish_time
+        assert log_time >= last.get(topic, 0), topic  # monotonic per channel
+        last[topic] = log_time
+        stamped = stamp_ns(msg)
+        if stamped is not None and topic != "/diagnostics":
+            assert stamped == log_time, topic  # log time = simulation time
+    assert max(last.values()) <= 3 * 10**9
+
+
+def test_tf_has_a_transform_for_every_body(bag):
+    _, _, messages = read_all(bag)
+    tf = [msg for topic, _, _, msg in messages if topic == "/tf"]
+    poses = [msg for topic, _, _, msg in messages if topic == "/vplayground/bodies/poses"]
+    children = {t.child_frame_id for t in tf[-1].transforms}
+    assert len([t for t in tf[-1].transforms if t.header.frame_id == "world"]) == len(poses[-1].poses)
+    assert {"car", "tower_1", "base_link", "wheel_front_left", "wheel_rear_right"} <= children
+    static = [msg for topic, _, _, msg in messages if topic == "/tf_static"]
+    assert static[0].transforms[0].child_frame_id == "odom"
+
+
+def test_split_files_each_open_on_their_own(tmp_path):
+    path = tmp_path / "split.mcap"
+    output = run("--duration", "4", "--real-time-factor", "2", "--record", str(path),
+                 "--record-split-size", "150000")
+    files = sorted(tmp_path.glob("split*.mcap"))
+    assert len(files) >= 2, output
+    for f in files:
+        _, _, messages = read_all(f)
+        assert LATCHED - {"/vplayground/state"} <= {topic for topic, *_ in messages}, f
+
+
+def test_sigterm_leaves_a_finished_bag(tmp_path):
+    path = tmp_path / "term.mcap"
+    process = run("--real-time-factor", "1", "--record", str(path), wait=False)
+    time.sleep(6)
+    process.send_signal(signal.SIGTERM)
+    output, _ = process.communicate(timeout=60)
+    assert process.returncode == 0, output
+    _, summary, messages = read_all(path)  # has a summary: it was finished properly
+    assert summary.statistics.message_count == len(messages) > 0
+
+
+def test_a_killed_run_recovers(tmp_path):
+    path = tmp_path / "killed.mcap"
+    process = run("--real-time-factor", "4", "--record", str(path), wait=False)
+    time.sleep(10)
+    process.kill()
+    process.wait(30)
+    with pytest.raises(Exception):
+        read_all(path)  # no summary, torn end
+    saved = recover(path, tmp_path / "fixed.mcap")
+    _, summary, messages = read_all(tmp_path / "fixed.mcap")
+    assert saved == len(messages) > 50
+
+
+FOXGLOVE_READER = r"""
+const fs = require("fs");
+const { McapIndexedReader } = require("@mcap/core");
+const { parse } = require("@foxglove/rosmsg");
+const { MessageReader } = require("@foxglove/rosmsg2-serialization");
+const { ZstdCodec } = require("zstd-codec");
+
+ZstdCodec.run(async (zstd) => {
+  const simple = new zstd.Simple();
+  const data = fs.readFileSync(process.argv[2]);
+  const readable = { size: async () => BigInt(data.length),
+                     read: async (offset, length) => data.subarray(Number(offset), Number(offset + length)) };
+  const reader = await McapIndexedReader.Initialize({ readable,
+      decompressHandlers: { zstd: (buffer, size) => simple.decompress(buffer) } });
+  const readers = new Map();
+  for (const [id, channel] of reader.channelsById) {
+    const schema = reader.schemasById.get(channel.schemaId);
+    const definitions = parse(new TextDecoder().decode(schema.data), { ros2: true });
+    readers.set(id, new MessageReader(definitions));
+  }
+  const counts = {};
+  for await (const message of reader.readMessages()) {
+    readers.get(message.channelId).readMessage(message.data);
+    const topic = reader.channelsById.get(message.channelId).topic;
+    counts[topic] = (counts[topic] || 0) + 1;
+  }
+  console.log(JSON.stringify(counts));
+});
+"""
+
+
+@pytest.mark.skipif(shutil.which("node") is None or shutil.which("npm") is None,
+                    reason="Foxglove's JavaScript stack needs node and npm")
+def test_foxglove_javascript_stack_decodes_every_message(bag, tmp_path_factory):
+    cache = Path(os.environ.get("VPLAYGROUND_NPM_CACHE", Path.home() / ".cache" / "vplayground_ros" / "npm"))
+    if not (cache / "node_modules" / "@foxglove" / "rosmsg2-serialization").exists():
+        cache.mkdir(parents=True, exist_ok=True)
+        subprocess.run(["npm", "install", "--prefix", str(cache), "--no-audit", "--no-fund", "--silent",
+                        "@mcap/core@2", "@foxglove/rosmsg@5", "@foxglove/rosmsg2-serialization@2",
+                        "zstd-codec@0.1"], check=True, timeout=300)
+    script = cache / "read_bag.js"
+    script.write_text(FOXGLOVE_READER)
+    result = subprocess.run(["node", str(script), str(bag)], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    counts = json.loads(result.stdout)
+    _, summary, _ = read_all(bag)
+    expected = {summary.channels[cid].topic: n for cid, n in summary.statistics.channel_message_counts.items()}
+    assert counts == expected
