@@ -1,7 +1,8 @@
 """Node overhead (SPEC 8): the ROS node with N boxes (default 1,000, a settled pile) in real
-time, a subscriber on every topic it publishes, for a few seconds. Reports the node process's
-CPU use beyond its simulation thread (messages, ROS, callbacks) as % of one core, and the time
-from starting the process to the first ~/bodies/poses message (warm Numba cache).
+time, recording its bag, a subscriber on every topic it publishes, for a few seconds. Reports the
+node process's CPU use beyond its simulation thread (messages, bag, ROS, callbacks) as % of one
+core, the time from starting the process to the first ~/bodies/poses message (warm Numba
+cache), and the bag's bytes per simulated second.
 
     python bench/node_overhead.py [--boxes 1000] [--seconds 20]
 """
@@ -32,6 +33,11 @@ def process_cpu_seconds(pid):
     return (int(fields[11]) + int(fields[12])) / CLOCK_TICKS  # utime + stime
 
 
+def latest_time(latest):
+    values = {kv.key: kv.value for s in latest["diag"].status for kv in s.values}
+    return values["time"]
+
+
 def settled_scene(boxes, path):
     world = build_pile(boxes)
     world.step(6 * 128)  # fall and freeze: the overhead is measured on a live, settled scene
@@ -52,7 +58,8 @@ def main():
     client = rclpy.create_node("overhead_bench")
     latest = {}
     started = time.perf_counter()
-    node = subprocess.Popen([sys.executable, "-m", "vplayground_ros.cli", "--scene", str(scene)],
+    bag = scene.with_name("overhead.mcap")
+    node = subprocess.Popen([sys.executable, "-m", "vplayground_ros.cli", "--scene", str(scene), "--record", str(bag)],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     first_pose = []
     client.create_subscription(PoseArray, "/vplayground/bodies/poses",
@@ -94,6 +101,7 @@ def main():
               "simulation_thread_percent": round(100 * physics, 1),
               "overhead_percent": round(100 * (total - physics), 1), "achieved_rtf": rtf,
               "start_to_first_pose_s": round(first_pose[0], 2) if first_pose else None,
+              "bag_bytes_per_sim_second": round(bag.stat().st_size / max(float(latest_time(latest)), 1e-9)),
               "exit_code": node.returncode}
     print(json.dumps(result))
     client.destroy_node()

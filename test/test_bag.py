@@ -173,3 +173,20 @@ def test_foxglove_javascript_stack_decodes_every_message(bag, tmp_path_factory):
     _, summary, _ = read_all(bag)
     expected = {summary.channels[cid].topic: n for cid, n in summary.statistics.channel_message_counts.items()}
     assert counts == expected
+
+
+def test_foxglove_layout_names_only_what_the_node_offers():
+    from vplayground_ros.resources import find_shared
+    layout = json.loads(find_shared("config/foxglove_layout.json").read_text())
+    panels = layout["configById"]
+    kinds = {key.split("!")[0] for key in panels}
+    assert {"3D", "Teleop", "CallService", "Parameters", "DiagnosticSummary", "Plot"} <= kinds
+    assert panels["3D!scene"]["followTf"] == "world"
+    assert panels["Teleop!drive"]["topic"] == "/cmd_vel" and panels["Teleop!drive"]["publishRate"] == 10
+    services = {p["serviceName"] for k, p in panels.items() if k.startswith("CallService")}
+    assert services == {"/vplayground/pause", "/vplayground/step", "/vplayground/reset",
+                        "/vplayground/spawn", "/vplayground/wake_all"}
+    # Every panel in the mosaic has a config, and every config is placed.
+    def leaves(node):
+        return [node] if isinstance(node, str) else leaves(node["first"]) + leaves(node["second"])
+    assert sorted(leaves(layout["layout"])) == sorted(panels)

@@ -54,3 +54,20 @@ def test_contact_cloud_round_trip():
     assert msg.width == 3 and msg.point_step == 40 and msg.is_dense
     decoded = np.frombuffer(bytes(msg.data), messages.CONTACT_DTYPE)
     assert decoded["x"].tolist() == [1.0, 2.0, 3.0] and decoded["body_b"].tolist() == [-1, 4, -2]
+
+
+def test_tf_message_round_trip_without_tf2_msgs():
+    from mcap_ros2._dynamic import generate_dynamic
+
+    from vplayground_ros.interfaces import schema
+    decode = generate_dynamic("tf2_msgs/msg/TFMessage", schema("tf2_msgs/msg/TFMessage"))["tf2_msgs/msg/TFMessage"]
+    poses = np.random.default_rng(3).normal(size=(4, 7))
+    data = cdr.TransformEncoder().encode(7.125, ["world", "world", "odom", "base_link"],
+                                         ["crate", "a_longer_name", "base_link", "wheel_front_left"], poses)
+    msg = decode(data)
+    assert [t.child_frame_id for t in msg.transforms] == ["crate", "a_longer_name", "base_link", "wheel_front_left"]
+    assert [t.header.frame_id for t in msg.transforms] == ["world", "world", "odom", "base_link"]
+    for t, p in zip(msg.transforms, poses):
+        assert t.header.stamp.sec == 7 and t.header.stamp.nanosec == 125_000_000
+        tr, rot = t.transform.translation, t.transform.rotation
+        assert [tr.x, tr.y, tr.z, rot.x, rot.y, rot.z, rot.w] == list(p)

@@ -125,15 +125,34 @@ class TemplateEncoder:
             self._templates[(key, alignment)] = (bytes(w.data), {k: v - alignment for k, v in offsets.items()})
         return self._templates[(key, alignment)]
 
-    def append(self, w, stamp_bytes, key, numbers):
-        """Appends one element; numbers: {field: (struct format, values)}."""
-        w.align(4)
-        start = w.position
-        template, offsets = self.template(key, start % 8)
-        w.data += template
-        w.data[start:start + 8] = stamp_bytes
-        for field, (fmt, values) in numbers.items():
-            struct.pack_into(fmt, w.data, start + offsets[field], *values)
+    def append_all(self, w, stamp_bytes, keys, numbers):
+        """Appends one element per key; numbers: {field: array (N, k) of the field's values,
+        its dtype the wire type ('<f8', '<f4', '<i4')}. The templates are laid end to end (an
+        element's alignment depends on what came before it), then the stamp and every field
+        are written into all elements at once with numpy."""
+        count = len(keys)
+        if count == 0:
+            return
+        chunks, stamps = [], np.empty(count, np.int64)
+        fields = {field: np.empty(count, np.int64) for field in numbers}
+        base = position = w.position
+        for k, key in enumerate(keys):
+            pad = -position % 4  # every element starts with its header's int32
+            if pad:
+                chunks.append(b"\x00" * pad)
+                position += pad
+            template, offsets = self.template(key, position % 8)
+            chunks.append(template)
+            stamps[k] = position - base
+            for field, at in fields.items():
+                at[k] = position - base + offsets[field]
+            position += len(template)
+        buffer = np.frombuffer(b"".join(chunks), np.uint8).copy()
+        buffer[stamps[:, None] + np.arange(8)] = np.frombuffer(stamp_bytes, np.uint8)
+        for field, values in numbers.items():
+            raw = np.ascontiguousarray(values).view(np.uint8).reshape(count, -1)
+            buffer[fields[field][:, None] + np.arange(raw.shape[1])] = raw
+        w.data += buffer.tobytes()
 
 
 class BodyMarkerEncoder:
@@ -151,11 +170,9 @@ class BodyMarkerEncoder:
         w.u32(len(ids) + 1)
         w.marker(stamp, frame, "", 0, 0, DELETEALL, [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0], [1.0] * 3,
                  [0.0] * 4, False)
-        stamp_bytes = struct.pack("<iI", *stamp)
-        for k in range(len(ids)):
-            self._elements.append(w, stamp_bytes, (frame, namespaces[k]), {
-                "id": ("<i", (int(ids[k]),)), "pose": ("<7d", poses[k]), "scale": ("<3d", sizes[k]),
-                "color": ("<4f", colours[k])})
+        self._elements.append_all(w, struct.pack("<iI", *stamp), [(frame, ns) for ns in namespaces], {
+            "id": np.asarray(ids, "<i4").reshape(-1, 1), "pose": np.asarray(poses, "<f8"),
+            "scale": np.asarray(sizes, "<f8"), "color": np.asarray(colours, "<f4")})
         return ENCAPSULATION + bytes(w.data)
 
 
@@ -169,9 +186,8 @@ class TransformEncoder:
         stamp = split_stamp(seconds)
         w = Writer()
         w.u32(len(children))
-        stamp_bytes = struct.pack("<iI", *stamp)
-        for k in range(len(children)):
-            self._elements.append(w, stamp_bytes, (parents[k], children[k]), {"pose": ("<7d", poses[k])})
+        self._elements.append_all(w, struct.pack("<iI", *stamp), list(zip(parents, children)),
+                                  {"pose": np.asarray(poses, "<f8").reshape(-1, 7)})
         return ENCAPSULATION + bytes(w.data)
 
 
