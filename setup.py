@@ -27,6 +27,8 @@ setup(
         "test": ["pytest>=7", "mcap-ros2-support>=0.5"],
         # The ROS 2 Jazzy Python wheels, for machines without a ROS install (make does this).
         "ros": ["ros-jazzy-rclpy[fastrtps]", "ros-jazzy-common-interfaces"],
+        # Peers and plots for bench/compare.py only; never needed to run the simulator.
+        "bench": ["pybullet", "mujoco", "matplotlib"],
     },
     zip_safe=False,
     entry_points={"console_scripts": [f"vplayground = {PACKAGE}.cli:main",

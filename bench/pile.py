@@ -5,25 +5,27 @@ real-time factor of the falling phase, of the last second (settled) and of the w
     python bench/pile.py [--boxes 1000] [--seconds 10]
 """
 import argparse
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
-from vplayground_ros.physics import World
+sys.path.insert(0, str(Path(__file__).parent))
+from scenes import pile  # noqa: E402
+from vplayground_ros.physics import World  # noqa: E402
+
+
+def world_of(boxes, capacity=64):
+    world = World(capacity=max(capacity, len(boxes)))
+    for size, position, quaternion, mass in boxes:
+        world.add_body({"size": size.tolist(), "position": position.tolist(),
+                        "quaternion": quaternion.tolist(), "mass": mass})
+    return world
 
 
 def build_pile(count, seed=1):
-    rng = np.random.default_rng(seed)
-    side = int(np.ceil(np.sqrt(count / 8)))
-    world = World()
-    for k in range(count):
-        ix, iy, iz = k % side, (k // side) % side, k // (side * side)
-        jitter = rng.uniform(-0.1, 0.1, 3)
-        world.add_body({"size": [0.5, 0.5, 0.5], "density": 500.0,
-                        "position": [(ix - side / 2) * 0.8 + jitter[0],
-                                     (iy - side / 2) * 0.8 + jitter[1], 0.5 + iz * 0.8 + jitter[2]],
-                        "rpy": list(rng.uniform(-0.3, 0.3, 3))})
-    return world
+    return world_of(pile(count, seed))
 
 
 def main():

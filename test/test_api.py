@@ -235,3 +235,15 @@ def test_bodies_that_go_non_finite_or_fly_away_are_removed():
     assert world.body_names() == ["keep"]
     world.step(10)
     assert np.all(np.isfinite(world.state()["positions"]))
+
+
+def test_profiling_times_every_stage():
+    from helpers import pile
+    world = pile(50)
+    world.step(20)
+    assert sum(world.stage_seconds().values()) == 0.0  # off by default
+    world.profiling = True
+    world.step(64)
+    seconds = world.stage_seconds()
+    assert set(seconds) >= {"detection", "contact pass", "collision pass", "freezing"}
+    assert all(v >= 0.0 for v in seconds.values()) and seconds["detection"] > 0.0

@@ -3,7 +3,11 @@ read the physics; each stage lives in the module named after it."""
 from collections import namedtuple
 
 import numpy as np
-from numba import njit
+import time
+import warnings
+
+from numba import njit, objmode
+from numba.core.errors import NumbaWarning
 
 from .broad_phase import build_index, find_body_pairs
 from .constants import STATIC_REINDEX_MIN_PENDING, STATIC_REINDEX_PENDING_FRACTION
@@ -24,6 +28,26 @@ Settings = namedtuple("Settings", [
 
 # step_world's status: why it returned before doing every step.
 DONE, GROW_PAIRS, GROW_CONTACTS, GROW_INDEX = 0, 1, 2, 3
+
+# Stages timed when step_world is asked to profile (nanoseconds summed over its steps).
+STAGES = ("derived state", "detection", "wake", "collision pass", "forces and wheels",
+          "contact pass", "positions", "freezing")
+
+
+# clock_ns reads the clock in object mode, which Numba warns holds the GIL: only when profiling.
+warnings.filterwarnings("ignore", message="Code running in object mode won't allow parallel",
+                        category=NumbaWarning)
+
+
+@njit(cache=True, nogil=True)
+def clock_ns(profile):
+    """Monotonic nanoseconds when profiling (briefly takes the GIL to read the clock), else 0."""
+    if not profile:
+        return 0
+    with objmode(now="int64"):
+        now = time.perf_counter_ns()
+    return now
+
 
 # step_world's counters, summed over its steps (the caller zeroes them).
 STAT_WOKEN, STAT_FROZEN, STAT_PAIRS, STAT_POINTS, STAT_TRIANGLES = 0, 1, 2, 3, 4
@@ -87,22 +111,27 @@ def detect(bodies, broad, playground, contacts, settings):
 
 
 @njit(cache=True, nogil=True)
-def step_world(steps, bodies, playground, vehicles, settings, broad, previous, current, stats):
+def step_world(steps, bodies, playground, vehicles, settings, broad, previous, current, stats,
+               stage_ns, profile):
     """Runs up to `steps` steps. Returns (steps done, status). The contact buffers swap every
     step: after an odd number of steps the newest contacts are in the buffer passed as
     `current`, else in the one passed as `previous`. A status other than DONE means a buffer was
-    too small; that step has not been applied and the caller grows the buffer and goes on."""
+    too small; that step has not been applied and the caller grows the buffer and goes on.
+    With `profile`, the time of each of STAGES is added to stage_ns."""
     s = settings
     for done in range(steps):
+        t0 = clock_ns(profile)
         # 1. Derived state: rotations, solver masses, broad-phase bounds.
         update_bodies(bodies, s.dt, s.root_size, s.octree_depth)
         if static_index_outdated(bodies, broad) and not rebuild_static_index(bodies, broad, s):
             return done, GROW_INDEX
+        t1 = clock_ns(profile)
         # 2. Collision detection (octree broad phase, SAT narrow phase) at the current positions,
         #    with speculative margins covering this step's motion.
         status = detect(bodies, broad, playground, current, s)
         if status != DONE:
             return done, status
+        t2 = clock_ns(profile)
         # 3. Freezing: sleepers touched by moving bodies wake, and are detected again with their
         #    own contacts so they do not sink for a step.
         woken, stale = wake_touched(current, bodies, s.freezing_linear_speed)
@@ -112,25 +141,35 @@ def step_world(steps, bodies, playground, vehicles, settings, broad, previous, c
             status = detect(bodies, broad, playground, current, s)
             if status != DONE:
                 return done, status
+        t3 = clock_ns(profile)
         # 4. Collision pass with the pre-step velocities and the bodies' elasticity.
         warm_start_from(previous, current)
         prepare_contacts(current, bodies, s.ground_material, s.gravity, s.dt)
         collision_pass(current, bodies, s.resolve_iterations)
+        t4 = clock_ns(profile)
         # 5. Velocity update with external forces: the cars' wheels (springs and dampers see the
         #    velocities before gravity adds its share, or dampers would hold up the cars), then
         #    gravity and pushes.
         drive_vehicles(vehicles, bodies, broad, playground, s.ground_enabled, s.ground_height,
                        s.root_min, s.root_size, s.octree_depth, s.dt)
         integrate_velocities(bodies, s.gravity, s.dt)
+        t5 = clock_ns(profile)
         # 6. Contact pass: zero elasticity, twice the iterations, split-impulse penetration fix.
         warm_start(current, bodies)
         contact_pass(current, bodies, 2 * s.resolve_iterations)
+        t6 = clock_ns(profile)
         # 7. Positions from velocities.
         integrate_positions(bodies, s.dt)
+        t7 = clock_ns(profile)
         # 8. Freezing of bodies that have been at rest long enough.
         frozen_now = update_freezing(bodies, s.freezing_enabled, s.freezing_time,
                                      s.freezing_linear_speed, s.freezing_angular_speed, s.dt)
         index_manifolds(current)
+        if profile:
+            t8 = clock_ns(profile)
+            for k, (a, b) in enumerate(((t0, t1), (t1, t2), (t2, t3), (t3, t4), (t4, t5),
+                                        (t5, t6), (t6, t7), (t7, t8))):
+                stage_ns[k] += b - a
         stats[STAT_WOKEN] += woken
         stats[STAT_FROZEN] += frozen_now
         stats[STAT_PAIRS] += broad.pair_count[0]
