@@ -1,6 +1,6 @@
 # make run  : set up .venv and run the simulator node on the built-in default scene
 # make test : set up .venv and run the whole test suite
-# make bench: quick engine benchmark (not part of make test)
+# make bench: this engine against PyBullet and MuJoCo, and the node's overhead (minutes; not in make test)
 PYTHON ?= python3.11
 VENV   ?= .venv
 PY      = $(VENV)/bin/python
@@ -28,8 +28,8 @@ test: $(STAMP)
 	$(PY) -m pytest -q test
 
 bench: $(STAMP)
-	$(PY) bench/pile.py
-	$(PY) bench/node_overhead.py
+	$(PY) -m pip install --quiet -e ".[bench]"
+	$(PY) bench/compare.py
 
 clean:
 	rm -rf $(VENV) build *.egg-info

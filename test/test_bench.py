@@ -1,0 +1,24 @@
+"""The benchmark's quick mode runs and reports finite figures (a regression guard: no timing
+assertions here, SPEC 8 is judged by `make bench`)."""
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+BENCH = Path(__file__).resolve().parent.parent / "bench"
+
+
+def test_quick_benchmark_reports_finite_figures(tmp_path):
+    result = subprocess.run([sys.executable, str(BENCH / "compare.py"), "--quick", "--out", str(tmp_path)],
+                            capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr[-2000:]
+    report = json.loads((tmp_path / "compare_quick.json").read_text())
+    ours = [row for row in report["rows"] if row["engine"] == "vplayground"]
+    assert {row["scene"] for row in ours} == {"pile of 150", "300 at rest", "10-box tower"}
+    for row in report["rows"]:
+        assert math.isfinite(row["rtf"]) and row["rtf"] > 0
+        for phase in ("falling", "resting"):
+            if phase in row:
+                assert all(math.isfinite(v) and v >= 0 for v in row[phase].values())
+    assert abs(sum(report["stages_percent"].values()) - 100.0) < 1.0
