@@ -74,8 +74,10 @@ class MuJoCo:
             f'<geom type="box" size="{s[0] / 2} {s[1] / 2} {s[2] / 2}" mass="{m}"/></body>'
             for s, p, q, m in boxes)
         flags = '<flag sleep="enable"/>' if sleeping else ""
-        xml = (f'<mujoco><option timestep="{DT}">{flags}</option><worldbody>'
-               f'<geom type="plane" size="0 0 1"/>{bodies}</worldbody></mujoco>')
+        # MuJoCo sizes its arena from the model: thousands of boxes in contact need more.
+        memory = max(64, len(boxes) // 4)
+        xml = (f'<mujoco><option timestep="{DT}">{flags}</option><size memory="{memory}M"/>'
+               f'<worldbody><geom type="plane" size="0 0 1"/>{bodies}</worldbody></mujoco>')
         self.mujoco = mujoco
         self.model = mujoco.MjModel.from_xml_string(xml)
         self.data = mujoco.MjData(self.model)
@@ -87,10 +89,10 @@ class MuJoCo:
         return self.data.xpos[1:].copy()
 
 
-def engines(boxes, include_sleep=True):
+def engines(boxes, include_sleep=True, include_pybullet=True):
     """Every engine that is installed, built on the same boxes."""
     out = [Ours(boxes)]
-    for make in (lambda: PyBullet(boxes), lambda: MuJoCo(boxes),
+    for make in (lambda: PyBullet(boxes) if include_pybullet else None, lambda: MuJoCo(boxes),
                  lambda: MuJoCo(boxes, sleeping=True) if include_sleep else None):
         try:
             engine = make()
@@ -135,10 +137,9 @@ def resting_scene(count, settle_seconds, include_peers):
     """A settled pile: each engine settles it, then 128 steps are timed."""
     rows = []
     boxes = scenes.pile(count)
-    candidates = engines(boxes) if include_peers else [Ours(boxes)]
+    # PyBullet would take many minutes to settle thousands of boxes: not run.
+    candidates = engines(boxes, include_pybullet=False) if include_peers else [Ours(boxes)]
     for engine in candidates:
-        if isinstance(engine, PyBullet):
-            continue  # minutes to settle 5,000 boxes: not run
         run(engine, settle_seconds)
         ms = run(engine, 1.0)
         rows.append({"scene": f"{count} at rest", "bodies": count, "engine": engine.name,
@@ -238,6 +239,8 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small scenes, a few seconds in all")
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
+    parser.add_argument("--no-peers-at-rest", action="store_true",
+                        help="settle the 5,000 boxes in this engine only (MuJoCo takes many minutes)")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
@@ -253,7 +256,7 @@ def main():
         overhead = None
     else:
         pile_rows, curves = pile_scene(1000, 10.0)
-        rows = pile_rows + resting_scene(5000, 8.0, include_peers=True)
+        rows = pile_rows + resting_scene(5000, 8.0, include_peers=not args.no_peers_at_rest)
         for label, boxes in (("10-box tower", scenes.tower(10)), ("20-box tower", scenes.tower(20)),
                              ("55-box brick wall", scenes.brick_wall())):
             rows += stack_scene(label, boxes, 20.0)
