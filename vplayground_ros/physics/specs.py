@@ -151,6 +151,16 @@ def validate_ground(raw, path="ground"):
     return out
 
 
+# Keys bodies and vehicles share: where they are and how they move.
+PLACEMENT = {
+    "name": name,
+    "position": lambda value, p: vector(value, p, 3, -MAX_COORDINATE, MAX_COORDINATE),
+    "rpy": lambda value, p: vector(value, p, 3, -1.0e3, 1.0e3),
+    "quaternion": quaternion,
+    "linear_velocity": lambda value, p: vector(value, p, 3, -MAX_SPEED, MAX_SPEED),
+    "angular_velocity": lambda value, p: vector(value, p, 3, -MAX_SPEED, MAX_SPEED),
+}
+
 BODY_KEYS = {"name", "shape", "size", "position", "rpy", "quaternion", "linear_velocity",
              "angular_velocity", "density", "mass", "elasticity", "static_friction",
              "dynamic_friction", "immovable", "allow_freezing", "frozen"}
@@ -162,22 +172,14 @@ def validate_body_fields(raw, path, allowed=BODY_KEYS):
     out = {}
     for key, value in raw.items():
         p = child(path, key)
-        if key == "name":
-            out[key] = name(value, p)
+        if key in PLACEMENT:
+            out[key] = PLACEMENT[key](value, p)
         elif key == "shape":
             if value != "box":
                 raise SpecError(p, f"unsupported shape {value!r:.40} (supported: box)")
             out[key] = value
         elif key == "size":
             out[key] = vector(value, p, 3, 0.0, MAX_SIZE, low_open=True)
-        elif key == "position":
-            out[key] = vector(value, p, 3, -MAX_COORDINATE, MAX_COORDINATE)
-        elif key == "rpy":
-            out[key] = vector(value, p, 3, -1.0e3, 1.0e3)
-        elif key == "quaternion":
-            out[key] = quaternion(value, p)
-        elif key in ("linear_velocity", "angular_velocity"):
-            out[key] = vector(value, p, 3, -MAX_SPEED, MAX_SPEED)
         elif key in ("density", "mass"):
             out[key] = number(value, p, 0.0, 1.0e12, low_open=True)
         elif key == "elasticity":
@@ -269,16 +271,8 @@ def validate_vehicle(raw, path="vehicle"):
     out = dict(VEHICLE_DEFAULTS)
     for key, value in raw.items():
         p = child(path, key)
-        if key == "name":
-            out[key] = name(value, p)
-        elif key == "position":
-            out[key] = vector(value, p, 3, -MAX_COORDINATE, MAX_COORDINATE)
-        elif key == "rpy":
-            out[key] = vector(value, p, 3, -1.0e3, 1.0e3)
-        elif key == "quaternion":
-            out[key] = quaternion(value, p)
-        elif key in ("linear_velocity", "angular_velocity"):
-            out[key] = vector(value, p, 3, -MAX_SPEED, MAX_SPEED)
+        if key in PLACEMENT:
+            out[key] = PLACEMENT[key](value, p)
         elif key == "chassis":
             mapping(value, p, {"size", "mass"})
             for required in ("size", "mass"):
