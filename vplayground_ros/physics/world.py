@@ -20,8 +20,10 @@ from .vehicle import allocate_vehicles, grow_vehicles
 
 DEFAULT_COMMAND_TIMEOUT = 1.2  # s: SPEC 6.4 cmd_vel_timeout
 
-# Bodies farther than this from the octree root's centre have left the world (they fell off the
-# edge or were flung away) and are removed, as are bodies whose state went non-finite.
+# Bodies farther than this from the world's centre (the playground's middle, else the origin)
+# have left the world (they fell off the edge or were flung away) and are removed, as are bodies
+# whose state went non-finite. The centre must not follow the bodies: the octree root refits
+# around every body, so one body placed far away would put all the others "outside".
 WORLD_RADIUS = 2000.0
 
 # The root cube reaches this far past the bodies it was fitted to, and is at least this large.
@@ -77,6 +79,7 @@ class World:
         self._root = None  # (min corner, edge length) of the octree root cube; fitted lazily
         self._playground = make_playground(*EMPTY_PLAYGROUND_ARGS)[0]
         self.playground_spec = None  # how the scene described the playground, for saving
+        self._centre = np.zeros(3)  # world_centre(), kept with the playground
         self.stats = {"woken": 0, "frozen": 0, "pairs": 0, "points": 0, "triangles": 0}
         self.profiling = False  # time every stage of the step (bench/), at ~6 us a step
         self._stage_ns = np.zeros(len(STAGES), np.int64)
@@ -89,6 +92,7 @@ class World:
     def add_body(self, spec):
         """Adds a box from a SPEC 3 body spec; returns its (given or generated) unique name."""
         body = specs.validate_body(spec)
+        self.check_inside(body["position"], "body.position")
         name = body.get("name")
         if name is None:
             name = self._generate_name("box")
@@ -230,6 +234,8 @@ class World:
         unless the edit freezes it (`frozen=True`)."""
         slot = self._slot(name)
         body = specs.validate_body_fields(fields, name, specs.BODY_KEYS - {"name", "shape"})
+        if "position" in body:
+            self.check_inside(body["position"], f"{name}.position")
         self._wake_touching(slot)
         self._forget_contacts(slot)
         b = self._bodies
@@ -282,16 +288,29 @@ class World:
         self._bodies.external_impulse[slot] += imp
         self._bodies.external_angular_impulse[slot] += ang
 
+    def world_centre(self):
+        """The centre of the world's bounds (WORLD_RADIUS around it): the middle of the
+        playground's bounds, else the origin."""
+        return self._centre.copy()
+
+    def check_inside(self, position, path="position"):
+        """Raises SpecError (a ValueError) when a position lies outside the world's bounds,
+        where the body would be removed at the next step."""
+        centre = self.world_centre()
+        distance = float(np.linalg.norm(np.asarray(position, dtype=np.float64) - centre))
+        if not distance <= WORLD_RADIUS:
+            raise specs.SpecError(path, f"{list(position)} is outside the world: {distance:.6g} m from "
+                                        f"its centre {centre.tolist()}, farther than {WORLD_RADIUS:g} m")
+
     def remove_escaped(self):
         """Removes bodies whose state is not finite or that left the world (WORLD_RADIUS from
-        the octree root's centre, or that far below the ground). Returns their names."""
+        world_centre(), or that far below the ground). Returns their names."""
         slots = self._active_slots()
         b = self._bodies
         state = np.concatenate([b.position[slots], b.orientation[slots], b.velocity[slots]], axis=1)
         bad = ~np.all(np.isfinite(state), axis=1)
-        if self._root is not None:
-            centre = self._root[0] + 0.5 * self._root[1]
-            bad |= np.linalg.norm(np.nan_to_num(b.position[slots] - centre), axis=1) > WORLD_RADIUS
+        centre = self.world_centre()
+        bad |= np.linalg.norm(np.nan_to_num(b.position[slots] - centre), axis=1) > WORLD_RADIUS
         if self.ground is not None:
             bad |= b.position[slots, 2] < self.ground["height"] - WORLD_RADIUS
         names = [self._names[slot] for slot in slots[bad]]
@@ -323,6 +342,8 @@ class World:
         for non-finite vertices or indices out of range, leaving the old playground."""
         playground, dropped = make_playground(vertices, faces)
         self._playground = playground
+        self._centre = (0.5 * (playground.aabb_min.min(axis=0) + playground.aabb_max.max(axis=0))
+                        if len(playground.triangles) else np.zeros(3))
         self.playground_spec = spec
         self._root = None  # refit around the mesh, which indexes it
         self.wake_all()
