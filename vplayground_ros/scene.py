@@ -4,7 +4,10 @@
 and the playground mesh read, before the World is built: an error names the file, the key path
 and the problem, and nothing is half-loaded.
 """
+import io
 import logging
+import re
+import stat
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +23,16 @@ SCENE_VERSION = 1
 TOP_LEVEL_KEYS = {"version", "settings", "ground", "playground", "bodies", "vehicles"}
 PLAYGROUND_KEYS = {"mesh", "position", "rpy", "scale"}
 MAX_PLAYGROUND_TRIANGLES = 500_000  # beyond this the octree and the viewer stop being real-time
+# Files are measured before they are read, so a hostile or mistaken path (a multi-gigabyte file)
+# costs a stat, not the machine's memory. A 16 MiB scene holds ~100,000 bodies; a mesh within
+# MAX_PLAYGROUND_TRIANGLES is ~20 MB of .obj text.
+MAX_SCENE_BYTES = 16 << 20
+MAX_MESH_BYTES = 64 << 20
+# Self-contained formats only: glTF, COLLADA and others can make trimesh open further files.
+MESH_TYPES = {".obj": "obj", ".stl": "stl", ".ply": "ply", ".off": "off"}
+# libyaml when it is there: ~5x faster than the pure-Python loader, and it refuses nesting
+# deeper than 1,000 levels itself.
+YAML_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 log = logging.getLogger(__name__)
 
@@ -28,48 +41,107 @@ class SceneError(ValueError):
     """A scene that cannot be loaded: the message names the file, the key path and the problem."""
 
 
+def read_capped(path, limit, what):
+    """The bytes of a regular file of at most `limit` bytes, measured before it is read (and
+    while, should it grow); else ValueError saying why. Devices and pipes are refused."""
+    try:
+        info = path.stat()
+        if not stat.S_ISREG(info.st_mode):
+            raise ValueError(f"the {what} is not a regular file")
+        if info.st_size > limit:
+            raise ValueError(f"the {what} has {info.st_size} bytes, more than the {limit} allowed")
+        with open(path, "rb") as stream:
+            data = stream.read(limit + 1)
+    except OSError as error:
+        raise ValueError(f"cannot read the {what}: {error.strerror or error}") from None
+    if len(data) > limit:
+        raise ValueError(f"the {what} has more than the {limit} bytes allowed")
+    return data
+
+
 def read_scene(path_or_dict):
     """The scene as a dict, a label for error messages, and the folder mesh paths start from."""
     if isinstance(path_or_dict, dict):
         return path_or_dict, "<scene>", Path.cwd()
     path = Path(path_or_dict)
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as error:
-        reason = getattr(error, "strerror", None) or str(error)
-        raise SceneError(f"{path}: cannot read the scene file: {reason}") from None
+        text = read_capped(path, MAX_SCENE_BYTES, "scene file").decode("utf-8")
+    except ValueError as error:  # UnicodeDecodeError is a ValueError too
+        raise SceneError(f"{path}: {str(error)[:200]}") from None
     try:
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=YAML_LOADER)
     except yaml.YAMLError as error:
         raise SceneError(f"{path}: not valid YAML: {error}") from None
+    except (ValueError, RecursionError) as error:  # e.g. an integer of more than 4,300 digits
+        raise SceneError(f"{path}: not valid YAML: {type(error).__name__}: {error}") from None
     return data, str(path), path.resolve().parent
 
 
-def resolve_mesh(name, base):
+def resolve_mesh(name, base, directories=None):
     """A mesh path as written in a scene: absolute, else relative to the scene file's folder,
-    else one of the package's meshes/. Returns the path or raises SpecError listing where it
-    looked."""
+    else one of the package's meshes/. With `directories` (scenes loaded for a service call),
+    a mesh outside them and the package's meshes/ is refused, symbolic links resolved. Returns
+    the path or raises SpecError listing where it looked."""
     candidate = Path(name)
     tried = [candidate] if candidate.is_absolute() else [base / candidate]
     if tried[0].is_file():
+        if directories is not None and not inside(tried[0], directories):
+            raise specs.SpecError("playground.mesh", f"mesh file {specs.quote(name)} resolves outside the "
+                                                     "allowed directories")
         return tried[0]
     if not candidate.is_absolute():
         shared = find_shared(f"meshes/{name}")
         if shared is not None:
             return shared
         tried.append(Path("<package>/meshes") / name)
-    raise specs.SpecError("playground.mesh", f"mesh file {name!r} not found (looked in: "
+    raise specs.SpecError("playground.mesh", f"mesh file {specs.quote(name)} not found (looked in: "
                                              f"{', '.join(str(p) for p in tried)})")
 
 
+def inside(path, directories):
+    """Whether `path`, symbolic links and `..` resolved, lies within one of `directories`."""
+    try:
+        resolved = Path(path).resolve()
+        return any(resolved.is_relative_to(Path(d).resolve()) for d in directories)
+    except (OSError, ValueError, RuntimeError):  # unreadable, NUL byte, symlink loop
+        return False
+
+
+def count_obj_triangles(data, path):
+    """Triangles an .obj's faces make once fanned (a face of n corners is n - 2), counted from
+    the raw bytes so a file of millions is refused before trimesh builds arrays for them."""
+    if data.count(b"\nf ") + data.count(b"\nf\t") > MAX_PLAYGROUND_TRIANGLES:
+        raise specs.SpecError("playground.mesh", f"mesh {path} has more than the "
+                                                 f"{MAX_PLAYGROUND_TRIANGLES} triangles allowed")
+    triangles = 0
+    for match in re.finditer(rb"^f[ \t]([^\n]*)", data, re.MULTILINE):
+        triangles += max(0, len(match.group(1).split()) - 2)
+        if triangles > MAX_PLAYGROUND_TRIANGLES:
+            raise specs.SpecError("playground.mesh", f"mesh {path} has more than the "
+                                                     f"{MAX_PLAYGROUND_TRIANGLES} triangles allowed")
+    return triangles
+
+
 def read_mesh(path):
-    """(vertices (V, 3), faces (T, 3)) of a Wavefront .obj (or any format trimesh reads)."""
+    """(vertices (V, 3), faces (T, 3)) of a Wavefront .obj (or .stl, .ply, .off)."""
     import trimesh  # only scenes with a playground need it
 
+    file_type = MESH_TYPES.get(Path(path).suffix.lower())
+    if file_type is None:
+        raise specs.SpecError("playground.mesh", f"mesh {path}: unsupported file type (supported: "
+                                                 f"{', '.join(sorted(MESH_TYPES))})")
     try:
-        mesh = trimesh.load(str(path), force="mesh", process=False)
+        data = read_capped(Path(path), MAX_MESH_BYTES, "mesh file")
+    except ValueError as error:
+        raise specs.SpecError("playground.mesh", f"mesh {path}: {error}") from None
+    if file_type == "obj":
+        count_obj_triangles(data, path)
+    try:
+        # From memory, not the path: an .obj's `mtllib` cannot make trimesh open other files.
+        mesh = trimesh.load(io.BytesIO(data), file_type=file_type, force="mesh", process=False)
     except Exception as error:  # trimesh raises many kinds for broken files
-        raise specs.SpecError("playground.mesh", f"cannot read mesh {path}: {error}") from None
+        raise specs.SpecError("playground.mesh", f"cannot read mesh {path}: {type(error).__name__}: "
+                                                 f"{str(error)[:200]}") from None
     vertices = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), dtype=np.float64)
     faces = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), dtype=np.int64)
     if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
@@ -80,7 +152,7 @@ def read_mesh(path):
     return vertices, faces
 
 
-def validate_playground(raw, base):
+def validate_playground(raw, base, directories=None):
     """The playground spec over its defaults, and its world-space vertices and faces."""
     path = "playground"
     specs.mapping(raw, path, PLAYGROUND_KEYS)
@@ -94,7 +166,7 @@ def validate_playground(raw, base):
             "rpy": specs.vector(raw.get("rpy", [0, 0, 0]), "playground.rpy", 3, -1.0e3, 1.0e3),
             "scale": specs.number(raw.get("scale", 1.0), "playground.scale", 0.0, 1.0e4,
                                   low_open=True)}
-    mesh_path = resolve_mesh(spec["mesh"], base)
+    mesh_path = resolve_mesh(spec["mesh"], base, directories)
     vertices, faces = read_mesh(mesh_path)
     rotation = quaternions_to_matrices(rpy_to_quat(spec["rpy"])[None])[0]
     world_vertices = (spec["scale"] * vertices) @ rotation.T + np.asarray(spec["position"])
@@ -108,25 +180,29 @@ def validate_list(raw, key):
     return items
 
 
-def validate_scene(scene, base):
+def validate_scene(scene, base, max_bodies=None, directories=None):
     """Checks the whole scene; returns what load_world builds from."""
     specs.mapping(scene, "", TOP_LEVEL_KEYS)
     if "version" not in scene:
         raise specs.SpecError("version", f"missing (this program reads version {SCENE_VERSION})")
-    if scene["version"] != SCENE_VERSION:
-        raise specs.SpecError("version", f"unsupported version {scene['version']!r:.20} "
+    if not isinstance(scene["version"], int) or scene["version"] != SCENE_VERSION:
+        raise specs.SpecError("version", f"unsupported version {specs.quote(scene['version'])} "
                                          f"(this program reads version {SCENE_VERSION})")
     settings = specs.validate_settings(scene.get("settings"))
     ground = specs.validate_ground(scene.get("ground", specs.DEFAULT_GROUND))
+    count = len(validate_list(scene, "bodies")) + len(validate_list(scene, "vehicles"))
+    if max_bodies is not None and count > max_bodies:  # before any body is validated
+        raise specs.SpecError("bodies", f"the scene has {count} bodies and vehicles, more than "
+                                        f"max_bodies ({max_bodies})")
     playground = None
     if scene.get("playground") is not None:
-        playground = validate_playground(scene["playground"], base)
+        playground = validate_playground(scene["playground"], base, directories)
     names = set()
 
     def claim(entry, path):
         if "name" in entry:
             if entry["name"] in names:
-                raise specs.SpecError(f"{path}.name", f"duplicate name {entry['name']!r}")
+                raise specs.SpecError(f"{path}.name", f"duplicate name {specs.quote(entry['name'])}")
             names.add(entry["name"])
         return entry
 
@@ -137,10 +213,12 @@ def validate_scene(scene, base):
     return settings, ground, playground, bodies, vehicles
 
 
-def load_world(path_or_dict):
+def load_world(path_or_dict, max_bodies=None, directories=None):
+    """A World from a scene file or dict. `max_bodies` caps bodies plus vehicles; `directories`
+    confines the playground mesh to them (and the package's meshes/)."""
     scene, label, base = read_scene(path_or_dict)
     try:
-        settings, ground, playground, bodies, vehicles = validate_scene(scene, base)
+        settings, ground, playground, bodies, vehicles = validate_scene(scene, base, max_bodies, directories)
     except specs.SpecError as error:
         raise SceneError(f"{label}: {error}") from None
     world = World(settings, ground, capacity=max(64, len(bodies) + len(vehicles)))
@@ -153,10 +231,12 @@ def load_world(path_or_dict):
         if dropped:
             log.warning("%s: playground mesh %s: dropped %d degenerate triangles", label,
                         spec["mesh"], dropped)
-    for body in bodies:
-        world.add_body(body)
-    for vehicle in vehicles:
-        world.add_vehicle(vehicle)
+    for key, entries, add in (("bodies", bodies, world.add_body), ("vehicles", vehicles, world.add_vehicle)):
+        for k, entry in enumerate(entries):
+            try:
+                add(entry)
+            except ValueError as error:  # checks that need the world (e.g. inside its bounds)
+                raise SceneError(f"{label}: {key}[{k}]: {error}") from None
     return world
 
 

@@ -6,6 +6,7 @@ everything as it was.
 """
 import math
 import re
+import reprlib
 
 NAME_PATTERN = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]{0,63}$")
 
@@ -30,6 +31,18 @@ MAX_COORDINATE = 1.0e6  # m
 MAX_SPEED = 1.0e4      # m/s, rad/s
 
 
+# Values quoted in error messages: a few items of a few levels, whatever the caller sent (a YAML
+# alias bomb is a small document whose full repr would not fit in memory).
+_quote = reprlib.Repr()
+_quote.maxlevel, _quote.maxstring, _quote.maxlong, _quote.maxother = 2, 40, 40, 40
+_quote.maxlist = _quote.maxtuple = _quote.maxdict = _quote.maxset = 4
+
+
+def quote(value):
+    """A short repr of any value, for error messages."""
+    return _quote.repr(value)
+
+
 class SpecError(ValueError):
     """A ValueError whose message starts with the key path of the bad value."""
 
@@ -50,8 +63,11 @@ def _is_number(value):
 
 def number(value, path, low=-math.inf, high=math.inf, low_open=False):
     if not _is_number(value):
-        raise SpecError(path, f"expected a number, got {type(value).__name__} {value!r:.40}")
-    value = float(value)
+        raise SpecError(path, f"expected a number, got {type(value).__name__} {quote(value)}")
+    try:
+        value = float(value)
+    except OverflowError:  # an int beyond the float range
+        raise SpecError(path, f"must be finite, got {quote(value)}") from None
     if not math.isfinite(value):
         raise SpecError(path, f"must be finite, got {value}")
     if value < low or (low_open and value == low):
@@ -65,15 +81,15 @@ def integer(value, path, low, high):
     if isinstance(value, float) and value.is_integer():
         value = int(value)
     if not isinstance(value, int) or isinstance(value, bool):
-        raise SpecError(path, f"expected an integer, got {type(value).__name__} {value!r:.40}")
+        raise SpecError(path, f"expected an integer, got {type(value).__name__} {quote(value)}")
     if not low <= value <= high:
-        raise SpecError(path, f"must be between {low} and {high}, got {value}")
+        raise SpecError(path, f"must be between {low} and {high}, got {quote(value)}")
     return value
 
 
 def boolean(value, path):
     if not isinstance(value, bool):
-        raise SpecError(path, f"expected true or false, got {type(value).__name__} {value!r:.40}")
+        raise SpecError(path, f"expected true or false, got {type(value).__name__} {quote(value)}")
     return value
 
 
@@ -90,14 +106,16 @@ def mapping(value, path, allowed):
         raise SpecError(path, f"expected a mapping, got {type(value).__name__}")
     for key in value:
         if key not in allowed:
-            raise SpecError(child(path, key), f"unknown key (allowed: {', '.join(sorted(allowed))})")
+            short = isinstance(key, (int, str)) and not isinstance(key, bool) and len(str(key)) <= 64
+            raise SpecError(child(path, key if short else quote(key)),
+                            f"unknown key (allowed: {', '.join(sorted(allowed))})")
     return value
 
 
 def name(value, path):
     if not isinstance(value, str):
         raise SpecError(path, f"expected a string, got {type(value).__name__}")
-    if not NAME_PATTERN.match(value):
+    if not NAME_PATTERN.fullmatch(value):  # fullmatch: `$` alone lets a trailing newline in
         raise SpecError(path, f"invalid name {value[:80]!r}: 1-64 characters of letters, digits, "
                               "'_', '-', '.', starting with a letter or '_'")
     return value
@@ -176,7 +194,7 @@ def validate_body_fields(raw, path, allowed=BODY_KEYS):
             out[key] = PLACEMENT[key](value, p)
         elif key == "shape":
             if value != "box":
-                raise SpecError(p, f"unsupported shape {value!r:.40} (supported: box)")
+                raise SpecError(p, f"unsupported shape {quote(value)} (supported: box)")
             out[key] = value
         elif key == "size":
             out[key] = vector(value, p, 3, 0.0, MAX_SIZE, low_open=True)
@@ -257,7 +275,7 @@ def validate_vehicle_edit(raw, path):
         out["wheels"] = {}
         for index, fields in wheels.items():
             if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < WHEEL_COUNT:
-                raise SpecError(child(path, "wheels"), f"wheel index must be 0-3, got {index!r:.20}")
+                raise SpecError(child(path, "wheels"), f"wheel index must be 0-3, got {quote(index)}")
             out["wheels"][index] = validate_wheel_fields(fields, child(child(path, "wheels"), index))
     return out
 
