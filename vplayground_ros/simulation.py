@@ -5,6 +5,7 @@ Data flows one way per batch: queued commands are applied -> the world steps (co
 released) -> a snapshot is taken -> listeners read the snapshot. Nothing outside this thread
 touches the World while it steps.
 """
+import logging
 import queue
 import threading
 import time
@@ -20,6 +21,8 @@ FAST_BATCH_STEPS = 16
 MAX_DEBT_BATCHES = 5
 
 STOPPED, PLAYING, PAUSED = 0, 1, 2  # simulation_interfaces SimulationState
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -46,6 +49,8 @@ class Simulation:
         self.thread_cpu_seconds = 0.0  # CPU time of the simulation thread (physics, snapshots)
         self.achieved_rtf = 0.0
         self.removed = []          # names of bodies removed for going non-finite or away
+        self.faults = []           # texts of the first exceptions the loop survived (listeners, steps)
+        self.fault_count = 0       # all of them
         self._commands = queue.SimpleQueue()
         self._listeners = []
         self._stop = threading.Event()
@@ -70,7 +75,15 @@ class Simulation:
         return future
 
     def call(self, fn, timeout=10.0):
-        return self.submit(fn).result(timeout)
+        """submit(fn) and wait for its result. On timeout the command is withdrawn if it has
+        not started, so a caller told "timed out" can rely on nothing having changed."""
+        future = self.submit(fn)
+        try:
+            return future.result(timeout)
+        except TimeoutError:
+            if future.cancel():
+                raise TimeoutError(f"the simulation thread did not take the command within {timeout:g} s") from None
+            return future.result()  # it started meanwhile: its outcome is the answer
 
     def add_listener(self, fn):
         """fn(snapshot) runs on the simulation thread after every batch: keep it short."""
@@ -94,6 +107,11 @@ class Simulation:
         """While paused: advance exactly `count` steps (the ~/step service)."""
         self._pending_steps += count
 
+    @property
+    def pending_steps(self):
+        """Steps asked for by request_steps and not yet run."""
+        return self._pending_steps
+
     # ---------------------------------------------------------------------- the loop
     def _run(self):
         try:
@@ -112,8 +130,12 @@ class Simulation:
                 rtf_wall, rtf_sim = origin_wall, world.time
             rate = world.settings["steps_per_second"]
             steps = 0
+            if not self.paused:
+                self._pending_steps = 0  # steps asked for while paused lapse when it plays
             if self.paused:
-                steps, self._pending_steps = self._pending_steps, 0
+                # ~/step requests run a batch at a time, so commands between them stay prompt.
+                steps = min(self._pending_steps, FAST_BATCH_STEPS)
+                self._pending_steps -= steps
                 origin_wall, origin_sim = time.perf_counter(), world.time
             elif self.real_time_factor <= 0.0:
                 steps = FAST_BATCH_STEPS
@@ -129,7 +151,11 @@ class Simulation:
                 steps = min(steps, max(0, int(round((self.duration - world.time) * rate))))
             if steps > 0:
                 started = time.perf_counter()
-                world.step(steps)
+                try:
+                    world.step(steps)
+                except Exception as error:  # an engine bug: keep the loop (and the node) alive
+                    self._fault("step", error)
+                    self.paused, self._pending_steps = True, 0  # not the same failure 100 times a second
                 self.step_seconds += time.perf_counter() - started
                 self.removed += world.remove_escaped()
                 self._publish()
@@ -173,7 +199,16 @@ class Simulation:
     def _publish(self):
         self.snapshot = self._take_snapshot()
         for listener in self._listeners:
-            listener(self.snapshot)
+            try:
+                listener(self.snapshot)
+            except Exception as error:  # a publisher's bug must not stop the physics
+                self._fault("listener", error)
+
+    def _fault(self, where, error):
+        self.fault_count += 1
+        if len(self.faults) < 100:  # the first ones say what went wrong; the rest would only flood
+            self.faults.append(f"{where}: {type(error).__name__}: {error}")
+            log.exception("simulation loop survived an error in %s", where)
 
     def _take_snapshot(self):
         world = self.world
