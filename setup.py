@@ -22,9 +22,9 @@ setup(
     ],
     python_requires=">=3.10",
     install_requires=["numpy>=1.24", "numba>=0.59", "pyyaml>=6", "trimesh>=4", "mcap>=1.1",
-                      "zstandard>=0.22"],
+                      "zstandard>=0.22", "regex>=2022.1"],
     extras_require={
-        "test": ["pytest>=7", "mcap-ros2-support>=0.5"],
+        "test": ["pytest>=7", "mcap-ros2-support>=0.5", "hypothesis>=6.80"],
         # The ROS 2 Jazzy Python wheels, for machines without a ROS install (make does this).
         "ros": ["ros-jazzy-rclpy[fastrtps]", "ros-jazzy-common-interfaces"],
         # Peers and plots for bench/compare.py only; never needed to run the simulator.

@@ -117,6 +117,7 @@ def test_reset_scopes(requests):
 
 
 def test_load_and_save_scene(requests, tmp_path):
+    requests.scene_directories = [tmp_path]
     path = tmp_path / "out.yaml"
     assert requests.save_scene(str(path)) == (True, f"RESULT_OK: {path}")
     assert requests.save_scene(str(path))[1].startswith("RESULT_OPERATION_FAILED:")  # no overwrite

@@ -2,18 +2,30 @@
 Foxglove server. Payloads are YAML or JSON text in the simulation_interfaces field names;
 replies start with an SI result code (`RESULT_OK:`, `NAME_NOT_UNIQUE:`, ...).
 
-Every handler validates the whole request before it changes anything, and runs on the
-simulation thread (through Simulation.call), between batches.
+Anyone on the ROS domain can call these, so every handler:
+- parses and validates the whole request on the caller's thread (a 1 MiB payload never holds
+  up the physics), then changes the world in one command on the simulation thread, between
+  batches, only after everything that can be checked has been;
+- answers with a coded error naming the key path and the problem, and changes nothing, for
+  any input: wrong types, non-finite or huge numbers, alias bombs, deep nesting;
+- keeps within limits: MAX_PAYLOAD bytes of request, `max_bodies` bodies in the world, scene
+  files only inside `scene_directories`, bounded regular-expression matching.
 """
 import copy
-import re
+import functools
+import json
+import logging
+import os
+import time
 from pathlib import Path
 
 import numpy as np
+import regex
 import yaml
 
 from .physics import specs
-from .scene import SceneError, load_world, save_world, world_to_scene
+from .resources import find_shared
+from .scene import YAML_LOADER, SceneError, load_world, world_to_scene
 from .simulation import PAUSED
 
 OK = "RESULT_OK"
@@ -37,6 +49,17 @@ FEATURES = {"SPAWNING": 0, "DELETING": 1, "NAMED_POSES": None, "ENTITY_STATE_GET
             "SIMULATION_STATE_PAUSE": 26, "STEP_SIMULATION_SINGLE": 31,
             "STEP_SIMULATION_MULTIPLE": 32}
 MAX_PAYLOAD = 1 << 20  # bytes of YAML a request may carry
+DEFAULT_MAX_BODIES = 10_000  # bodies (vehicles included) the world may hold; ~real time at 128 Hz
+MAX_STEPS = 1_000_000  # steps one ~/step may queue (~2 h of simulated time at 128 Hz)
+MAX_PATH = 4096  # characters of a scene path (PATH_MAX)
+MAX_FILTER = 1000  # characters of a ~/remove filter
+# Wall time a ~/remove filter may spend matching names: a backtracking pattern such as (a+)+$
+# would otherwise take longer than the age of the universe on a 64-character name.
+FILTER_SECONDS = 0.5
+SCENE_SUFFIXES = (".yaml", ".yml")  # ~/save_scene with overwrite never replaces anything else
+YAML_DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
+
+log = logging.getLogger(__name__)
 
 
 class RequestError(Exception):
@@ -52,14 +75,21 @@ def reply(code, message):
 def parse(text, what="request"):
     if not isinstance(text, str):
         raise RequestError(FAILED, f"{what} must be YAML or JSON text")
-    if len(text.encode("utf-8", "surrogatepass")) > MAX_PAYLOAD:
+    if len(text) > MAX_PAYLOAD or len(text.encode("utf-8", "surrogatepass")) > MAX_PAYLOAD:
         raise RequestError(FAILED, f"{what} is larger than {MAX_PAYLOAD} bytes")
     try:
-        return yaml.safe_load(text)
+        if text.lstrip()[:1] in ("{", "["):
+            try:
+                return json.loads(text)  # JSON, what programs send: ~50x faster than YAML
+            except json.JSONDecodeError:
+                pass  # flow-style YAML such as {name: a}
+        return yaml.load(text, Loader=YAML_LOADER)
     except yaml.YAMLError as error:
-        raise RequestError(FAILED, f"{what} is not valid YAML/JSON: {error}") from None
+        raise RequestError(FAILED, f"{what} is not valid YAML/JSON: {str(error)[:300]}") from None
     except RecursionError:
         raise RequestError(FAILED, f"{what} is nested too deeply") from None
+    except ValueError as error:  # integers of more than 4,300 digits, unencodable characters
+        raise RequestError(FAILED, f"{what} is not valid YAML/JSON: {str(error)[:300]}") from None
 
 
 def as_mapping(value, what):
@@ -77,8 +107,36 @@ def xyz(value, path, length=3):
     return specs.vector(value, path, length, -specs.MAX_COORDINATE, specs.MAX_COORDINATE)
 
 
+def pose_fields(pose, path):
+    """{position, orientation} (or a PoseStamped's {header, pose}) as body keys; INVALID_POSE
+    naming the key when a value is bad."""
+    try:
+        specs.mapping(pose, path, {"position", "orientation", "header", "pose"})
+        if "pose" in pose:
+            path = f"{path}.pose"
+            pose = specs.mapping(pose["pose"], path, {"position", "orientation"})
+        fields = {}
+        if "position" in pose:
+            fields["position"] = xyz(pose["position"], f"{path}.position")
+        if "orientation" in pose:
+            fields["quaternion"] = specs.quaternion(xyz(pose["orientation"], f"{path}.orientation", 4),
+                                                    f"{path}.orientation")
+        return fields
+    except specs.SpecError as error:
+        raise RequestError(INVALID_POSE, str(error)) from None
+
+
+def check_inside(world, position, path):
+    try:
+        world.check_inside(position, path)
+    except specs.SpecError as error:
+        raise RequestError(INVALID_POSE, str(error)) from None
+
+
 def handled(fn):
-    """Turns RequestError / validation errors into coded replies."""
+    """Turns every failure into a coded reply: the callers are services, whose node must not
+    fall over whatever it is sent."""
+    @functools.wraps(fn)
     def wrapper(*args, **kwargs):
         try:
             return fn(*args, **kwargs)
@@ -88,59 +146,90 @@ def handled(fn):
             code = NAME_INVALID if error.path.endswith("name") and "invalid name" in error.problem else FAILED
             return False, f"{code}: {error}"
         except KeyError as error:
-            return False, f"{NOT_FOUND}: {error.args[0]}"
-        except ValueError as error:
+            return False, f"{NOT_FOUND}: {error.args[0] if error.args else 'no such entity'}"
+        except TimeoutError as error:
             return False, f"{FAILED}: {error}"
-    wrapper.__name__ = fn.__name__
-    wrapper.__doc__ = fn.__doc__
+        except ValueError as error:
+            return False, f"{FAILED}: {str(error)[:500]}"
+        except Exception as error:  # a bug: answered and logged, never a dead service
+            log.exception("%s failed", fn.__name__)
+            return False, f"{FAILED}: internal error: {type(error).__name__}: {str(error)[:300]}"
     return wrapper
+
+
+def default_scene_directories(bag_directory=None):
+    """The package's config/, the current working directory, and the bag's directory."""
+    config = find_shared("config/default_scene.yaml")
+    directories = [config.parent] if config is not None else []
+    directories.append(Path.cwd())
+    if bag_directory is not None:
+        directories.append(Path(bag_directory))
+    return directories
 
 
 class Requests:
     """The SPEC 6.3 handlers, bound to a Simulation. Each public method runs on the caller's
-    thread and hands the work to the simulation thread."""
+    thread and hands the work to the simulation thread.
 
-    def __init__(self, simulation, scene_label=""):
+    `scene_directories` (paths) and `max_bodies` are plain attributes: the parameter layer may
+    replace them at any time, and each request reads them once."""
+
+    def __init__(self, simulation, scene_label="", scene_directories=None, bag_directory=None,
+                 max_bodies=DEFAULT_MAX_BODIES):
         self.sim = simulation
         self.scene_label = scene_label
+        self.scene_directories = ([Path(d) for d in scene_directories] if scene_directories is not None
+                                  else default_scene_directories(bag_directory))
+        self.max_bodies = max_bodies
         self.initial = copy.deepcopy(world_to_scene(simulation.world))
 
     # ------------------------------------------------------------------ entities
-    def spawn(self, text):
-        return self.sim.call(lambda world: self._spawn(world, text))
-
     @handled
-    def _spawn(self, world, text):
+    def spawn(self, text):
         request = parse(text)
         items = request if isinstance(request, list) else [request]
         if not items:
             raise RequestError(FAILED, "nothing to spawn")
-        prepared, names = [], set(world.body_names())
-        for k, raw in enumerate(items):
-            path = f"[{k}]" if isinstance(request, list) else "spawn"
-            item = dict(as_mapping(raw, path))
-            rename = specs.boolean(item.pop("allow_renaming", False), f"{path}.allow_renaming")
-            if "initial_pose" in item:
-                pose = as_mapping(item.pop("initial_pose"), f"{path}.initial_pose")
-                if "position" in pose:
-                    item["position"] = xyz(pose["position"], f"{path}.initial_pose.position")
-                if "orientation" in pose:
-                    item["quaternion"] = specs.quaternion(xyz(pose["orientation"], f"{path}.initial_pose.orientation", 4),
-                                                          f"{path}.initial_pose.orientation")
-            vehicle = "wheels" in item or "chassis" in item
-            spec = specs.validate_vehicle(item, path) if vehicle else specs.validate_body(item, path)
+        cap = int(self.max_bodies)
+        if len(items) > cap:  # before validating any of them: a million boxes fail at once
+            raise RequestError(FAILED, f"spawn of {len(items)} entities: more than max_bodies ({cap})")
+        prepared = [self._prepare_spawn(raw, f"[{k}]" if isinstance(request, list) else "spawn")
+                    for k, raw in enumerate(items)]
+        return self.sim.call(lambda world: self._spawn(world, prepared, cap))
+
+    @staticmethod
+    def _prepare_spawn(raw, path):
+        """(path, is vehicle, validated spec, allow_renaming) of one spawn entry."""
+        item = dict(as_mapping(raw, path))
+        rename = specs.boolean(item.pop("allow_renaming", False), f"{path}.allow_renaming")
+        if "initial_pose" in item:
+            pose = as_mapping(item.pop("initial_pose"), f"{path}.initial_pose")
+            item.update(pose_fields(pose, f"{path}.initial_pose"))
+            if "quaternion" in item:
+                item.pop("rpy", None)  # the pose's orientation wins over the spec's
+        vehicle = "wheels" in item or "chassis" in item
+        spec = specs.validate_vehicle(item, path) if vehicle else specs.validate_body(item, path)
+        return path, vehicle, spec, rename
+
+    def _spawn(self, world, prepared, cap):
+        existing = world.body_names()
+        if len(existing) + len(prepared) > cap:
+            raise RequestError(FAILED, f"spawn of {len(prepared)} entities: the world has {len(existing)} "
+                                       f"bodies and max_bodies is {cap}")
+        names, suffixes = set(existing), {}
+        for path, vehicle, spec, rename in prepared:
             name = spec.get("name")
             if name is not None and name in names:
                 if not rename:
                     raise RequestError(NAME_NOT_UNIQUE, f"{path}.name: {name!r} is taken "
                                                         "(allow_renaming: true picks a free name)")
-                spec["name"] = name = unique_name(name, names)
+                spec["name"] = name = unique_name(name, names, suffixes)
             if name is not None:
                 names.add(name)
-            prepared.append((vehicle, spec))
+            check_inside(world, spec["position"], f"{path}.position")
         added = []
         try:
-            for vehicle, spec in prepared:
+            for _, vehicle, spec, _ in prepared:
                 added.append(world.add_vehicle(spec) if vehicle else world.add_body(spec))
         except Exception:
             for name in added:  # all or nothing
@@ -148,17 +237,13 @@ class Requests:
             raise
         return reply(OK, ", ".join(added))
 
-    def edit(self, text):
-        return self.sim.call(lambda world: self._edit(world, text))
-
     @handled
-    def _edit(self, world, text):
+    def edit(self, text):
         request = dict(as_mapping(parse(text), "edit"))
         name = request.pop("entity", None)
         if not isinstance(name, str):
             raise RequestError(FAILED, "edit.entity: the name of the entity to edit is missing")
-        if name not in world.body_names():
-            raise RequestError(NOT_FOUND, f"no entity named {name!r}")
+        label = name if specs.NAME_PATTERN.fullmatch(name) else specs.quote(name)  # for messages
         state = as_mapping(request.pop("state", {}) or {}, "edit.state")
         specs.mapping(state, "edit.state", {"pose", "twist", "header", "acceleration"})
         set_pose = specs.boolean(request.pop("set_pose", "pose" in state), "edit.set_pose")
@@ -166,16 +251,7 @@ class Requests:
         vehicle_edit = request.pop("vehicle", None)
         fields = dict(request)
         if set_pose:
-            pose = as_mapping(state.get("pose", {}), "edit.state.pose")
-            specs.mapping(pose, "edit.state.pose", {"position", "orientation"})
-            try:
-                if "position" in pose:
-                    fields["position"] = xyz(pose["position"], "edit.state.pose.position")
-                if "orientation" in pose:
-                    fields["quaternion"] = specs.quaternion(
-                        xyz(pose["orientation"], "edit.state.pose.orientation", 4), "edit.state.pose.orientation")
-            except specs.SpecError as error:
-                raise RequestError(INVALID_POSE, str(error)) from None
+            fields.update(pose_fields(as_mapping(state.get("pose", {}), "edit.state.pose"), "edit.state.pose"))
         if set_twist:
             twist = as_mapping(state.get("twist", {}), "edit.state.twist")
             specs.mapping(twist, "edit.state.twist", {"linear", "angular"})
@@ -184,65 +260,82 @@ class Requests:
             if "angular" in twist:
                 fields["angular_velocity"] = xyz(twist["angular"], "edit.state.twist.angular")
         # Validate everything before changing anything.
-        specs.validate_body_fields(fields, name, specs.BODY_KEYS - {"name", "shape"})
+        fields = specs.validate_body_fields(fields, label, specs.BODY_KEYS - {"name", "shape"})
         if vehicle_edit is not None:
-            if name not in world.vehicle_names():
-                raise RequestError(FAILED, f"{name}.vehicle: {name!r} is not a vehicle")
-            specs.validate_vehicle_edit(as_mapping(vehicle_edit, f"{name}.vehicle"), f"{name}.vehicle")
+            specs.validate_vehicle_edit(as_mapping(vehicle_edit, f"{label}.vehicle"), f"{label}.vehicle")
+        return self.sim.call(lambda world: self._edit(world, name, label, fields, vehicle_edit))
+
+    @staticmethod
+    def _edit(world, name, label, fields, vehicle_edit):
+        if name not in world.body_names():
+            raise RequestError(NOT_FOUND, f"no entity named {label}")
+        if vehicle_edit is not None and name not in world.vehicle_names():
+            raise RequestError(FAILED, f"{label}.vehicle: {specs.quote(name)} is not a vehicle")
+        if "position" in fields:
+            check_inside(world, fields["position"], f"{label}.position")
         if fields:
             world.edit_body(name, **fields)
         if vehicle_edit:
             world.edit_vehicle(name, **vehicle_edit)
         return reply(OK, f"edited {name}: {', '.join(sorted(fields) + (['vehicle'] if vehicle_edit else []))}")
 
-    def remove(self, text):
-        return self.sim.call(lambda world: self._remove(world, text))
-
     @handled
-    def _remove(self, world, text):
+    def remove(self, text):
         request = as_mapping(parse(text), "remove")
         specs.mapping(request, "remove", {"entity", "filter", "all"})
         if len(request) != 1:
             raise RequestError(FAILED, "remove takes exactly one of entity, filter, all")
-        names = world.body_names()
         if "entity" in request:
-            if request["entity"] not in names:
-                raise RequestError(NOT_FOUND, f"no entity named {request['entity']!r:.80}")
-            doomed = [request["entity"]]
-        elif "filter" in request:
-            try:
-                pattern = re.compile(str(request["filter"]))
-            except re.error as error:
-                raise RequestError(FAILED, f"remove.filter: not a valid regular expression: {error}") from None
-            doomed = [n for n in names if pattern.search(n)]
+            name = request["entity"]
+            if not isinstance(name, str):
+                raise RequestError(NOT_FOUND, f"no entity named {specs.quote(name)}")
+            return self.sim.call(lambda world: self._remove(world, [name], strict=True))
+        if "filter" in request:
+            pattern = request["filter"]
+            if not isinstance(pattern, str) or not pattern or len(pattern) > MAX_FILTER:
+                raise RequestError(FAILED, f"remove.filter: expected a regular expression of 1-{MAX_FILTER} "
+                                           f"characters, got {specs.quote(pattern)}")
+            names = self.sim.call(lambda world: world.body_names())
+            doomed = match_names(pattern, names)  # here, not on the simulation thread
             if not doomed:
-                raise RequestError(NOT_FOUND, f"no entity matches {request['filter']!r:.80}")
-        else:
-            if request["all"] is not True:
-                raise RequestError(FAILED, "remove.all: must be true")
-            doomed = names
+                raise RequestError(NOT_FOUND, f"no entity matches {specs.quote(pattern)}")
+            return self.sim.call(lambda world: self._remove(world, doomed, strict=False))
+        if request["all"] is not True:
+            raise RequestError(FAILED, "remove.all: must be true")
+        return self.sim.call(lambda world: self._remove(world, world.body_names(), strict=True))
+
+    @staticmethod
+    def _remove(world, doomed, strict):
+        present = set(world.body_names())
+        if strict and doomed and doomed[0] not in present:
+            raise RequestError(NOT_FOUND, f"no entity named {specs.quote(doomed[0])}")
+        doomed = [name for name in doomed if name in present]  # a filter's may have gone meanwhile
         for name in doomed:
             world.remove_body(name)
         return reply(OK, ", ".join(doomed))
 
-    def get_entity(self, text):
-        return self.sim.call(lambda world: self._get_entity(world, text))
-
     @handled
-    def _get_entity(self, world, text):
+    def get_entity(self, text):
         request = as_mapping(parse(text), "get_entity")
         specs.mapping(request, "get_entity", {"entity"})
         name = request.get("entity")
-        if name not in world.body_names():
-            raise RequestError(NOT_FOUND, f"no entity named {name!r:.80}")
-        return True, yaml.safe_dump(describe(world, name), sort_keys=False)
+        if not isinstance(name, str):
+            raise RequestError(FAILED, f"get_entity.entity: expected an entity name, got {specs.quote(name)}")
+
+        def read(world):
+            if name not in world.body_names():
+                raise RequestError(NOT_FOUND, f"no entity named {specs.quote(name)}")
+            return describe(world, name)
+        return True, yaml.dump(self.sim.call(read), Dumper=YAML_DUMPER, sort_keys=False)
 
     def entities(self):
         """[(name, description dict)] of every entity, in the order of ~/bodies/poses."""
         return self.sim.call(lambda world: [(name, describe(world, name)) for name in world.body_names()])
 
     # --------------------------------------------------------------- simulation state
+    @handled
     def pause(self, paused):
+        paused = specs.boolean(paused, "pause.data")
         return self.sim.call(lambda world: self._pause(paused))
 
     def _pause(self, paused):
@@ -251,22 +344,27 @@ class Requests:
         self.sim.paused = paused
         return reply(OK, "paused" if paused else "playing")
 
+    @handled
     def step(self, count):
+        count = specs.integer(count, "step.steps", 1, MAX_STEPS)
         return self.sim.call(lambda world: self._step(count))
 
     def _step(self, count):
         if self.sim.state != PAUSED:
             return reply(INCORRECT_STATE, "stepping needs the simulation paused (~/pause true)")
+        if self.sim.pending_steps + count > MAX_STEPS:
+            return reply(FAILED, f"{self.sim.pending_steps} steps are still queued; at most {MAX_STEPS} may be")
         self.sim.request_steps(count)
         return reply(OK, f"stepping {count}")
 
+    @handled
     def reset(self, scope):
+        scope = specs.integer(scope, "reset.scope", 1, SCOPE_ALL)
+        if scope != SCOPE_ALL and scope & ~(SCOPE_TIME | SCOPE_STATE | SCOPE_SPAWNED):
+            raise RequestError(FAILED, f"reset scope {scope} is not a combination of 1 TIME, 2 STATE, 4 SPAWNED")
         return self.sim.call(lambda world: self._reset(world, scope))
 
-    @handled
     def _reset(self, world, scope):
-        if scope != SCOPE_ALL and (scope <= 0 or scope & ~(SCOPE_TIME | SCOPE_STATE | SCOPE_SPAWNED)):
-            raise RequestError(FAILED, f"reset scope {scope} is not a combination of 1 TIME, 2 STATE, 4 SPAWNED")
         if scope == SCOPE_ALL:
             self.sim.world = load_world(copy.deepcopy(self.initial))
             return reply(OK, "reset everything to the loaded scene")
@@ -293,15 +391,19 @@ class Requests:
             done.append("time zeroed")
         return reply(OK, ", ".join(done))
 
+    @handled
     def set_freezing(self, enabled):
+        enabled = specs.boolean(enabled, "set_freezing.data")
         return self.sim.call(lambda world: self._set_freezing(world, enabled))
 
-    def _set_freezing(self, world, enabled):
+    @staticmethod
+    def _set_freezing(world, enabled):
         if world.settings["freezing"]["enabled"] == enabled:
             return reply(ALREADY, f"freezing already {'on' if enabled else 'off'}")
         world.update_settings({"freezing": {"enabled": enabled}})
         return reply(OK, f"freezing {'on' if enabled else 'off'}")
 
+    @handled
     def wake_all(self):
         return self.sim.call(lambda world: (world.wake_all(), reply(OK, "every body awake"))[1])
 
@@ -311,50 +413,142 @@ class Requests:
                                     default_flow_style=True).strip()
 
     # ------------------------------------------------------------------ scene files
+    def allowed_directories(self):
+        """scene_directories resolved (symbolic links, `..`), the ones that exist."""
+        roots = []
+        for directory in list(self.scene_directories):
+            try:
+                root = Path(directory).resolve()
+            except (OSError, ValueError, RuntimeError):
+                continue
+            if root.is_dir():
+                roots.append(root)
+        return roots
+
+    def confine(self, raw, what):
+        """The absolute, resolved path of a scene file named in a request, refused (FAILED)
+        unless it lies inside one of scene_directories and ends in .yaml or .yml. Relative
+        paths start from the current working directory, as on the command line."""
+        if not isinstance(raw, str) or not raw:
+            raise RequestError(FAILED, f"{what}: the path is missing")
+        if len(raw) > MAX_PATH or "\0" in raw:
+            raise RequestError(FAILED, f"{what}: {specs.quote(raw)} is not a usable path")
+        try:
+            resolved = (Path.cwd() / raw).resolve()
+        except (OSError, ValueError, RuntimeError) as error:  # too long, unencodable, a link loop
+            raise RequestError(FAILED, f"{what}: cannot resolve {specs.quote(raw)}: {error}") from None
+        roots = self.allowed_directories()
+        if not any(resolved.is_relative_to(root) for root in roots):
+            raise RequestError(FAILED, f"{what}: {specs.quote(raw)} resolves to {specs.quote(str(resolved))}, "
+                                       f"outside the scene directories ({', '.join(map(str, roots)) or 'none'}; "
+                                       "the scene_directories parameter)")
+        if resolved.suffix.lower() not in SCENE_SUFFIXES:
+            raise RequestError(FAILED, f"{what}: {specs.quote(raw)}: scene files end in .yaml or .yml")
+        return resolved
+
     def load_scene(self, path):
         """(LoadMap result code, message). The old world stays on any failure."""
-        if not isinstance(path, str) or not path or not Path(path).is_file():
-            return MAP_DOES_NOT_EXIST, f"{NOT_FOUND}: no scene file at {path!r:.200}"
         try:
-            world = load_world(path)
+            target = self.confine(path, "load_scene")
+        except RequestError as error:
+            return MAP_DOES_NOT_EXIST, str(error)
+        if not target.is_file():
+            return MAP_DOES_NOT_EXIST, f"{NOT_FOUND}: no scene file at {specs.quote(path)}"
+        try:
+            world = load_world(target, max_bodies=int(self.max_bodies), directories=self.allowed_directories())
+            initial = copy.deepcopy(world_to_scene(world))
         except SceneError as error:
-            return INVALID_MAP_DATA, f"{FAILED}: {error}"
+            return INVALID_MAP_DATA, f"{FAILED}: {str(error)[:1000]}"
         except Exception as error:  # an unexpected failure must not take the node down
-            return UNDEFINED_FAILURE, f"{FAILED}: {type(error).__name__}: {error}"
+            log.exception("load_scene %s", target)
+            return UNDEFINED_FAILURE, f"{FAILED}: {type(error).__name__}: {str(error)[:300]}"
 
         def install(_):
             self.sim.world = world
-            self.initial = copy.deepcopy(world_to_scene(world))
-            self.scene_label = path
-        self.sim.call(install)
-        return MAP_SUCCESS, f"{OK}: loaded {path} ({len(world.body_names())} bodies)"
-
-    def save_scene(self, text):
-        return self.sim.call(lambda world: self._save_scene(world, text))
+            self.initial = initial
+            self.scene_label = str(target)
+        try:
+            self.sim.call(install)
+        except TimeoutError as error:
+            return UNDEFINED_FAILURE, f"{FAILED}: {error}"
+        return MAP_SUCCESS, f"{OK}: loaded {target} ({len(world.body_names())} bodies)"
 
     @handled
-    def _save_scene(self, world, text):
+    def save_scene(self, text):
+        if not isinstance(text, str):
+            raise RequestError(FAILED, "save_scene: expected a path or {path: ..., overwrite: true}")
         request = parse(text) if text.strip().startswith("{") else {"path": text.strip()}
         request = as_mapping(request, "save_scene")
         specs.mapping(request, "save_scene", {"path", "overwrite"})
-        path = request.get("path")
-        if not isinstance(path, str) or not path:
-            raise RequestError(FAILED, "save_scene: the output path is missing")
         overwrite = specs.boolean(request.get("overwrite", False), "save_scene.overwrite")
-        target = Path(path)
-        if target.exists() and not overwrite:
-            raise RequestError(FAILED, f"{path} exists (pass {{path: ..., overwrite: true}} to replace it)")
+        target = self.confine(request.get("path"), "save_scene.path")
+        if target.is_dir():
+            raise RequestError(FAILED, f"save_scene.path: {target} is a directory")
+        if (target.exists() or target.is_symlink()) and not overwrite:
+            raise RequestError(FAILED, f"{target} exists (pass {{path: ..., overwrite: true}} to replace it)")
+
+        def scene(world):
+            data = world_to_scene(world)
+            data["vehicles"] = copy.deepcopy(data["vehicles"])  # edits replace wheel entries in place
+            return data
+        body = yaml.dump(self.sim.call(scene), Dumper=YAML_DUMPER, sort_keys=False).encode("utf-8")
         try:
-            save_world(world, target)
+            write_file(target, body, overwrite)
         except OSError as error:
-            raise RequestError(FAILED, f"cannot write {path}: {error.strerror}") from None
+            raise RequestError(FAILED, f"cannot write {target}: {error.strerror or error}") from None
         return reply(OK, str(target))
 
 
-def unique_name(name, taken):
-    k = 2
+def write_file(target, data, overwrite):
+    """Writes `data` to `target`: without overwrite, only if nothing is there (O_EXCL, so not
+    even a file or link made since the check is replaced); with it, through a temporary file
+    renamed over the old one, so a full disk leaves the old file whole."""
+    if not overwrite:
+        try:
+            with open(target, "xb") as stream:
+                stream.write(data)
+        except FileExistsError:
+            raise
+        except OSError:
+            target.unlink(missing_ok=True)
+            raise
+        return
+    temporary = target.with_name(f".{target.name}.{os.getpid()}.{time.monotonic_ns()}.tmp")
+    try:
+        with open(temporary, "xb") as stream:
+            stream.write(data)
+        os.replace(temporary, target)
+    finally:
+        temporary.unlink(missing_ok=True)
+
+
+def match_names(pattern, names, seconds=FILTER_SECONDS):
+    """The names `pattern` (a POSIX ERE, Python syntax) finds, with the matching bounded in
+    wall time; FAILED naming the problem for a bad or too slow pattern."""
+    try:
+        compiled = regex.compile(pattern)
+    except (regex.error, ValueError, OverflowError, RecursionError) as error:
+        raise RequestError(FAILED, f"remove.filter: not a valid regular expression: {error}") from None
+    deadline = time.monotonic() + seconds
+    matched = []
+    try:
+        for name in names:
+            # concurrent: the GIL is released while matching, so the physics keeps stepping.
+            if compiled.search(name, timeout=max(deadline - time.monotonic(), 1e-3), concurrent=True):
+                matched.append(name)
+    except TimeoutError:
+        raise RequestError(FAILED, f"remove.filter: matching took longer than {seconds:g} s "
+                                   "(nested repetition such as (a+)+ backtracks without end)") from None
+    return matched
+
+
+def unique_name(name, taken, suffixes):
+    """name_2, name_3, ...: the first not taken. `suffixes` remembers where each name's search
+    stopped, so renaming thousands of copies of one name stays linear."""
+    k = suffixes.get(name, 2)
     while f"{name}_{k}" in taken:
         k += 1
+    suffixes[name] = k + 1
     return f"{name}_{k}"
 
 
