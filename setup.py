@@ -13,7 +13,7 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(exclude=["test", "bench"]),
-    package_data={PACKAGE: ["msg_definitions/*/msg/*.msg"]},
+    package_data={PACKAGE: ["msg_definitions/README.md", "msg_definitions/*/msg/*.msg", "msg_definitions/*/srv/*.srv"]},
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),

@@ -28,6 +28,7 @@ from visualization_msgs.srv import GetInteractiveMarkers  # noqa: E402
 
 from vplayground_ros.cli import parse_args  # noqa: E402
 from vplayground_ros.node import SimulatorNode  # noqa: E402
+from vplayground_ros.runtime import Runtime  # noqa: E402
 from vplayground_ros.scene import load_world  # noqa: E402
 from vplayground_ros.simulation import Simulation  # noqa: E402
 
@@ -50,12 +51,14 @@ class Harness:
         rclpy.init(args=["test"])
         options = parse_args(["--real-time-factor", str(rtf), "--no-record"])
         self.sim = Simulation(load_world(options.scene), real_time_factor=rtf)
-        self.node = SimulatorNode(self.sim, options)
+        self.node = SimulatorNode()
+        self.runtime = Runtime(self.sim, options, self.node.get_logger(), None, self.node.resolve_topic_name)
+        self.node.attach(self.runtime)
         self.client = rclpy.create_node("vplayground_test_client")
         self.executor = MultiThreadedExecutor(num_threads=4)
         self.executor.add_node(self.node)
         self.executor.add_node(self.client)
-        self.sim.start()
+        self.runtime.start()
         self.thread = threading.Thread(target=self.executor.spin, daemon=True)
         self.thread.start()
         self.latest = {}
@@ -87,7 +90,7 @@ class Harness:
         return response.results[0]
 
     def close(self):
-        self.sim.stop()
+        self.runtime.stop()
         self.executor.shutdown()
         self.thread.join(10)
         self.node.destroy_node()
