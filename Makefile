@@ -21,8 +21,10 @@ $(STAMP): setup.py setup.cfg package.xml
 	$(PY) -c "import rclpy" 2>/dev/null || $(PY) -m pip install --quiet -e ".[ros]"
 	touch $(STAMP)
 
+# The built-in Foxglove server is on under make run (FOXGLOVE= turns it off).
+FOXGLOVE ?= --foxglove
 run: $(STAMP)
-	$(VENV)/bin/vplayground $(ARGS)
+	$(VENV)/bin/vplayground $(FOXGLOVE) $(ARGS)
 
 test: $(STAMP)
 	$(PY) -m pytest -q test

@@ -13,7 +13,7 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(exclude=["test", "bench"]),
-    package_data={PACKAGE: ["msg_definitions/*/msg/*.msg"]},
+    package_data={PACKAGE: ["msg_definitions/README.md", "msg_definitions/*/msg/*.msg", "msg_definitions/*/srv/*.srv"]},
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
@@ -21,10 +21,13 @@ setup(
         (f"share/{PACKAGE}/meshes", glob("meshes/*.obj")),
     ],
     python_requires=">=3.10",
+    # mcap-ros2-support: CDR from message definitions (interfaces.py); foxglove-sdk: the built-in
+    # Foxglove WebSocket server (--foxglove).
     install_requires=["numpy>=1.24", "numba>=0.59", "pyyaml>=6", "trimesh>=4", "mcap>=1.1",
-                      "zstandard>=0.22", "regex>=2022.1"],
+                      "zstandard>=0.22", "regex>=2022.1", "mcap-ros2-support>=0.5",
+                      "foxglove-sdk>=0.30,<0.31"],
     extras_require={
-        "test": ["pytest>=7", "mcap-ros2-support>=0.5", "hypothesis>=6.80"],
+        "test": ["pytest>=7", "hypothesis>=6.80", "websockets>=13"],
         # The ROS 2 Jazzy Python wheels, for machines without a ROS install (make does this).
         "ros": ["ros-jazzy-rclpy[fastrtps]", "ros-jazzy-common-interfaces"],
         # Peers and plots for bench/compare.py only; never needed to run the simulator.

@@ -1,21 +1,17 @@
 """MCAP bags (SPEC 7), read back with independent readers: the `mcap` library with
 mcap_ros2's decoder, and Foxglove's own JavaScript stack where node and npm are installed."""
 import json
-import os
-import shutil
 import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import pytest
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
 
-pytest.importorskip("rclpy")
-from mcap.reader import make_reader  # noqa: E402
-from mcap_ros2.decoder import DecoderFactory  # noqa: E402
-
-from vplayground_ros.recorder import recover  # noqa: E402
+from foxglove_js import needs_node, run_script
+from vplayground_ros.recorder import recover
 
 LATCHED = {"/vplayground/scene/markers", "/tf_static", "/vplayground/state"}
 
@@ -156,20 +152,9 @@ ZstdCodec.run(async (zstd) => {
 """
 
 
-@pytest.mark.skipif(shutil.which("node") is None or shutil.which("npm") is None,
-                    reason="Foxglove's JavaScript stack needs node and npm")
-def test_foxglove_javascript_stack_decodes_every_message(bag, tmp_path_factory):
-    cache = Path(os.environ.get("VPLAYGROUND_NPM_CACHE", Path.home() / ".cache" / "vplayground_ros" / "npm"))
-    if not (cache / "node_modules" / "@foxglove" / "rosmsg2-serialization").exists():
-        cache.mkdir(parents=True, exist_ok=True)
-        subprocess.run(["npm", "install", "--prefix", str(cache), "--no-audit", "--no-fund", "--silent",
-                        "@mcap/core@2", "@foxglove/rosmsg@5", "@foxglove/rosmsg2-serialization@2",
-                        "zstd-codec@0.1"], check=True, timeout=300)
-    script = cache / "read_bag.js"
-    script.write_text(FOXGLOVE_READER)
-    result = subprocess.run(["node", str(script), str(bag)], capture_output=True, text=True, timeout=120)
-    assert result.returncode == 0, result.stderr
-    counts = json.loads(result.stdout)
+@needs_node
+def test_foxglove_javascript_stack_decodes_every_message(bag):
+    counts = json.loads(run_script("read_bag.js", FOXGLOVE_READER, bag))
     _, summary, _ = read_all(bag)
     expected = {summary.channels[cid].topic: n for cid, n in summary.statistics.channel_message_counts.items()}
     assert counts == expected

@@ -48,9 +48,9 @@ def test_pose_array_round_trip():
 def test_contact_cloud_round_trip():
     rows = np.zeros(3, messages.CONTACT_DTYPE)
     rows["x"], rows["body_b"] = [1.0, 2.0, 3.0], [-1, 4, -2]
-    fields = [(f.name, f.offset, f.datatype, f.count) for f in messages.CONTACT_FIELDS]
-    msg = deserialize_message(cdr.point_cloud(1.0, "world", fields, rows), PointCloud2)
-    assert [f.name for f in msg.fields] == [f.name for f in messages.CONTACT_FIELDS]
+    msg = deserialize_message(cdr.point_cloud(1.0, "world", messages.CONTACT_FIELD_LAYOUT, rows), PointCloud2)
+    assert [(f.name, f.offset, f.datatype, f.count) for f in msg.fields] == messages.CONTACT_FIELD_LAYOUT
+    assert [f.name for f in msg.fields] == list(messages.CONTACT_DTYPE.names)
     assert msg.width == 3 and msg.point_step == 40 and msg.is_dense
     decoded = np.frombuffer(bytes(msg.data), messages.CONTACT_DTYPE)
     assert decoded["x"].tolist() == [1.0, 2.0, 3.0] and decoded["body_b"].tolist() == [-1, 4, -2]

@@ -27,7 +27,10 @@ from std_srvs.srv import SetBool, Trigger  # noqa: E402
 from visualization_msgs.srv import GetInteractiveMarkers  # noqa: E402
 
 from vplayground_ros.cli import parse_args  # noqa: E402
+from foxglove_client import FoxgloveClient  # noqa: E402
+from vplayground_ros.foxglove_server import FoxgloveServer  # noqa: E402
 from vplayground_ros.node import SimulatorNode  # noqa: E402
+from vplayground_ros.runtime import Runtime  # noqa: E402
 from vplayground_ros.scene import load_world  # noqa: E402
 from vplayground_ros.simulation import Simulation  # noqa: E402
 
@@ -50,12 +53,15 @@ class Harness:
         rclpy.init(args=["test"])
         options = parse_args(["--real-time-factor", str(rtf), "--no-record"])
         self.sim = Simulation(load_world(options.scene), real_time_factor=rtf)
-        self.node = SimulatorNode(self.sim, options)
+        self.node = SimulatorNode()
+        self.runtime = Runtime(self.sim, options, self.node.get_logger(), None, self.node.resolve_topic_name)
+        self.foxglove = FoxgloveServer(self.runtime, port=0)  # both live: the ROS graph and the server
+        self.node.attach(self.runtime)
         self.client = rclpy.create_node("vplayground_test_client")
         self.executor = MultiThreadedExecutor(num_threads=4)
         self.executor.add_node(self.node)
         self.executor.add_node(self.client)
-        self.sim.start()
+        self.runtime.start()
         self.thread = threading.Thread(target=self.executor.spin, daemon=True)
         self.thread.start()
         self.latest = {}
@@ -87,7 +93,8 @@ class Harness:
         return response.results[0]
 
     def close(self):
-        self.sim.stop()
+        self.runtime.stop()
+        self.foxglove.stop()
         self.executor.shutdown()
         self.thread.join(10)
         self.node.destroy_node()
@@ -211,6 +218,34 @@ def test_parameters_accepted_and_rejected(ros):
     assert ros.set_parameter("freezing.time", 1.0, ParameterType.PARAMETER_DOUBLE).successful
     assert wait_for(lambda: ros.sim.world.settings["freezing"]["time"] == 1.0)
     assert ros.set_parameter("steps_per_second", 128, ParameterType.PARAMETER_INTEGER).successful
+
+
+def test_foxglove_server_shares_the_ros_graph(ros):
+    """With ROS present both are live: a spawn through the socket shows in the ROS
+    ~/get_entities, and a parameter set through the socket goes through rclpy (refused with the
+    same validation, or seen by `ros2 param get` when accepted)."""
+    client = FoxgloveClient(ros.foxglove.url)
+    try:
+        assert client.wait(lambda: f"{NS}/spawn" in client.services and "/odom" in client.channels)
+        assert client.call(f"{NS}/spawn", {"load_namespace": "{name: from_foxglove, position: [0, 9, 3]}"}).success
+        entities = ros.call(GetInteractiveMarkers, f"{NS}/get_entities", GetInteractiveMarkers.Request())
+        assert "from_foxglove" in [m.name for m in entities.markers]
+        assert ros.text("remove", "{entity: from_foxglove}")[0]
+
+        client.set_parameters({"click_spawn_size": -1.0})
+        assert client.wait(lambda: any("click_spawn_size" in s["message"] for s in client.statuses))
+        assert ros.node.get_parameter("click_spawn_size").value == 0.5
+        ros_result = ros.set_parameter("click_spawn_size", -1.0, ParameterType.PARAMETER_DOUBLE)
+        # rclpy words its own range check; both name the parameter and its range.
+        foxglove_reason = next(s["message"] for s in client.statuses if "click_spawn_size" in s["message"])
+        assert not ros_result.successful
+        assert all("click_spawn_size" in r and "0.01" in r for r in (ros_result.reason, foxglove_reason))
+        assert client.set_parameters({"click_spawn_size": 0.25}) == {"click_spawn_size": 0.25}
+        assert ros.node.get_parameter("click_spawn_size").value == 0.25
+        assert ros.set_parameter("click_spawn_size", 0.5, ParameterType.PARAMETER_DOUBLE).successful
+        assert client.get_parameters("click_spawn_size") == {"click_spawn_size": 0.5}
+    finally:
+        client.close()
 
 
 def test_twist_drives_the_car_and_the_timeout_stops_it(ros):

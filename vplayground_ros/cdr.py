@@ -58,8 +58,9 @@ class Writer:
         self.u32(stamp[1])
         self.string(frame)
 
-    def marker(self, stamp, frame, ns, marker_id, kind, action, pose, scale, rgba, frame_locked):
-        """A visualization_msgs/Marker with empty sequences and strings after `color`."""
+    def marker(self, stamp, frame, ns, marker_id, kind, action, pose, scale, rgba, frame_locked, points=None):
+        """A visualization_msgs/Marker: `points` (N, 3) or None; the other sequences and strings
+        after `color` empty."""
         offsets = {}
         self.header(stamp, frame)
         self.string(ns)
@@ -78,7 +79,12 @@ class Writer:
         self.i32(0)  # lifetime
         self.u32(0)
         self.u8(1 if frame_locked else 0)
-        self.u32(0)  # points
+        if points is None or len(points) == 0:
+            self.u32(0)
+        else:  # geometry_msgs/Point is three float64: the sequence is one block
+            self.u32(len(points))
+            self.align(8)
+            self.data += np.ascontiguousarray(points, "<f8").tobytes()
         self.u32(0)  # colors
         self.string("")  # texture_resource
         self.header((0, 0), "")  # texture: CompressedImage header, format, data
@@ -91,7 +97,6 @@ class Writer:
         self.u32(0)
         self.u8(0)  # mesh_use_embedded_materials
         return offsets
-
 
     def transform(self, stamp, parent, child, pose):
         """A geometry_msgs/TransformStamped; pose = translation xyz + rotation xyzw."""
@@ -189,6 +194,25 @@ class TransformEncoder:
         self._elements.append_all(w, struct.pack("<iI", *stamp), list(zip(parents, children)),
                                   {"pose": np.asarray(poses, "<f8").reshape(-1, 7)})
         return ENCAPSULATION + bytes(w.data)
+
+
+def marker_array(seconds, frame, markers):
+    """visualization_msgs/MarkerArray of markers given as dicts of Writer.marker's arguments
+    (ns, marker_id, kind, action, pose, scale, rgba, frame_locked, points), all stamped
+    `seconds` in `frame`."""
+    stamp = split_stamp(seconds)
+    w = Writer()
+    w.u32(len(markers))
+    for m in markers:
+        w.marker(stamp, frame, **m)
+    return ENCAPSULATION + bytes(w.data)
+
+
+def transform_stamped(seconds, parent, child, pose):
+    """geometry_msgs/TransformStamped; pose = translation xyz + rotation xyzw."""
+    w = Writer()
+    w.transform(split_stamp(seconds), parent, child, [float(v) for v in pose])
+    return ENCAPSULATION + bytes(w.data)
 
 
 def pose_array(seconds, frame, positions, quaternions):

@@ -1,10 +1,12 @@
 """Console entry point `vplayground` (SPEC 2).
 
-With rclpy importable it runs the ROS node; without it (or with --no-ros) the same simulation
-runs headless. Either way it prints a status line and stops cleanly (exit 0) on Ctrl-C, SIGTERM
-or when --duration of simulated time has passed.
+One Runtime (runtime.py) serves up to three sinks at once: the ROS node when rclpy imports (not
+with --no-ros), the bag (unless --no-record) and the Foxglove server (--foxglove). Either way it
+prints a status line and stops cleanly (exit 0) on Ctrl-C, SIGTERM or when --duration of
+simulated time has passed.
 """
 import argparse
+import logging
 import signal
 import sys
 import threading
@@ -26,7 +28,14 @@ def parse_args(argv):
     parser.add_argument("--real-time-factor", type=float, default=1.0,
                         help="simulated seconds per wall-clock second; 0 = as fast as possible")
     parser.add_argument("--start-paused", action="store_true", help="start paused")
-    parser.add_argument("--no-ros", action="store_true", help="run headless even where rclpy imports")
+    parser.add_argument("--no-ros", action="store_true", help="no ROS node even where rclpy imports")
+    foxglove = parser.add_mutually_exclusive_group()
+    foxglove.add_argument("--foxglove", type=int, nargs="?", const=8765, default=None, metavar="PORT",
+                          help="serve Foxglove's WebSocket protocol on PORT (8765 if not given; 0 = any free port)")
+    foxglove.add_argument("--no-foxglove", action="store_const", const=None, dest="foxglove",
+                          help="no Foxglove server (the default)")
+    parser.add_argument("--foxglove-host", default="127.0.0.1",
+                        help="address the Foxglove server listens on (default 127.0.0.1)")
     record = parser.add_mutually_exclusive_group()
     record.add_argument("--record", type=Path, default=None, metavar="PATH.mcap",
                         help="write the MCAP bag here (default: bags/<date-time>.mcap)")
@@ -40,6 +49,8 @@ def parse_args(argv):
         parser.error("--real-time-factor must be >= 0")
     if args.record_split_size < 0:
         parser.error("--record-split-size must be >= 0")
+    if args.foxglove is not None and not 0 <= args.foxglove <= 65535:
+        parser.error("--foxglove PORT must be in 0..65535")
     if args.no_record:
         args.record = None
     elif args.record is None:
@@ -77,6 +88,14 @@ def main(argv=None):
     except SceneError as error:
         print(f"vplayground: {error}", file=sys.stderr)
         return 2
+    recorder = None
+    if options.record is not None:
+        from .recorder import Recorder
+        try:
+            recorder = Recorder(options.record, options.record_split_size)
+        except OSError as error:
+            print(f"vplayground: cannot record to {options.record}: {error.strerror or error}", file=sys.stderr)
+            return 2
     sim = Simulation(world, real_time_factor=options.real_time_factor,
                      start_paused=options.start_paused, duration=options.duration)
     stop = threading.Event()
@@ -86,64 +105,131 @@ def main(argv=None):
         import rclpy  # noqa: F401
     except ImportError:
         rclpy = None
-    if rclpy is None or options.no_ros:
-        return run_headless(sim, options, stop)
-    return run_node(sim, options, ros_args, stop)
+    return run(sim, options, recorder, ros_args if rclpy is not None and not options.no_ros else None, stop)
 
 
-def run_headless(sim, options, stop):
-    print(f"vplayground: {options.scene} ({len(sim.world.body_names())} bodies), headless", flush=True)
-    sim.start()
-    last = time.perf_counter()
-    while not stop.is_set() and not sim.wait(0.1):
-        if time.perf_counter() - last >= STATUS_PERIOD:
-            last = time.perf_counter()
-            print(status_line(sim), flush=True)
-    sim.stop()
-    print(f"summary: {status_line(sim)}, {sim.world.step_count} steps", flush=True)
-    return 0
+def run(sim, options, recorder, ros_args, stop):
+    """The main thread: ROS callbacks (if any) and the publishing schedule, until stopped."""
+    from .runtime import Runtime
 
+    node = executor = server = None
+    if ros_args is not None:
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.signals import SignalHandlerOptions
 
-def run_node(sim, options, ros_args, stop):
-    import rclpy
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.signals import SignalHandlerOptions
-
-    from .node import SimulatorNode
-
-    from .recorder import Recorder
-
-    recorder = None
-    if options.record is not None:
-        try:
-            recorder = Recorder(options.record, options.record_split_size)
-        except OSError as error:
+        from .node import SimulatorNode
+        rclpy.init(args=["vplayground", *ros_args], signal_handler_options=SignalHandlerOptions.NO)
+        node = SimulatorNode()
+        log = node.get_logger()
+        runtime = Runtime(sim, options, log, recorder, node.resolve_topic_name)
+    else:
+        logging.basicConfig(level=logging.INFO, stream=sys.stdout, format="[%(levelname)s] %(name)s: %(message)s")
+        log = logging.getLogger("vplayground")
+        runtime = Runtime(sim, options, log, recorder)
+    try:
+        if options.foxglove is not None:
+            from .foxglove_server import FoxgloveServer
+            server = FoxgloveServer(runtime, options.foxglove_host, options.foxglove)
+            runtime.parameters.values["foxglove.port"] = server.server.port  # the port bound (0 asked any)
+        if node is not None:
+            node.attach(runtime)
+            executor = SingleThreadedExecutor()
+            executor.add_node(node)
+        log.info(f"{options.scene}: {len(sim.world.body_names())} bodies; real-time factor "
+                 f"{options.real_time_factor:g}{'' if options.duration is None else f', {options.duration:g} s'}; "
+                 f"{'ROS node' if node else 'no ROS node'}; "
+                 f"{'recording to ' + str(options.record) if recorder else 'not recording'}")
+        if server is not None:
+            log.info(f"Foxglove: open connection to {server.url} (Foxglove WebSocket), then load "
+                     f"config/foxglove_layout.json")
+        runtime.start()
+        status_due = time.monotonic() + STATUS_PERIOD
+        while not stop.is_set() and not sim.wait(0):
+            if executor is not None:
+                executor.spin_once(timeout_sec=0.1)
+            else:
+                stop.wait(0.1)
+            if time.monotonic() >= status_due:
+                status_due += STATUS_PERIOD
+                log.info(status_line(sim))
+    except OSError as error:
             print(f"vplayground: cannot record to {options.record}: {error.strerror or error}", file=sys.stderr)
             return 2
-    rclpy.init(args=["vplayground", *ros_args], signal_handler_options=SignalHandlerOptions.NO)
-    node = SimulatorNode(sim, options, recorder)
-    log = node.get_logger()
-    node.create_timer(STATUS_PERIOD, lambda: log.info(status_line(sim)))
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    log.info(f"{options.scene}: {len(sim.world.body_names())} bodies; real-time factor "
-             f"{options.real_time_factor:g}{'' if options.duration is None else f', {options.duration:g} s'}; "
-             f"{'recording to ' + str(options.record) if recorder else 'not recording'}")
-    sim.start()
+    sim = Simulation(world, real_time_factor=options.real_time_factor,
+                     start_paused=options.start_paused, duration=options.duration)
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
     try:
+        import rclpy  # noqa: F401
+    except ImportError:
+        rclpy = None
+    return run(sim, options, recorder, ros_args if rclpy is not None and not options.no_ros else None, stop)
+
+
+def run(sim, options, recorder, ros_args, stop):
+    """The main thread: ROS callbacks (if any) and the publishing schedule, until stopped."""
+    from .runtime import Runtime
+
+    node = executor = server = None
+    if ros_args is not None:
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.signals import SignalHandlerOptions
+
+        from .node import SimulatorNode
+        rclpy.init(args=["vplayground", *ros_args], signal_handler_options=SignalHandlerOptions.NO)
+        node = SimulatorNode()
+        log = node.get_logger()
+        runtime = Runtime(sim, options, log, recorder, node.resolve_topic_name)
+    else:
+        logging.basicConfig(level=logging.INFO, stream=sys.stdout, format="[%(levelname)s] %(name)s: %(message)s")
+        log = logging.getLogger("vplayground")
+        runtime = Runtime(sim, options, log, recorder)
+    try:
+        if options.foxglove is not None:
+            from .foxglove_server import FoxgloveServer
+            server = FoxgloveServer(runtime, options.foxglove_host, options.foxglove)
+            runtime.parameters.values["foxglove.port"] = server.server.port  # the port bound (0 asked any)
+        if node is not None:
+            node.attach(runtime)
+            executor = SingleThreadedExecutor()
+            executor.add_node(node)
+        log.info(f"{options.scene}: {len(sim.world.body_names())} bodies; real-time factor "
+                 f"{options.real_time_factor:g}{'' if options.duration is None else f', {options.duration:g} s'}; "
+                 f"{'ROS node' if node else 'no ROS node'}; "
+                 f"{'recording to ' + str(options.record) if recorder else 'not recording'}")
+        if server is not None:
+            log.info(f"Foxglove: open connection to {server.url} (Foxglove WebSocket), then load "
+                     f"config/foxglove_layout.json")
+        sim.start()
+        status_due = time.monotonic() + STATUS_PERIOD
         while not stop.is_set() and not sim.wait(0):
-            executor.spin_once(timeout_sec=0.05)
+            wait = min(runtime.broadcaster.tick(), 0.05)
+            if executor is not None:
+                executor.spin_once(timeout_sec=wait)
+            else:
+                stop.wait(wait)
+            if time.monotonic() >= status_due:
+                status_due += STATUS_PERIOD
+                log.info(status_line(sim))
+    except OSError as error:  # the Foxglove port is taken, say
+        log.error(f"cannot start: {error}")
+        return 2
     finally:
-        sim.stop()
-        executor.spin_once(timeout_sec=0.05)  # the last state and /clock go out
+        runtime.stop()
+        if server is not None:
+            server.stop()
         if recorder is not None:
             recorder.close()
             log.info(f"bag: {', '.join(str(f) for f in recorder.files)} ({recorder.bytes_written} bytes of "
                      f"messages, {recorder.dropped} dropped){'; error: ' + recorder.error if recorder.error else ''}")
-        log.info(f"stopped: {status_line(sim)}")
-        executor.remove_node(node)
-        node.destroy_node()
-        rclpy.try_shutdown()
+        log.info(f"stopped: {status_line(sim)}, {sim.world.step_count} steps")
+        if node is not None:
+            executor.remove_node(node)
+            node.destroy_node()
+            rclpy.try_shutdown()
     return 0
 
 

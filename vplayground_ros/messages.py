@@ -1,5 +1,7 @@
-"""Snapshots -> ROS messages (SPEC 6.1). Every stamp is simulation time; frames follow REP-105:
-`world` -> `odom` -> `base_link` (the car), wheels under base_link, bodies under `world`.
+"""Snapshots -> the CDR bytes of the SPEC 6.1 messages, built without rclpy: markers, poses,
+clouds and transforms straight from numpy (cdr.py), the small messages as dicts through
+interfaces.encode. Every stamp is simulation time; frames follow REP-105: `world` -> `odom` ->
+`base_link` (the car), wheels under base_link, bodies under `world`.
 
 The odom frame is where the car started: odometry here is perfect (a simulator knows), so
 world -> odom is fixed at the car's pose when the scene was loaded.
@@ -7,16 +9,9 @@ world -> odom is fixed at the car's pose when the scene was loaded.
 import math
 
 import numpy as np
-from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import Point, Pose, TransformStamped, TwistStamped
-from nav_msgs.msg import Odometry
-from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import JointState, PointField
-from std_msgs.msg import ColorRGBA, Header
-from visualization_msgs.msg import Marker, MarkerArray
 
 from . import cdr
+from .interfaces import encode
 from .physics.world import quaternions_to_matrices
 
 WHEEL_NAMES = ("front_left", "front_right", "rear_left", "rear_right")
@@ -29,34 +24,54 @@ COLOURS = {  # category -> RGBA
     "playground": (0.55, 0.60, 0.65, 1.0),
     "contact": (1.0, 0.1, 0.1, 1.0),
 }
+# visualization_msgs/Marker types and actions.
+CUBE, CYLINDER, LINE_LIST, CUBE_LIST, SPHERE_LIST, TRIANGLE_LIST = 1, 3, 5, 6, 7, 11
+ADD, DELETEALL = 0, 3
+IDENTITY = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)  # pose: xyz + xyzw
+FLOAT32, INT32 = 7, 5  # sensor_msgs/PointField datatypes
 
 
 def stamp(seconds):
-    sec = int(math.floor(seconds))
-    return Time(sec=sec, nanosec=int(round((seconds - sec) * 1e9)) % 1_000_000_000)
+    sec, nanosec = cdr.split_stamp(seconds)
+    return {"sec": sec, "nanosec": nanosec}
 
 
 def header(seconds, frame):
-    return Header(stamp=stamp(seconds), frame_id=frame)
+    return {"stamp": stamp(seconds), "frame_id": frame}
+
+
+def xyz(values):
+    return dict(zip("xyz", (float(v) for v in values)))
+
+
+def xyzw(values):
+    return dict(zip("xyzw", (float(v) for v in values)))
 
 
 def clock(seconds):
-    return Clock(clock=stamp(seconds))
+    return encode("rosgraph_msgs/msg/Clock", {"clock": stamp(seconds)})
 
 
-def pose(position, quaternion):
-    p = Pose()
-    p.position.x, p.position.y, p.position.z = (float(v) for v in position)
-    p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w = (float(v) for v in quaternion)
-    return p
+def uint8(value):
+    return encode("std_msgs/msg/UInt8", {"data": int(value)})
 
 
-def colour(rgba):
-    return ColorRGBA(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3])
+def float64(value):
+    return encode("std_msgs/msg/Float64", {"data": float(value)})
+
+
+def marker(ns, marker_id, kind, pose=IDENTITY, scale=(1.0, 1.0, 1.0), rgba=(0.0, 0.0, 0.0, 0.0),
+           points=None, action=ADD):
+    return dict(ns=ns, marker_id=marker_id, kind=kind, action=action, pose=[float(v) for v in pose],
+                scale=[float(v) for v in scale], rgba=[float(v) for v in rgba], frame_locked=False,
+                points=points)
+
+
+DELETE_ALL = marker("", 0, 0, action=DELETEALL)
 
 
 def pose_array(snapshot, frame):
-    """~/bodies/poses as CDR bytes, in the order of ~/get_entities."""
+    """~/bodies/poses, in the order of ~/get_entities."""
     return cdr.pose_array(snapshot.time, frame, snapshot.state["positions"], snapshot.state["quaternions"])
 
 
@@ -68,8 +83,8 @@ def category(snapshot, row):
 
 
 def body_markers(snapshot, frame, marker_ids, encoder):
-    """~/bodies/markers as CDR bytes: DELETEALL, then one CUBE per body (ns = category, id
-    stable per name, frozen grey)."""
+    """~/bodies/markers: DELETEALL, then one CUBE per body (ns = category, id stable per name,
+    frozen grey)."""
     s = snapshot.state
     namespaces = [category(snapshot, row) for row in range(len(snapshot.names))]
     colours = np.array([COLOURS["frozen" if frozen else kind] for kind, frozen in zip(namespaces, s["frozen"])],
@@ -82,48 +97,28 @@ def body_markers(snapshot, frame, marker_ids, encoder):
 def scene_markers(seconds, frame, ground, triangles, octree_cells=()):
     """The static scenery: the ground plane, the playground as a TRIANGLE_LIST, and (when
     asked) the occupied octree cells as one translucent CUBE_LIST per level."""
-    stamp_header = header(seconds, frame)
-    markers = [Marker(header=stamp_header, action=Marker.DELETEALL)]
+    markers = [DELETE_ALL]
     if ground is not None:
-        m = Marker(header=stamp_header, ns="ground", id=0, type=Marker.CUBE, action=Marker.ADD)
-        m.pose.position.z = float(ground["height"]) - 0.005
-        m.pose.orientation.w = 1.0
-        m.scale.x = m.scale.y = 200.0
-        m.scale.z = 0.01
-        m.color = colour(COLOURS["ground"])
-        markers.append(m)
+        markers.append(marker("ground", 0, CUBE, (0.0, 0.0, float(ground["height"]) - 0.005, 0.0, 0.0, 0.0, 1.0),
+                              (200.0, 200.0, 0.01), COLOURS["ground"]))
     if len(triangles):
-        m = Marker(header=stamp_header, ns="playground", id=0, type=Marker.TRIANGLE_LIST,
-                   action=Marker.ADD)
-        m.pose.orientation.w = 1.0
-        m.scale.x = m.scale.y = m.scale.z = 1.0
-        m.color = colour(COLOURS["playground"])
-        m.points = [Point(x=float(x), y=float(y), z=float(z)) for x, y, z in triangles.reshape(-1, 3)]
-        markers.append(m)
+        markers.append(marker("playground", 0, TRIANGLE_LIST, rgba=COLOURS["playground"],
+                              points=np.asarray(triangles).reshape(-1, 3)))
     for level, centres, edge in octree_cells:
-        m = Marker(header=stamp_header, ns="octree", id=level, type=Marker.CUBE_LIST, action=Marker.ADD)
-        m.pose.orientation.w = 1.0
-        m.scale.x = m.scale.y = m.scale.z = float(edge)
-        m.color = colour((0.2, 0.6, 1.0, 0.12))
-        m.points = [Point(x=float(x), y=float(y), z=float(z)) for x, y, z in centres]
-        markers.append(m)
-    return MarkerArray(markers=markers)
+        markers.append(marker("octree", int(level), CUBE_LIST, scale=(edge, edge, edge),
+                              rgba=(0.2, 0.6, 1.0, 0.12), points=np.asarray(centres).reshape(-1, 3)))
+    return cdr.marker_array(seconds, frame, markers)
 
 
-CONTACT_FIELDS = [PointField(name=n, offset=4 * k, datatype=PointField.FLOAT32, count=1)
-                  for k, n in enumerate(("x", "y", "z", "nx", "ny", "nz", "depth", "impulse"))] + [
-                  PointField(name="body_a", offset=32, datatype=PointField.INT32, count=1),
-                  PointField(name="body_b", offset=36, datatype=PointField.INT32, count=1)]
 CONTACT_DTYPE = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("nx", "<f4"), ("ny", "<f4"),
                           ("nz", "<f4"), ("depth", "<f4"), ("impulse", "<f4"), ("body_a", "<i4"),
                           ("body_b", "<i4")])
-
-
-CONTACT_FIELD_LAYOUT = [(f.name, f.offset, f.datatype, f.count) for f in CONTACT_FIELDS]
+CONTACT_FIELD_LAYOUT = [(name, CONTACT_DTYPE.fields[name][1], INT32 if name.startswith("body") else FLOAT32, 1)
+                        for name in CONTACT_DTYPE.names]
 
 
 def contact_cloud(snapshot, frame, max_points):
-    """~/contacts/points as CDR bytes."""
+    """~/contacts/points."""
     c = snapshot.contacts
     n = min(len(c["depths"]), max_points)
     rows = np.zeros(n, CONTACT_DTYPE)
@@ -139,20 +134,13 @@ def contact_markers(snapshot, frame, max_points):
     """The 2008 "show collisions": contact points and their normals (0.3 m long)."""
     c = snapshot.contacts
     n = min(len(c["depths"]), max_points)
-    stamp_header = header(snapshot.time, frame)
-    points = Marker(header=stamp_header, ns="contact_points", id=0, type=Marker.SPHERE_LIST, action=Marker.ADD)
-    points.pose.orientation.w = 1.0
-    points.scale.x = points.scale.y = points.scale.z = 0.05
-    points.color = colour(COLOURS["contact"])
-    points.points = [Point(x=float(x), y=float(y), z=float(z)) for x, y, z in c["points"][:n]]
-    normals = Marker(header=stamp_header, ns="contact_normals", id=1, type=Marker.LINE_LIST, action=Marker.ADD)
-    normals.pose.orientation.w = 1.0
-    normals.scale.x = 0.01
-    normals.color = colour(COLOURS["contact"])
-    tips = c["points"][:n] - 0.3 * c["normals"][:n]  # normals point from A into B: draw them out of B
-    normals.points = [Point(x=float(v[0]), y=float(v[1]), z=float(v[2]))
-                      for pair in zip(c["points"][:n], tips) for v in pair]
-    return MarkerArray(markers=[Marker(header=stamp_header, action=Marker.DELETEALL), points, normals])
+    points = c["points"][:n]
+    tips = points - 0.3 * c["normals"][:n]  # normals point from A into B: draw them out of B
+    segments = np.stack([points, tips], axis=1).reshape(-1, 3)
+    return cdr.marker_array(snapshot.time, frame, [
+        DELETE_ALL,
+        marker("contact_points", 0, SPHERE_LIST, scale=(0.05, 0.05, 0.05), rgba=COLOURS["contact"], points=points),
+        marker("contact_normals", 1, LINE_LIST, scale=(0.01, 0.01, 0.01), rgba=COLOURS["contact"], points=segments)])
 
 
 def car_odometry(snapshot, name, frame, child):
@@ -160,13 +148,12 @@ def car_odometry(snapshot, name, frame, child):
     row = snapshot.names.index(name)
     s = snapshot.state
     q = s["quaternions"][row]
-    msg = Odometry(header=header(snapshot.time, frame), child_frame_id=child)
-    msg.pose.pose = pose(s["positions"][row], q)
     to_body = quaternions_to_matrices(q[None])[0].T
-    lin, ang = to_body @ s["linear_velocities"][row], to_body @ s["angular_velocities"][row]
-    msg.twist.twist.linear.x, msg.twist.twist.linear.y, msg.twist.twist.linear.z = (float(v) for v in lin)
-    msg.twist.twist.angular.x, msg.twist.twist.angular.y, msg.twist.twist.angular.z = (float(v) for v in ang)
-    return msg
+    return encode("nav_msgs/msg/Odometry", {
+        "header": header(snapshot.time, frame), "child_frame_id": child,
+        "pose": {"pose": {"position": xyz(s["positions"][row]), "orientation": xyzw(q)}},
+        "twist": {"twist": {"linear": xyz(to_body @ s["linear_velocities"][row]),
+                            "angular": xyz(to_body @ s["angular_velocities"][row])}}})
 
 
 def joint_states(snapshot, name):
@@ -178,40 +165,31 @@ def joint_states(snapshot, name):
         names += [f"{wheel}_steer", f"{wheel}_spin", f"{wheel}_suspension"]
         position += [float(v["steer_angle"][w]), float(v["spin_angle"][w]), float(v["compression"][w])]
         velocity += [0.0, float(v["spin_rate"][w]), 0.0]
-    return JointState(header=header(snapshot.time, ""), name=names, position=position, velocity=velocity)
+    return encode("sensor_msgs/msg/JointState", {"header": header(snapshot.time, ""), "name": names,
+                                                 "position": position, "velocity": velocity})
 
 
 def car_command(snapshot, name, frame):
     v = snapshot.vehicles[name]
-    msg = TwistStamped(header=header(snapshot.time, frame))
-    msg.twist.linear.x = v["command_speed"]
-    msg.twist.angular.z = v["command_yaw_rate"]
-    return msg
-
-
-def transform(seconds, parent, child, position, quaternion):
-    t = TransformStamped(header=header(seconds, parent), child_frame_id=child)
-    t.transform.translation.x, t.transform.translation.y, t.transform.translation.z = (float(v) for v in position)
-    (t.transform.rotation.x, t.transform.rotation.y, t.transform.rotation.z,
-     t.transform.rotation.w) = (float(v) for v in quaternion)
-    return t
+    return encode("geometry_msgs/msg/TwistStamped", {
+        "header": header(snapshot.time, frame),
+        "twist": {"linear": xyz((v["command_speed"], 0, 0)), "angular": xyz((0, 0, v["command_yaw_rate"]))}})
 
 
 def car_transforms(snapshot, name, frames, wheels):
-    """world -> odom (identity), odom -> base_link, base_link -> wheel_<position> at the wheel's
-    centre (the mount, down by the spring's current length), steered and spun."""
-    world_frame, odom_frame, base_frame = frames
+    """[(parent, child, pose xyz + xyzw)]: odom -> base_link, and base_link -> wheel_<position>
+    at the wheel's centre (the mount, down by the spring's current length), steered and spun."""
+    _, odom_frame, base_frame = frames
     row = snapshot.names.index(name)
     s, v = snapshot.state, snapshot.vehicles[name]
-    out = [transform(snapshot.time, world_frame, odom_frame, (0, 0, 0), (0, 0, 0, 1)),
-           transform(snapshot.time, odom_frame, base_frame, s["positions"][row], s["quaternions"][row])]
+    out = [(odom_frame, base_frame, np.concatenate([s["positions"][row], s["quaternions"][row]]))]
     for w, wheel in enumerate(WHEEL_NAMES):
         centre = list(wheels[w]["mount"])
         centre[2] -= wheels[w]["spring_length"] - v["compression"][w]
         steer, spin = 0.5 * v["steer_angle"][w], 0.5 * v["spin_angle"][w]
         rotation = quaternion_multiply((0.0, 0.0, math.sin(steer), math.cos(steer)),
                                        (0.0, math.sin(spin), 0.0, math.cos(spin)))
-        out.append(transform(snapshot.time, base_frame, f"wheel_{wheel}", centre, rotation))
+        out.append((base_frame, f"wheel_{wheel}", [*centre, *rotation]))
     return out
 
 
@@ -223,20 +201,8 @@ def car_markers(snapshot, name, frame, wheels):
     q = s["quaternions"][row]
     rotation = quaternions_to_matrices(q[None])[0]
     position = s["positions"][row]
-    stamp_header = header(snapshot.time, frame)
-    chassis = Marker(header=stamp_header, ns="chassis", id=0, type=Marker.CUBE, action=Marker.ADD,
-                     pose=pose(position, q))
-    chassis.scale.x, chassis.scale.y, chassis.scale.z = (float(x) for x in s["sizes"][row])
-    chassis.color = colour(COLOURS["vehicle"])
-    springs = Marker(header=stamp_header, ns="springs", id=0, type=Marker.LINE_LIST, action=Marker.ADD)
-    springs.pose.orientation.w = 1.0
-    springs.scale.x = 0.04
-    springs.color = colour((0.9, 0.9, 0.2, 1.0))
-    hits = Marker(header=stamp_header, ns="ray_hits", id=0, type=Marker.SPHERE_LIST, action=Marker.ADD)
-    hits.pose.orientation.w = 1.0
-    hits.scale.x = hits.scale.y = hits.scale.z = 0.08
-    hits.color = colour(COLOURS["contact"])
-    markers = [Marker(header=stamp_header, action=Marker.DELETEALL), chassis]
+    markers = [DELETE_ALL, marker("chassis", 0, CUBE, [*position, *q], s["sizes"][row], COLOURS["vehicle"])]
+    springs, hits = [], []
     for w, wheel in enumerate(wheels):
         mount = np.asarray(wheel["mount"], dtype=float)
         centre_local = mount - [0.0, 0.0, wheel["spring_length"] - v["compression"][w]]
@@ -245,17 +211,17 @@ def car_markers(snapshot, name, frame, wheels):
         # A cylinder's axis is its z: turn it onto the wheel's axle (y), then steer about z.
         axle = quaternion_multiply(quaternion_multiply(tuple(q), (0.0, 0.0, math.sin(half), math.cos(half))),
                                    (math.sin(math.pi / 4), 0.0, 0.0, math.cos(math.pi / 4)))
-        m = Marker(header=stamp_header, ns="wheels", id=w, type=Marker.CYLINDER, action=Marker.ADD,
-                   pose=pose(centre_world, axle))
-        m.scale.x = m.scale.y = 2.0 * wheel["radius"]
-        m.scale.z = 0.25
-        m.color = colour((0.1, 0.1, 0.1, 1.0))
-        markers.append(m)
-        springs.points += [Point(x=float(a), y=float(b), z=float(c)) for a, b, c in (mount_world, centre_world)]
+        diameter = 2.0 * wheel["radius"]
+        markers.append(marker("wheels", w, CYLINDER, [*centre_world, *axle], (diameter, diameter, 0.25),
+                              (0.1, 0.1, 0.1, 1.0)))
+        springs += [mount_world, centre_world]
         if v["in_contact"][w]:
-            x, y, z = v["contact_point"][w]
-            hits.points.append(Point(x=float(x), y=float(y), z=float(z)))
-    return MarkerArray(markers=markers + [springs, hits])
+            hits.append(v["contact_point"][w])
+    markers.append(marker("springs", 0, LINE_LIST, scale=(0.04, 0.04, 0.04), rgba=(0.9, 0.9, 0.2, 1.0),
+                          points=np.array(springs).reshape(-1, 3)))
+    markers.append(marker("ray_hits", 0, SPHERE_LIST, scale=(0.08, 0.08, 0.08), rgba=COLOURS["contact"],
+                          points=np.array(hits).reshape(-1, 3)))
+    return cdr.marker_array(snapshot.time, frame, markers)
 
 
 def quaternion_multiply(a, b):
@@ -267,9 +233,8 @@ def quaternion_multiply(a, b):
 
 def diagnostics(seconds, statuses):
     """statuses: [(name, level, message, {key: value})]."""
-    msg = DiagnosticArray(header=header(seconds, ""))
-    for name, level, message, values in statuses:
-        msg.status.append(DiagnosticStatus(
-            level=bytes([level]), name=name, message=message, hardware_id="vplayground",
-            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()]))
-    return msg
+    return encode("diagnostic_msgs/msg/DiagnosticArray", {
+        "header": header(seconds, ""),
+        "status": [{"level": level, "name": name, "message": message, "hardware_id": "vplayground",
+                    "values": [{"key": k, "value": str(v)} for k, v in values.items()]}
+                   for name, level, message, values in statuses]})

@@ -1,0 +1,28 @@
+"""Foxglove's own JavaScript packages, installed once with npm into a cache the tests share
+(VPLAYGROUND_NPM_CACHE, default ~/.cache/vplayground_ros/npm); tests using them skip where node
+or npm is missing."""
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+PACKAGES = ["@mcap/core@2", "@foxglove/rosmsg@5", "@foxglove/rosmsg2-serialization@2", "zstd-codec@0.1"]
+
+needs_node = pytest.mark.skipif(shutil.which("node") is None or shutil.which("npm") is None,
+                                reason="Foxglove's JavaScript stack needs node and npm")
+
+
+def run_script(name, source, *args, timeout=120):
+    """Writes the script next to the installed packages, runs it with node; returns stdout."""
+    cache = Path(os.environ.get("VPLAYGROUND_NPM_CACHE", Path.home() / ".cache" / "vplayground_ros" / "npm"))
+    if not (cache / "node_modules" / "@foxglove" / "rosmsg2-serialization").exists():
+        cache.mkdir(parents=True, exist_ok=True)
+        subprocess.run(["npm", "install", "--prefix", str(cache), "--no-audit", "--no-fund", "--silent", *PACKAGES],
+                       check=True, timeout=300)
+    script = cache / name
+    script.write_text(source)
+    result = subprocess.run(["node", str(script), *map(str, args)], capture_output=True, text=True, timeout=timeout)
+    assert result.returncode == 0, result.stderr
+    return result.stdout

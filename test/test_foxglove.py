@@ -1,0 +1,209 @@
+"""The built-in Foxglove WebSocket server (SPEC 6.5) through a real WebSocket client, with the
+simulator in a process where rclpy and every ROS message package fail to import: the live
+window must work without a ROS install."""
+import json
+import math
+import re
+import struct
+import subprocess
+import sys
+import threading
+import time
+
+import pytest
+from mcap_ros2._dynamic import serialize_dynamic
+
+from foxglove_client import FoxgloveClient
+from foxglove_js import needs_node, run_script
+
+NS = "/vplayground"
+TOPICS = {
+    "/clock": "rosgraph_msgs/msg/Clock", f"{NS}/bodies/markers": "visualization_msgs/msg/MarkerArray",
+    f"{NS}/bodies/poses": "geometry_msgs/msg/PoseArray", f"{NS}/scene/markers": "visualization_msgs/msg/MarkerArray",
+    f"{NS}/contacts/points": "sensor_msgs/msg/PointCloud2", f"{NS}/contacts/markers": "visualization_msgs/msg/MarkerArray",
+    f"{NS}/transforms": "geometry_msgs/msg/TransformStamped", "/tf": "tf2_msgs/msg/TFMessage",
+    "/tf_static": "tf2_msgs/msg/TFMessage", "/odom": "nav_msgs/msg/Odometry",
+    f"{NS}/car/ground_truth": "nav_msgs/msg/Odometry", "/joint_states": "sensor_msgs/msg/JointState",
+    f"{NS}/car/command": "geometry_msgs/msg/TwistStamped", f"{NS}/car/markers": "visualization_msgs/msg/MarkerArray",
+    f"{NS}/state": "std_msgs/msg/UInt8", f"{NS}/real_time_factor": "std_msgs/msg/Float64",
+    "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
+}
+SERVICES = {"spawn", "edit", "remove", "get_entity", "save_scene", "get_entities", "pause", "set_freezing",
+            "step", "reset", "wake_all", "get_simulator_features", "load_scene"}
+ROS_MODULES = ["rclpy", "rosidl_runtime_py", "builtin_interfaces", "rcl_interfaces", "rosgraph_msgs", "std_msgs",
+               "std_srvs", "geometry_msgs", "nav_msgs", "sensor_msgs", "visualization_msgs", "diagnostic_msgs",
+               "tf2_msgs"]
+# The simulator with every ROS Python package made unimportable.
+WITHOUT_ROS = (f"import sys; sys.modules.update(dict.fromkeys({ROS_MODULES!r})); "
+               "from vplayground_ros.cli import main; sys.exit(main())")
+
+
+@pytest.fixture(scope="module")
+def server():
+    process = subprocess.Popen([sys.executable, "-c", WITHOUT_ROS, "--foxglove", "0", "--no-record"],
+                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    output, url = [], None
+    deadline = time.monotonic() + 120
+    while url is None and time.monotonic() < deadline:
+        line = process.stdout.readline()
+        if not line:
+            break
+        output.append(line)
+        found = re.search(r"open connection to (ws://\S+)", line)
+        url = found.group(1) if found else None
+    assert url, "".join(output)
+    threading.Thread(target=lambda: output.extend(process.stdout), daemon=True).start()  # keep the pipe drained
+    yield url, output
+    process.terminate()
+    assert process.wait(30) == 0, "".join(output)
+    assert "Traceback" not in "".join(output), "".join(output)
+
+
+@pytest.fixture
+def client(server):
+    c = FoxgloveClient(server[0])
+    assert c.wait(lambda: len(c.channels) >= len(TOPICS) and len(c.services) >= len(SERVICES))
+    yield c
+    c.close()
+
+
+def test_runs_without_ros_and_advertises_every_topic_and_service(client, server):
+    assert "no ROS node" in "".join(server[1])
+    assert {t: c["schemaName"] for t, c in client.channels.items()} == TOPICS
+    assert all(c["encoding"] == "cdr" and c["schemaEncoding"] == "ros2msg" for c in client.channels.values())
+    assert set(client.services) == {f"{NS}/{name}" for name in SERVICES}
+    for service in client.services.values():
+        assert service["request"]["encoding"] == service["response"]["encoding"] == "cdr"
+        assert service["request"]["schemaName"] == service["type"] + "_Request"
+    assert {"clientPublish", "parameters", "services", "time"} <= set(client.server_info["capabilities"])
+
+
+def test_subscribed_frames_decode_to_their_types_stamped_with_sim_time(client):
+    client.subscribe(f"{NS}/bodies/poses", "/odom", f"{NS}/bodies/markers", "/diagnostics", "/clock", "/tf",
+                     f"{NS}/scene/markers")
+    assert client.wait(lambda: any(stamp > 0 for stamp, _ in client.frames[f"{NS}/bodies/poses"]))
+    log_time, poses = client.latest(f"{NS}/bodies/poses")
+    assert len(poses.poses) == 44 and poses.header.frame_id == "world"
+    stamp = poses.header.stamp.sec * 10**9 + poses.header.stamp.nanosec
+    assert stamp == log_time and 0 < stamp < 3600 * 10**9  # simulated, not wall-clock, time
+    _, odom = client.latest("/odom")
+    assert odom.child_frame_id == "base_link" and math.isfinite(odom.pose.pose.position.x)
+    _, markers = client.latest(f"{NS}/bodies/markers")
+    assert markers.markers[0].action == 3 and len(markers.markers) == 45  # DELETEALL + one cube per body
+    _, scene = client.latest(f"{NS}/scene/markers")  # latched: re-sent to a new subscriber
+    assert any(m.ns == "playground" and len(m.points) > 0 for m in scene.markers)
+    _, tf = client.latest("/tf")
+    assert {"car", "base_link", "wheel_front_left"} <= {t.child_frame_id for t in tf.transforms}
+    _, diagnostics = client.latest("/diagnostics")
+    assert any(s.name == "vplayground: foxglove" for s in diagnostics.status)
+    # The time capability follows the simulation.
+    assert client.wait(lambda: len(client.times) >= 2)
+    assert 0 < client.times[-1] < 3600 * 10**9 and client.times[-1] >= client.times[0]
+
+
+def test_service_call_spawns_a_body_that_get_entities_then_lists(client):
+    response = client.call(f"{NS}/spawn", {"load_namespace": "{name: socket_crate, size: [0.4, 0.4, 0.4], "
+                                                             "position: [3, -6, 2]}"})
+    assert response.success and response.message == "RESULT_OK: socket_crate"
+    entities = client.call(f"{NS}/get_entities", {})
+    assert "socket_crate" in [m.name for m in entities.markers]
+    again = client.call(f"{NS}/spawn", {"load_namespace": "{name: socket_crate}"})
+    assert not again.success and again.message.startswith("NAME_NOT_UNIQUE:")
+    paused = client.call(f"{NS}/pause", {"data": True})
+    assert paused.success
+    assert client.call(f"{NS}/pause", {"data": False}).success
+    missing = client.call(f"{NS}/load_scene", {"map_url": "/nonexistent/scene.yaml"})
+    assert missing.result == 1  # MAP_DOES_NOT_EXIST, the old world stays
+    assert "socket_crate" in [m.name for m in client.call(f"{NS}/get_entities", {}).markers]
+
+
+def test_malformed_service_request_fails_cleanly(client):
+    service = client.services[f"{NS}/spawn"]
+    call = 99999
+    client.ws.send(struct.pack("<BIII", 2, service["id"], call, 3) + b"cdr" + b"\x00\x01\x00\x00\xff\xff")
+    assert client.wait(lambda: call in client.responses)
+    assert client.responses.pop(call)[0] == "failure"
+    assert client.call(f"{NS}/get_simulator_features", {}).success  # still serving
+
+
+def test_parameters_are_validated_like_the_ros_ones(client):
+    before = client.get_parameters("publish_rate", "gravity", "scene")
+    assert before["publish_rate"] == 30.0 and before["gravity"] == [0.0, 0.0, -9.81]
+    for bad in ({"publish_rate": -5.0}, {"publish_rate": "fast"}, {"gravity": [0.0, 1.0]}, {"scene": "x.yaml"},
+                {"no_such_parameter": 1}):
+        client.set_parameters(bad)
+    assert client.get_parameters("publish_rate", "gravity", "scene") == before  # nothing changed
+    reasons = [s["message"] for s in client.statuses]
+    assert any("publish_rate" in r and "outside" in r for r in reasons), reasons
+    assert any("read-only" in r for r in reasons), reasons
+    after = client.set_parameters({"click_spawn_height": 3.5})
+    assert after == {"click_spawn_height": 3.5}
+    assert client.get_parameters("click_spawn_height") == {"click_spawn_height": 3.5}
+
+
+def twist_publisher(client, encoding):
+    if encoding == "json":
+        channel = client.advertise("/cmd_vel", "json", "geometry_msgs/msg/Twist")
+        return lambda speed, yaw: client.publish(channel, json.dumps(
+            {"linear": {"x": speed, "y": 0, "z": 0}, "angular": {"x": 0, "y": 0, "z": yaw}}).encode())
+    schema = "Vector3 linear\nVector3 angular\n" + "=" * 80 + "\nMSG: geometry_msgs/Vector3\nfloat64 x\nfloat64 y\nfloat64 z\n"
+    channel = client.advertise("/cmd_vel", "cdr", "geometry_msgs/msg/Twist", schema)
+    encode = serialize_dynamic("geometry_msgs/msg/Twist", schema)["geometry_msgs/msg/Twist"]
+    return lambda speed, yaw: client.publish(channel, encode(
+        {"linear": {"x": speed, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": yaw}}))
+
+
+@pytest.mark.parametrize("encoding", ["cdr", "json"])
+def test_twist_published_by_the_client_drives_the_car(client, encoding):
+    client.subscribe(f"{NS}/car/command", "/odom")
+    drive = twist_publisher(client, encoding)
+    speed = 1.5 if encoding == "cdr" else -1.0
+    end = time.monotonic() + 4.0
+    while time.monotonic() < end:
+        drive(speed, 0.0)
+        time.sleep(0.1)
+    _, command = client.latest(f"{NS}/car/command")
+    assert command.twist.linear.x == speed
+    _, odom = client.latest("/odom")
+    assert odom.twist.twist.linear.x == pytest.approx(speed, abs=0.4)
+    drive(0.0, 0.0)
+
+
+def test_clicked_point_from_the_3d_panel_drops_a_box(client):
+    before = {m.name for m in client.call(f"{NS}/get_entities", {}).markers}
+    channel = client.advertise("/clicked_point", "json", "geometry_msgs/msg/PointStamped")
+    client.publish(channel, json.dumps({"header": {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": "world"},
+                                        "point": {"x": -4.0, "y": 6.0, "z": 0.0}}).encode())
+
+    def dropped():
+        return {m.name for m in client.call(f"{NS}/get_entities", {}).markers} - before
+    deadline = time.monotonic() + 5
+    while not dropped() and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert len(dropped()) == 1
+    # A topic the simulator does not take is refused with a status, not an exception.
+    client.advertise("/not_a_simulator_topic", "json", "std_msgs/msg/String")
+    assert client.wait(lambda: any("not_a_simulator_topic" in s["message"] for s in client.statuses))
+
+
+ROSMSG_PARSER = r"""
+const { parse } = require("@foxglove/rosmsg");
+const schemas = JSON.parse(require("fs").readFileSync(process.argv[2], "utf8"));
+const parsed = {};
+for (const [name, text] of Object.entries(schemas)) {
+  parsed[name] = parse(text, { ros2: true }).length;
+}
+console.log(JSON.stringify(parsed));
+"""
+
+
+@needs_node
+def test_foxglove_parser_accepts_every_advertised_schema(client, tmp_path):
+    schemas = {c["schemaName"]: c["schema"] for c in client.channels.values()}
+    for service in client.services.values():
+        for part in ("request", "response"):
+            schemas[service[part]["schemaName"]] = service[part]["schema"]
+    path = tmp_path / "schemas.json"
+    path.write_text(json.dumps(schemas))
+    parsed = json.loads(run_script("parse_schemas.js", ROSMSG_PARSER, path))
+    assert set(parsed) == set(schemas) and all(count >= 1 for count in parsed.values())

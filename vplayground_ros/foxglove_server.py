@@ -1,0 +1,155 @@
+"""The built-in Foxglove WebSocket server (SPEC 6.5): the live window without a ROS install.
+
+foxglove-sdk's server runs inside the simulator process and offers what the ROS graph offers,
+from the same Runtime:
+- every Broadcaster topic as a channel (`cdr` messages, `ros2msg` schemas from interfaces.py):
+  the server is one more Broadcaster sink, so it logs the very bytes the bag and the ROS
+  publishers get, with log time = simulation time; /clock also feeds the server's time;
+- the services (services.py) with ros2msg/cdr request and response schemas;
+- the parameters: get, set through the Runtime's one validation, updates to subscribers;
+- client publish: cmd_vel, clicked_point, initialpose and ~/push (cdr or json) into the same
+  handlers as the ROS subscriptions.
+A latched topic (scenery, state, /tf_static) is sent again when a client subscribes to it.
+"""
+import threading
+
+import foxglove
+from foxglove import Channel, Context, MessageSchema, Parameter, ParameterType, Schema, Service, ServiceSchema
+from foxglove.websocket import Capability, StatusLevel
+
+from .inputs import from_cdr, from_json, subscriptions
+from .interfaces import decoder, encode, schema
+
+DEFAULT_PORT = 8765
+
+
+def ros2msg(type_name):
+    return Schema(name=type_name, encoding="ros2msg", data=schema(type_name).encode())
+
+
+class FoxgloveServer:
+    def __init__(self, runtime, host="127.0.0.1", port=DEFAULT_PORT):
+        self.runtime = runtime
+        self.context = Context()
+        self.channels = {key: Channel(topic.name, schema=ros2msg(topic.type), message_encoding="cdr",
+                                      context=self.context)
+                         for key, topic in runtime.broadcaster.topics.items()}
+        self.latched = {key for key, topic in runtime.broadcaster.topics.items() if topic.qos == "latched"}
+        self.inputs = {runtime.resolve_name(sub.name): sub
+                       for sub in subscriptions(runtime.parameters["cmd_vel_stamped"])}
+        self.client_channels = {}  # (client id, channel id) -> (subscription key, decode)
+        self.subscriptions = 0
+        self._lock = threading.Lock()
+        self.server = foxglove.start_server(
+            name="vplayground", host=host, port=port, context=self.context,
+            capabilities=[Capability.ClientPublish, Capability.Parameters, Capability.Services, Capability.Time],
+            server_listener=self, supported_encodings=["cdr", "json"],
+            services=[self._service(s) for s in runtime.services])
+        self.url = f"ws://{host}:{self.server.port}"
+        runtime.parameters.listen(self._parameters_changed)
+        runtime.broadcaster.add_sink(self)
+
+    def stop(self):
+        self.server.stop()
+
+    # ------------------------------------------------------------- the Broadcaster sink
+    def publish(self, topic, data, seconds):
+        stamp = int(round(seconds * 1e9))
+        self.channels[topic.key].log(data, log_time=stamp)
+        if topic.key == "clock":
+            self.server.broadcast_time(stamp)
+
+    def subscribed(self, topic):
+        return self.channels[topic.key].has_sinks()
+
+    def statuses(self):
+        return [("vplayground: foxglove", 0, self.url, {"subscriptions": self.subscriptions,
+                                                        "client_channels": len(self.client_channels)})]
+
+    # ------------------------------------------------------------- services
+    def _service(self, service):
+        request_type, response_type = f"{service.type}_Request", f"{service.type}_Response"
+
+        def handle(request):
+            if request.encoding == "json":
+                message = from_json(request.payload)
+            else:
+                message = decoder(request_type)(bytes(request.payload))
+            return encode(response_type, service.handler(message))
+        return Service(self.runtime.resolve_name(service.name), handler=handle, schema=ServiceSchema(
+            service.type, request=MessageSchema(encoding="cdr", schema=ros2msg(request_type)),
+            response=MessageSchema(encoding="cdr", schema=ros2msg(response_type))))
+
+    # ------------------------------------------------------------- ServerListener
+    def on_subscribe(self, client, channel):
+        self.subscriptions += 1
+        if any(self.channels[key].id() == channel.id for key in self.latched):
+            self.runtime.broadcaster.resend_latched()
+
+    def on_unsubscribe(self, client, channel):
+        self.subscriptions -= 1
+
+    def on_client_advertise(self, client, channel):
+        topic = channel.topic if channel.topic.startswith("/") else f"/{channel.topic}"
+        sub = self.inputs.get(topic)
+        if sub is None:
+            self._warn(f"{channel.topic}: the simulator does not subscribe to it "
+                       f"(it takes {', '.join(sorted(self.inputs))})")
+            return
+        if channel.encoding == "json":
+            decode = from_json
+        elif channel.encoding == "cdr":
+            if channel.schema_name and channel.schema_name.replace("/msg/", "/") != sub.type.replace("/msg/", "/"):
+                self._warn(f"{channel.topic}: expected {sub.type}, the client advertises {channel.schema_name}")
+                return
+            decode = lambda data, kind=sub.type: from_cdr(kind, data)  # noqa: E731
+        else:
+            self._warn(f"{channel.topic}: encoding {channel.encoding!r} not supported (cdr or json)")
+            return
+        with self._lock:
+            self.client_channels[(client.id, channel.id)] = (sub.key, decode)
+
+    def on_client_unadvertise(self, client, client_channel_id):
+        with self._lock:
+            self.client_channels.pop((client.id, client_channel_id), None)
+
+    def on_message_data(self, client, client_channel_id, data):
+        entry = self.client_channels.get((client.id, client_channel_id))
+        if entry is None:
+            return
+        key, decode = entry
+        try:
+            message = decode(data)
+        except Exception as error:  # a client's bytes must never reach the loop as an exception
+            self._warn(f"{key}: undecodable message ignored ({type(error).__name__}: {error})")
+            return
+        self.runtime.inputs.handle(key, message)
+
+    def on_get_parameters(self, client, param_names, request_id=None):
+        store = self.runtime.parameters
+        return [self._parameter(name) for name in (param_names or list(store.specs)) if name in store.specs]
+
+    def on_set_parameters(self, client, parameters, request_id=None):
+        changes = {p.name: p.get_value() for p in parameters}
+        ok, reason = self.runtime.set_parameters(changes)
+        if not ok:
+            self._warn(f"parameters refused: {reason}")
+        store = self.runtime.parameters
+        return [self._parameter(name) for name in changes if name in store.specs]
+
+    # ------------------------------------------------------------- helpers
+    def _parameter(self, name):
+        store = self.runtime.parameters
+        kind, value = store.specs[name].kind, store[name]
+        if kind == "float":
+            return Parameter(name, value=float(value), type=ParameterType.Float64)
+        if kind == "float[3]":
+            return Parameter(name, value=[float(v) for v in value], type=ParameterType.Float64Array)
+        return Parameter(name, value=value)
+
+    def _parameters_changed(self, changed):
+        self.server.publish_parameter_values([self._parameter(name) for name in changed])
+
+    def _warn(self, text):
+        self.runtime.log.warning(f"foxglove: {text}")
+        self.server.publish_status(text, StatusLevel.Warning)

@@ -1,0 +1,133 @@
+"""What the simulator subscribes to (SPEC 6.2), ROS-free: one handler per topic, fed by the ROS
+subscriptions (rclpy messages) and by the Foxglove server's client channels (messages decoded
+from CDR, or JSON as nested namespaces). Handlers only read attributes, so all three work, and
+they hand their work to the simulation thread.
+"""
+import json
+import math
+from collections import namedtuple
+from types import SimpleNamespace
+
+import numpy as np
+import yaml
+
+from .interfaces import decoder
+from .physics.math3d import rpy_to_quat
+from .physics.world import quaternions_to_matrices
+
+Subscription = namedtuple("Subscription", "key name type")
+SUBSCRIPTIONS = [
+    Subscription("cmd_vel", "cmd_vel", "geometry_msgs/msg/Twist"),
+    Subscription("clicked_point", "clicked_point", "geometry_msgs/msg/PointStamped"),
+    Subscription("initial_pose", "initialpose", "geometry_msgs/msg/PoseWithCovarianceStamped"),
+    Subscription("push", "~/push", "geometry_msgs/msg/WrenchStamped"),
+]
+TWIST_STAMPED = "geometry_msgs/msg/TwistStamped"
+
+
+def subscriptions(cmd_vel_stamped):
+    """The subscription table; cmd_vel is TwistStamped when the parameter says so."""
+    return [s._replace(type=TWIST_STAMPED) if s.key == "cmd_vel" and cmd_vel_stamped else s
+            for s in SUBSCRIPTIONS]
+
+
+def from_json(data):
+    """A JSON message as nested namespaces (attribute access, like the other two)."""
+    def convert(value):
+        if isinstance(value, dict):
+            return SimpleNamespace(**{k: convert(v) for k, v in value.items()})
+        if isinstance(value, list):
+            return [convert(v) for v in value]
+        return value
+    return convert(json.loads(data))
+
+
+def from_cdr(type_name, data):
+    return decoder(type_name)(bytes(data))
+
+
+class Inputs:
+    def __init__(self, sim, requests, parameters, log, car):
+        self.sim = sim
+        self.requests = requests
+        self.parameters = parameters
+        self.log = log
+        self.car = car  # snapshot -> the driven car's name or None
+        self.handlers = {"cmd_vel": self.cmd_vel, "clicked_point": self.clicked_point,
+                         "initial_pose": self.initial_pose, "push": self.push}
+
+    def handle(self, key, msg):
+        """Runs the handler of subscription `key`; a message missing a field is logged, not raised."""
+        try:
+            self.handlers[key](msg)
+        except (AttributeError, TypeError, ValueError) as error:
+            self.log.warning(f"{key}: malformed message ignored ({error})")
+
+    def cmd_vel(self, msg):
+        twist = msg.twist if hasattr(msg, "twist") else msg
+        speed, yaw_rate = float(twist.linear.x), float(twist.angular.z)
+        timeout = self.parameters["cmd_vel_timeout"]
+        if not (math.isfinite(speed) and math.isfinite(yaw_rate)):
+            self.log.warning("cmd_vel with non-finite values ignored")
+            return
+        car = self.car(self.sim.snapshot)
+        if car is not None:
+            self.sim.submit(lambda world: world.drive(car, speed, yaw_rate, timeout))
+
+    def to_world(self, frame, point):
+        """A point in any frame the simulator publishes, in the world frame (None if unknown)."""
+        snap = self.sim.snapshot
+        world_frame, odom_frame, base_frame = (self.parameters[p] for p in ("world_frame", "odom_frame", "base_frame"))
+        point = np.asarray(point, dtype=float)
+        if frame in ("", world_frame, odom_frame):
+            return point
+        name = self.car(snap) if frame == base_frame or frame.startswith("wheel_") else frame
+        if name not in snap.names:
+            return None
+        row = snap.names.index(name)
+        rotation = quaternions_to_matrices(snap.state["quaternions"][row][None])[0]
+        return snap.state["positions"][row] + rotation @ point
+
+    def clicked_point(self, msg):
+        frame = str(msg.header.frame_id)
+        p = self.to_world(frame, (float(msg.point.x), float(msg.point.y), float(msg.point.z)))
+        if p is None or not np.all(np.isfinite(p)):
+            self.log.warning(f"clicked_point in unknown frame {frame!r:.80} or not finite: ignored")
+            return
+        size = self.parameters["click_spawn_size"]
+        height = self.parameters["click_spawn_height"]
+        spec = yaml.safe_dump({"size": [size] * 3, "position": [float(p[0]), float(p[1]), float(p[2] + height + size / 2)]})
+        self.log.info(f"clicked_point: {self.requests.spawn(spec)[1]}")
+
+    def initial_pose(self, msg):
+        car = self.car(self.sim.snapshot)
+        pose = msg.pose.pose
+        p = self.to_world(str(msg.header.frame_id), (float(pose.position.x), float(pose.position.y),
+                                                     float(pose.position.z)))
+        q = [float(getattr(pose.orientation, k)) for k in "xyzw"]
+        if car is None or p is None or not (np.all(np.isfinite(p)) and np.all(np.isfinite(q))):
+            self.log.warning("initialpose ignored: no car, an unknown frame, or not finite")
+            return
+        yaw = math.atan2(2 * (q[3] * q[2] + q[0] * q[1]), 1 - 2 * (q[1] ** 2 + q[2] ** 2))
+
+        def teleport(world):
+            wheels = world.vehicle(car)["wheels"]
+            lift = max(w["spring_length"] + w["radius"] - w["mount"][2] for w in wheels)
+            world.edit_body(car, position=[float(p[0]), float(p[1]), float(p[2]) + lift],
+                            quaternion=list(rpy_to_quat((0.0, 0.0, yaw))),
+                            linear_velocity=[0, 0, 0], angular_velocity=[0, 0, 0])
+            world.drive(car, 0.0, 0.0)
+        self.sim.submit(teleport)
+
+    def push(self, msg):
+        name = str(msg.header.frame_id)
+        force = [float(getattr(msg.wrench.force, k)) for k in "xyz"]
+        torque = [float(getattr(msg.wrench.torque, k)) for k in "xyz"]
+
+        def push(world):
+            dt = 1.0 / world.settings["steps_per_second"]
+            try:
+                world.apply_impulse(name, [f * dt for f in force], [t * dt for t in torque])
+            except (KeyError, ValueError) as error:
+                self.log.warning(f"~/push ignored: {error}")
+        self.sim.submit(push)

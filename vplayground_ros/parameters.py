@@ -1,0 +1,158 @@
+"""The SPEC 6.4 parameters, ROS-free: one table, one validation, one place that applies a
+change. The ROS node declares them from the table and hands every set to Parameters.set; the
+Foxglove server does the same, so a value refused on one is refused on the other, with the same
+reason, and nothing changes.
+"""
+import math
+import threading
+from dataclasses import dataclass
+
+from .physics import specs
+
+PHYSICS = ("gravity", "steps_per_second", "resolve_iterations", "octree_depth", "freezing.enabled",
+           "freezing.time", "freezing.linear_speed", "freezing.angular_speed")
+
+
+@dataclass(frozen=True)
+class ParameterSpec:
+    name: str
+    default: object
+    description: str
+    kind: str              # "bool", "int", "float", "str", "float[3]", "str[]"
+    low: float = None      # inclusive range of numbers
+    high: float = None
+    read_only: bool = False
+
+
+def parameter_table(world, options):
+    """Every parameter; the physics ones default to the scene's values."""
+    s = world.settings
+    f = s["freezing"]
+    P = ParameterSpec
+    return [
+        P("scene", str(options.scene), "scene file loaded at start", "str", read_only=True),
+        P("real_time_factor", float(options.real_time_factor),
+          "simulated seconds per wall-clock second; 0 = as fast as possible", "float", 0, 1000),
+        P("start_paused", bool(options.start_paused), "start paused (~/pause false to play)", "bool", read_only=True),
+        P("duration", float(options.duration or 0.0),
+          "stop after this much simulated time, s (0 = run until stopped)", "float", read_only=True),
+        P("gravity", [float(v) for v in s["gravity"]], "gravity vector, m/s^2, world frame", "float[3]",
+          -specs.MAX_COORDINATE, specs.MAX_COORDINATE),
+        P("steps_per_second", int(s["steps_per_second"]), "physics steps per simulated second", "int", 1, 10000),
+        P("resolve_iterations", int(s["resolve_iterations"]),
+          "collision passes per step (contact passes are twice this)", "int", 1, 100),
+        P("octree_depth", int(s["octree_depth"]), "depth of the broad-phase octree", "int", 1, 10),
+        P("freezing.enabled", bool(f["enabled"]), "freeze bodies at rest", "bool"),
+        P("freezing.time", float(f["time"]), "seconds below the thresholds before freezing", "float", 0, 1e6),
+        P("freezing.linear_speed", float(f["linear_speed"]), "freezing threshold, m/s", "float", 0, 1e6),
+        P("freezing.angular_speed", float(f["angular_speed"]), "freezing threshold, rad/s", "float", 0, 1e6),
+        P("publish_rate", 30.0, "Hz of poses, odometry, joint states, transforms", "float", 0.1, 1000),
+        P("marker_rate", 30.0, "Hz of marker topics (when subscribed)", "float", 0.1, 1000),
+        P("static_republish_period", 5.0, "s between re-sends of the static scene markers", "float", 0.1, 3600),
+        P("clock_rate", 0.0, "Hz cap of /clock (0 = after every batch of steps)", "float", 0, 10000),
+        P("contacts.publish", True, "publish the contact topics", "bool"),
+        P("contacts.max_points", 5000, "most contact points published", "int", 0, 1000000),
+        P("show_octree", False, "draw the occupied octree cells in ~/scene/markers", "bool"),
+        P("cmd_vel_timeout", 1.2, "s without cmd_vel before the car brakes to rest", "float", 0.01, 3600),
+        P("cmd_vel_stamped", False, "cmd_vel is geometry_msgs/TwistStamped", "bool", read_only=True),
+        P("world_frame", "world", "fixed frame of the simulation", "str", read_only=True),
+        P("odom_frame", "odom", "the car's odometry frame", "str", read_only=True),
+        P("base_frame", "base_link", "the car's body frame", "str", read_only=True),
+        P("publish_body_frames", False, "publish a transform per body on ~/transforms", "bool"),
+        P("step_count", 1, "steps one ~/step call advances", "int", 1, 1000000),
+        P("reset_scope", 255, "~/reset scope bits: 1 TIME, 2 STATE, 4 SPAWNED, 255 ALL", "int", 1, 255),
+        P("click_spawn_size", 0.5, "edge of the box a clicked_point drops, m", "float", 0.01, 100),
+        P("click_spawn_height", 2.0, "height above the clicked point it drops from, m", "float", 0, 1000),
+        P("record", str(options.record or ""), "MCAP bag being written ('' = not recording)", "str", read_only=True),
+        P("record_split_size", int(options.record_split_size),
+          "bytes after which the bag continues in a new file (0 = one file)", "int", 0, 1 << 50, read_only=True),
+        P("foxglove.port", int(options.foxglove or 0),
+          "port of the built-in Foxglove WebSocket server (0 = off)", "int", 0, 65535, read_only=True),
+    ]
+
+
+class Parameters:
+    """Current values, validated sets, and listeners told of every applied change."""
+
+    def __init__(self, table, world_settings):
+        self.specs = {p.name: p for p in table}
+        self.values = {p.name: p.default for p in table}
+        self._world_settings = world_settings  # () -> the world's settings, to validate physics
+        self._listeners = []
+        self._lock = threading.Lock()
+
+    def __getitem__(self, name):
+        return self.values[name]
+
+    def listen(self, fn):
+        """fn({name: value}) after every applied change."""
+        self._listeners.append(fn)
+
+    def check(self, name, value):
+        """The value as stored (ints accepted for floats), or ValueError naming the problem."""
+        spec = self.specs.get(name)
+        if spec is None:
+            raise ValueError(f"{name}: no such parameter")
+        if spec.read_only:
+            raise ValueError(f"{name}: read-only")
+        if spec.kind == "bool":
+            if not isinstance(value, bool):
+                raise ValueError(f"{name}: expected a bool, got {type(value).__name__}")
+            return value
+        if spec.kind == "str":
+            if not isinstance(value, str):
+                raise ValueError(f"{name}: expected a string, got {type(value).__name__}")
+            return value
+        if spec.kind == "str[]":
+            if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) for v in value):
+                raise ValueError(f"{name}: expected a list of strings")
+            return list(value)
+        if spec.kind == "float[3]":
+            if not isinstance(value, (list, tuple)) or len(value) != 3:
+                raise ValueError(f"{name}: expected 3 numbers")
+            return [self._number(name, v, float, spec) for v in value]
+        return self._number(name, value, int if spec.kind == "int" else float, spec)
+
+    @staticmethod
+    def _number(name, value, kind, spec):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or (kind is int and isinstance(value, float)):
+            raise ValueError(f"{name}: expected {'an integer' if kind is int else 'a number'}, "
+                             f"got {type(value).__name__}")
+        if not math.isfinite(value):
+            raise ValueError(f"{name}: must be finite, got {value}")
+        if spec.low is not None and not spec.low <= value <= spec.high:
+            raise ValueError(f"{name}: {value} is outside [{spec.low:g}, {spec.high:g}]")
+        return kind(value)
+
+    def set(self, changes):
+        """Applies {name: value} all together, or nothing: (True, "") or (False, reason)."""
+        with self._lock:
+            try:
+                checked = {name: self.check(name, value) for name, value in changes.items()}
+                physics = settings_from({n: v for n, v in checked.items() if n in PHYSICS})
+                if physics:
+                    current = self._world_settings()
+                    merged = {**current, **physics}
+                    merged["freezing"] = {**current["freezing"], **physics.get("freezing", {})}
+                    specs.validate_settings(merged)
+            except ValueError as error:
+                return False, str(error)
+            changed = {n: v for n, v in checked.items() if v != self.values[n]}
+            self.values.update(checked)
+        if changed:
+            for fn in self._listeners:
+                fn(changed)
+        return True, ""
+
+
+def settings_from(values):
+    """World settings ({..., "freezing": {...}}) of physics parameters {name: value}."""
+    settings, freezing = {}, {}
+    for name, value in values.items():
+        if name.startswith("freezing."):
+            freezing[name.split(".", 1)[1]] = value
+        else:
+            settings[name] = list(value) if name == "gravity" else value
+    if freezing:
+        settings["freezing"] = freezing
+    return settings

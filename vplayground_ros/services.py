@@ -1,0 +1,81 @@
+"""The SPEC 6.3 services, ROS-free: name, service type and a handler (request with attribute
+access -> response as a dict of its fields). The ROS node and the Foxglove server both serve
+this one table, so a call behaves the same whichever way it comes in.
+"""
+from collections import namedtuple
+
+import yaml
+
+from .api import MAP_SUCCESS
+from .messages import header
+
+Service = namedtuple("Service", "name type handler")
+
+
+def service_table(runtime):
+    requests, parameters = runtime.requests, runtime.parameters
+
+    def text(handler):
+        def serve(request):
+            success, message = handler(str(request.load_namespace))
+            return {"success": success, "message": message}
+        return serve
+
+    def boolean(handler):
+        def serve(request):
+            success, message = handler(bool(request.data))
+            return {"success": success, "message": message}
+        return serve
+
+    def trigger(handler):
+        def serve(_request):
+            success, message = handler()
+            return {"success": success, "message": message}
+        return serve
+
+    def load_scene(request):
+        result, message = requests.load_scene(str(request.map_url))
+        if result == MAP_SUCCESS:
+            runtime.broadcaster.scene_changed()  # the new scenery goes out at once
+            runtime.log.info(f"~/load_scene: {message}")
+        else:
+            runtime.log.warning(f"~/load_scene: {message}")
+        return {"result": result}
+
+    def get_entities(_request):
+        return {"markers": [entity_marker(runtime, name, description)
+                            for name, description in requests.entities()]}
+
+    return [
+        Service("~/spawn", "diagnostic_msgs/srv/AddDiagnostics", text(requests.spawn)),
+        Service("~/edit", "diagnostic_msgs/srv/AddDiagnostics", text(requests.edit)),
+        Service("~/remove", "diagnostic_msgs/srv/AddDiagnostics", text(requests.remove)),
+        Service("~/get_entity", "diagnostic_msgs/srv/AddDiagnostics", text(requests.get_entity)),
+        Service("~/save_scene", "diagnostic_msgs/srv/AddDiagnostics", text(requests.save_scene)),
+        Service("~/get_entities", "visualization_msgs/srv/GetInteractiveMarkers", get_entities),
+        Service("~/pause", "std_srvs/srv/SetBool", boolean(requests.pause)),
+        Service("~/set_freezing", "std_srvs/srv/SetBool", boolean(requests.set_freezing)),
+        Service("~/step", "std_srvs/srv/Trigger", trigger(lambda: requests.step(parameters["step_count"]))),
+        Service("~/reset", "std_srvs/srv/Trigger", trigger(lambda: requests.reset(parameters["reset_scope"]))),
+        Service("~/wake_all", "std_srvs/srv/Trigger", trigger(requests.wake_all)),
+        Service("~/get_simulator_features", "std_srvs/srv/Trigger", trigger(requests.features)),
+        Service("~/load_scene", "nav_msgs/srv/LoadMap", load_scene),
+    ]
+
+
+def entity_marker(runtime, name, description):
+    """visualization_msgs/InteractiveMarker of an entity: its pose, YAML description, and its
+    shape as controls[0].markers[0]."""
+    snap = runtime.sim.snapshot
+    position, orientation = description["pose"]["position"], description["pose"]["orientation"]
+    size = [float(v) for v in description["bounds"]["size"]]
+    return {
+        "header": header(snap.time, runtime.parameters["world_frame"]),
+        "name": name,
+        "description": yaml.safe_dump(description, sort_keys=False),
+        "pose": {"position": dict(zip("xyz", map(float, position))),
+                 "orientation": dict(zip("xyzw", map(float, orientation)))},
+        "controls": [{"name": "shape", "always_visible": True, "markers": [{
+            "type": 1, "action": 0,  # CUBE, ADD
+            "pose": {"orientation": {"w": 1.0}}, "scale": dict(zip("xyz", size))}]}],
+    }
