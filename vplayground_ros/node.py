@@ -124,12 +124,7 @@ class SimulatorNode(Node):
             self.declare_parameter(spec.name, store[spec.name], descriptor(spec))
         # Overrides given with --ros-args -p: validated and applied like any other set.
         overrides = {name: plain(self.get_parameter(name).value) for name in store.specs}
-        overrides = {name: value for name, value in overrides.items() if value != store[name]}
-        read_only = {name: overrides.pop(name) for name in list(overrides) if store.specs[name].read_only}
-        store.values.update(read_only)  # what the command line fixed, reported as it is
-        ok, reason = store.set(overrides)
-        if not ok:
-            raise ValueError(f"parameter override refused: {reason}")
+        store.override({name: value for name, value in overrides.items() if value != store[name]})
         self.add_on_set_parameters_callback(self._on_parameters)
         self.runtime.set_parameters = self._set_from_outside
 

@@ -24,8 +24,9 @@ class ParameterSpec:
     read_only: bool = False
 
 
-def parameter_table(world, options):
-    """Every parameter; the physics ones default to the scene's values."""
+def parameter_table(world, options, requests):
+    """Every parameter; the physics ones default to the scene's values, the request limits to
+    the Requests' own."""
     s = world.settings
     f = s["freezing"]
     P = ParameterSpec
@@ -66,6 +67,10 @@ def parameter_table(world, options):
         P("record", str(options.record or ""), "MCAP bag being written ('' = not recording)", "str", read_only=True),
         P("record_split_size", int(options.record_split_size),
           "bytes after which the bag continues in a new file (0 = one file)", "int", 0, 1 << 50, read_only=True),
+        P("scene_directories", [str(d) for d in requests.scene_directories],
+          "directories ~/load_scene and ~/save_scene may use (set at start only)", "str[]", read_only=True),
+        P("max_bodies", int(requests.max_bodies), "most bodies the world may hold (spawns past it are refused)",
+          "int", 1, 1_000_000),
         P("foxglove.port", int(options.foxglove or 0),
           "port of the built-in Foxglove WebSocket server (0 = off)", "int", 0, 65535, read_only=True),
     ]
@@ -123,6 +128,24 @@ class Parameters:
         if spec.low is not None and not spec.low <= value <= spec.high:
             raise ValueError(f"{name}: {value} is outside [{spec.low:g}, {spec.high:g}]")
         return kind(value)
+
+    def override(self, values):
+        """Start-up values from the command line (--ros-args -p), read-only ones included:
+        type- and range-checked like a set, then applied."""
+        checked = {}
+        for name, value in values.items():
+            spec = self.specs.get(name)
+            if spec is None:
+                raise ValueError(f"{name}: no such parameter")
+            checked[name] = self.check(name, value) if not spec.read_only else value
+        writable = {n: v for n, v in checked.items() if not self.specs[n].read_only}
+        ok, reason = self.set(writable)
+        if not ok:
+            raise ValueError(reason)
+        fixed = {n: v for n, v in checked.items() if self.specs[n].read_only}
+        self.values.update(fixed)
+        for fn in self._listeners:
+            fn(fixed)
 
     def set(self, changes):
         """Applies {name: value} all together, or nothing: (True, "") or (False, reason)."""

@@ -3,6 +3,7 @@ and the Foxglove server share (requests, parameters, what is published, what is 
 the services). ROS-free: `vplayground --no-ros --foxglove` runs on this alone.
 """
 import threading
+from pathlib import Path
 
 from .api import Requests
 from .broadcast import BagSink, Broadcaster, resolve
@@ -18,8 +19,9 @@ class Runtime:
         self.log = log
         self.recorder = recorder
         self.resolve_name = resolve_name
-        self.requests = Requests(sim, str(options.scene))
-        self.parameters = Parameters(parameter_table(sim.world, options), lambda: sim.world.settings)
+        self.requests = Requests(sim, str(options.scene),
+                                 bag_directory=recorder.path.parent if recorder is not None else None)
+        self.parameters = Parameters(parameter_table(sim.world, options, self.requests), lambda: sim.world.settings)
         self.parameters.listen(self._apply)
         self.set_parameters = self.parameters.set  # the ROS node routes sets through rclpy
         self.broadcaster = Broadcaster(sim, self.parameters, log, resolve_name)
@@ -55,3 +57,7 @@ class Runtime:
             self.sim.call(lambda world: world.update_settings(physics))
         if "real_time_factor" in changed:
             self.sim.real_time_factor = changed["real_time_factor"]
+        if "max_bodies" in changed:
+            self.requests.max_bodies = changed["max_bodies"]
+        if "scene_directories" in changed:
+            self.requests.scene_directories = [Path(d) for d in changed["scene_directories"]]
