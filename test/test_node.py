@@ -2,11 +2,14 @@
 pause/step exactness, driving, Foxglove's publish tools, clean shutdown."""
 import math
 import os
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
 import time
+from pathlib import Path
 
 import pytest
 import yaml
@@ -50,7 +53,9 @@ class Harness:
     """The node on its own executor thread, and a client node beside it."""
 
     def __init__(self, rtf=4.0):
-        rclpy.init(args=["test"])
+        # Scene files only in a directory of the test's own (set at start, like any override).
+        self.scene_directory = Path(tempfile.mkdtemp(prefix="vplayground_scenes_"))
+        rclpy.init(args=["test", "--ros-args", "-p", f"scene_directories:=['{self.scene_directory}']"])
         options = parse_args(["--real-time-factor", str(rtf), "--no-record"])
         self.sim = Simulation(load_world(options.scene), real_time_factor=rtf)
         self.node = SimulatorNode()
@@ -100,6 +105,7 @@ class Harness:
         self.node.destroy_node()
         self.client.destroy_node()
         rclpy.try_shutdown()
+        shutil.rmtree(self.scene_directory, ignore_errors=True)
 
 
 @pytest.fixture(scope="module")
@@ -182,7 +188,11 @@ def test_entity_services_and_codes(ros):
     assert ros.text("remove", "{entity: node_box}")[1].startswith("RESULT_NOT_FOUND:")
 
 
-def test_scene_services(ros, tmp_path):
+def test_scene_services(ros):
+    tmp_path = ros.scene_directory
+    assert ros.node.get_parameter("scene_directories").value == [str(tmp_path)]
+    outside = ros.text("save_scene", "/tmp/outside_the_scene_directories.yaml")
+    assert not outside[0] and "scene_directories" in outside[1]
     path = tmp_path / "saved.yaml"
     assert ros.text("save_scene", str(path)) == (True, f"RESULT_OK: {path}")
     assert path.exists()
