@@ -2,16 +2,19 @@
 time, recording its bag, a subscriber on every topic it publishes, for a few seconds. Reports the
 node process's CPU use beyond its simulation thread (messages, bag, ROS, callbacks) as % of one
 core, the time from starting the process to the first ~/bodies/poses message (warm Numba
-cache), and the bag's bytes per simulated second.
+cache), and the bag's bytes per simulated second. With --foxglove the built-in Foxglove server
+runs too, with a WebSocket client subscribed to every channel.
 
-    python bench/node_overhead.py [--boxes 1000] [--seconds 20]
+    python bench/node_overhead.py [--boxes 1000] [--seconds 20] [--foxglove]
 """
 import argparse
 import json
 import os
 import subprocess
 import sys
+import re
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -21,6 +24,8 @@ from geometry_msgs.msg import PoseArray
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 sys.path.insert(0, str(Path(__file__).parent))
+sys.path.insert(0, str(Path(__file__).parent.parent / "test"))
+from foxglove_client import FoxgloveClient  # noqa: E402
 from pile import build_pile  # noqa: E402
 
 from vplayground_ros.scene import save_world  # noqa: E402
@@ -48,6 +53,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--boxes", type=int, default=1000)
     parser.add_argument("--seconds", type=float, default=20.0)
+    parser.add_argument("--foxglove", action="store_true", help="also serve Foxglove, a client subscribed to all")
     args = parser.parse_args()
     os.environ.setdefault("ROS_DOMAIN_ID", str(150 + os.getpid() % 50))
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
@@ -59,8 +65,15 @@ def main():
     latest = {}
     started = time.perf_counter()
     bag = scene.with_name("overhead.mcap")
-    node = subprocess.Popen([sys.executable, "-m", "vplayground_ros.cli", "--scene", str(scene), "--record", str(bag)],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    node = subprocess.Popen([sys.executable, "-m", "vplayground_ros.cli", "--scene", str(scene), "--record", str(bag),
+                             *(["--foxglove", "0"] if args.foxglove else [])],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    urls = []
+
+    def drain():  # the node's log, read so its pipe never fills; the Foxglove URL noted
+        for line in node.stdout:
+            urls.extend(re.findall(r"open connection to (ws://\S+)", line))
+    threading.Thread(target=drain, daemon=True).start()
     first_pose = []
     client.create_subscription(PoseArray, "/vplayground/bodies/poses",
                                lambda m: first_pose or first_pose.append(time.perf_counter() - started), 1)
@@ -77,6 +90,11 @@ def main():
             qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL if durable else DurabilityPolicy.VOLATILE)
             client.create_subscription(message, name, lambda m: None, qos)
+    foxglove = None
+    if args.foxglove:
+        foxglove = FoxgloveClient(urls[0])
+        assert foxglove.wait(lambda: len(foxglove.channels) >= 17)
+        foxglove.subscribe(*foxglove.channels)
     end = time.perf_counter() + 3.0
     while time.perf_counter() < end:  # let discovery settle
         rclpy.spin_once(client, timeout_sec=0.05)
@@ -93,6 +111,9 @@ def main():
     for _ in range(30):
         rclpy.spin_once(client, timeout_sec=0.05)
     wall1, cpu1, sim1, rtf = sample()
+    foxglove_frames = sum(len(f) for f in foxglove.frames.values()) if foxglove else None
+    if foxglove:
+        foxglove.close()
     node.terminate()
     node.wait(30)
     wall = wall1 - wall0
@@ -102,7 +123,7 @@ def main():
               "overhead_percent": round(100 * (total - physics), 1), "achieved_rtf": rtf,
               "start_to_first_pose_s": round(first_pose[0], 2) if first_pose else None,
               "bag_bytes_per_sim_second": round(bag.stat().st_size / max(float(latest_time(latest)), 1e-9)),
-              "exit_code": node.returncode}
+              "foxglove_frames_received": foxglove_frames, "exit_code": node.returncode}
     print(json.dumps(result))
     client.destroy_node()
     rclpy.shutdown()

@@ -122,6 +122,7 @@ class TemplateEncoder:
     def __init__(self, write_element):
         self._write = write_element  # (writer, key) -> {field: offset}, with zero numbers
         self._templates = {}
+        self._last_layout = None
 
     def template(self, key, alignment):
         if (key, alignment) not in self._templates:
@@ -130,29 +131,41 @@ class TemplateEncoder:
             self._templates[(key, alignment)] = (bytes(w.data), {k: v - alignment for k, v in offsets.items()})
         return self._templates[(key, alignment)]
 
-    def append_all(self, w, stamp_bytes, keys, numbers):
-        """Appends one element per key; numbers: {field: array (N, k) of the field's values,
-        its dtype the wire type ('<f8', '<f4', '<i4')}. The templates are laid end to end (an
-        element's alignment depends on what came before it), then the stamp and every field
-        are written into all elements at once with numpy."""
-        count = len(keys)
-        if count == 0:
-            return
-        chunks, stamps = [], np.empty(count, np.int64)
-        fields = {field: np.empty(count, np.int64) for field in numbers}
-        base = position = w.position
-        for k, key in enumerate(keys):
+    def layout(self, keys, alignment):
+        """The elements of `keys` laid end to end from a payload position ≡ alignment (mod 8):
+        (bytes as a uint8 array, stamp offsets (N,), {field: offsets (N,)}). An element's
+        alignment depends on what came before it, so the layout is a whole; the last one is
+        kept, since the keys (the bodies' names) rarely change between messages."""
+        cache_key = (tuple(keys), alignment)
+        if self._last_layout is not None and self._last_layout[0] == cache_key:
+            return self._last_layout[1]
+        chunks, stamps, fields = [], [], {}
+        position = alignment
+        for key in keys:
             pad = -position % 4  # every element starts with its header's int32
             if pad:
                 chunks.append(b"\x00" * pad)
                 position += pad
             template, offsets = self.template(key, position % 8)
             chunks.append(template)
-            stamps[k] = position - base
-            for field, at in fields.items():
-                at[k] = position - base + offsets[field]
+            stamps.append(position - alignment)
+            for field, at in offsets.items():
+                fields.setdefault(field, []).append(position - alignment + at)
             position += len(template)
-        buffer = np.frombuffer(b"".join(chunks), np.uint8).copy()
+        layout = (np.frombuffer(b"".join(chunks), np.uint8), np.array(stamps),
+                  {field: np.array(at) for field, at in fields.items()})
+        self._last_layout = (cache_key, layout)
+        return layout
+
+    def append_all(self, w, stamp_bytes, keys, numbers):
+        """Appends one element per key; numbers: {field: array (N, k) of the field's values,
+        its dtype the wire type ('<f8', '<f4', '<i4')}: the stamp and every field are written
+        into a copy of the layout at once with numpy."""
+        count = len(keys)
+        if count == 0:
+            return
+        template, stamps, fields = self.layout(keys, w.position % 8)
+        buffer = template.copy()
         buffer[stamps[:, None] + np.arange(8)] = np.frombuffer(stamp_bytes, np.uint8)
         for field, values in numbers.items():
             raw = np.ascontiguousarray(values).view(np.uint8).reshape(count, -1)
