@@ -169,7 +169,14 @@ def validate_playground(raw, base, directories=None):
     mesh_path = resolve_mesh(spec["mesh"], base, directories)
     vertices, faces = read_mesh(mesh_path)
     rotation = quaternions_to_matrices(rpy_to_quat(spec["rpy"])[None])[0]
-    world_vertices = (spec["scale"] * vertices) @ rotation.T + np.asarray(spec["position"])
+    with np.errstate(invalid="ignore", over="ignore"):  # non-finite vertices are refused below
+        world_vertices = (spec["scale"] * vertices) @ rotation.T + np.asarray(spec["position"])
+    # Beyond this the octree's cells and the world's bounds (centred on the mesh) lose meaning.
+    far = np.nonzero(~(np.abs(world_vertices) <= specs.MAX_COORDINATE).all(axis=1))[0]
+    if len(far):
+        raise specs.SpecError("playground.mesh", f"mesh {mesh_path}: vertex {far[0]} is at "
+                                                 f"{world_vertices[far[0]].tolist()}, beyond "
+                                                 f"{specs.MAX_COORDINATE:g} m (or not finite)")
     return {**spec, "mesh": str(mesh_path)}, world_vertices, faces
 
 
@@ -185,7 +192,7 @@ def validate_scene(scene, base, max_bodies=None, directories=None):
     specs.mapping(scene, "", TOP_LEVEL_KEYS)
     if "version" not in scene:
         raise specs.SpecError("version", f"missing (this program reads version {SCENE_VERSION})")
-    if not isinstance(scene["version"], int) or scene["version"] != SCENE_VERSION:
+    if type(scene["version"]) is not int or scene["version"] != SCENE_VERSION:  # not True, not 1.0
         raise specs.SpecError("version", f"unsupported version {specs.quote(scene['version'])} "
                                          f"(this program reads version {SCENE_VERSION})")
     settings = specs.validate_settings(scene.get("settings"))
@@ -228,6 +235,9 @@ def load_world(path_or_dict, max_bodies=None, directories=None):
             dropped = world.set_playground(vertices, faces, spec)
         except ValueError as error:
             raise SceneError(f"{label}: playground.mesh: {spec['mesh']}: {error}") from None
+        if dropped == len(faces):
+            raise SceneError(f"{label}: playground.mesh: {spec['mesh']}: all {dropped} triangles are "
+                             "degenerate (repeated or collinear corners)")
         if dropped:
             log.warning("%s: playground mesh %s: dropped %d degenerate triangles", label,
                         spec["mesh"], dropped)
