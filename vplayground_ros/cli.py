@@ -153,67 +153,6 @@ def run(sim, options, recorder, ros_args, stop):
             if time.monotonic() >= status_due:
                 status_due += STATUS_PERIOD
                 log.info(status_line(sim))
-    except OSError as error:
-            print(f"vplayground: cannot record to {options.record}: {error.strerror or error}", file=sys.stderr)
-            return 2
-    sim = Simulation(world, real_time_factor=options.real_time_factor,
-                     start_paused=options.start_paused, duration=options.duration)
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
-    try:
-        import rclpy  # noqa: F401
-    except ImportError:
-        rclpy = None
-    return run(sim, options, recorder, ros_args if rclpy is not None and not options.no_ros else None, stop)
-
-
-def run(sim, options, recorder, ros_args, stop):
-    """The main thread: ROS callbacks (if any) and the publishing schedule, until stopped."""
-    from .runtime import Runtime
-
-    node = executor = server = None
-    if ros_args is not None:
-        import rclpy
-        from rclpy.executors import SingleThreadedExecutor
-        from rclpy.signals import SignalHandlerOptions
-
-        from .node import SimulatorNode
-        rclpy.init(args=["vplayground", *ros_args], signal_handler_options=SignalHandlerOptions.NO)
-        node = SimulatorNode()
-        log = node.get_logger()
-        runtime = Runtime(sim, options, log, recorder, node.resolve_topic_name)
-    else:
-        logging.basicConfig(level=logging.INFO, stream=sys.stdout, format="[%(levelname)s] %(name)s: %(message)s")
-        log = logging.getLogger("vplayground")
-        runtime = Runtime(sim, options, log, recorder)
-    try:
-        if options.foxglove is not None:
-            from .foxglove_server import FoxgloveServer
-            server = FoxgloveServer(runtime, options.foxglove_host, options.foxglove)
-            runtime.parameters.values["foxglove.port"] = server.server.port  # the port bound (0 asked any)
-        if node is not None:
-            node.attach(runtime)
-            executor = SingleThreadedExecutor()
-            executor.add_node(node)
-        log.info(f"{options.scene}: {len(sim.world.body_names())} bodies; real-time factor "
-                 f"{options.real_time_factor:g}{'' if options.duration is None else f', {options.duration:g} s'}; "
-                 f"{'ROS node' if node else 'no ROS node'}; "
-                 f"{'recording to ' + str(options.record) if recorder else 'not recording'}")
-        if server is not None:
-            log.info(f"Foxglove: open connection to {server.url} (Foxglove WebSocket), then load "
-                     f"config/foxglove_layout.json")
-        sim.start()
-        status_due = time.monotonic() + STATUS_PERIOD
-        while not stop.is_set() and not sim.wait(0):
-            wait = min(runtime.broadcaster.tick(), 0.05)
-            if executor is not None:
-                executor.spin_once(timeout_sec=wait)
-            else:
-                stop.wait(wait)
-            if time.monotonic() >= status_due:
-                status_due += STATUS_PERIOD
-                log.info(status_line(sim))
     except OSError as error:  # the Foxglove port is taken, say
         log.error(f"cannot start: {error}")
         return 2
