@@ -13,6 +13,9 @@ the package free of a native extension wherever it is built (colcon, pip); zstd 
 - record_split_size: a new file <stem>_<n>.mcap starts past that many bytes, and the latched
   topics (the scenery, /tf_static, the state) are written again at its start, so every file
   opens on its own.
+- A disk that fills or a path that cannot be written stops the recording, never the simulation:
+  the first failure is kept in `error` (the node puts it on /diagnostics) and later messages are
+  dropped.
 - Chunks are written to the file as they fill, so after a crash (kill -9) every complete chunk
   is still there: `vplayground-recover crashed.mcap fixed.mcap` rewrites them into a proper,
   summarised file (as `mcap recover` does).
@@ -42,19 +45,25 @@ class Recorder:
         self.split_size = split_size
         self.bytes_written = 0   # over all files
         self.dropped = 0
-        self.error = None        # the first write failure (disk full, unwritable path)
+        self.error = None        # the first failure (disk full, unwritable path); then nothing is written
         self.files = []
         self._latched = {}       # topic -> (type, data, time_ns): re-written into every split
         self._queue = queue.Queue(maxsize=QUEUE_MESSAGES)
         self._thread = threading.Thread(target=self._run, name="vplayground-recorder", daemon=True)
         self._file = self._writer = None
         self._channels = {}
-        self._open(self.path)  # fail early and loudly on an unwritable path
+        try:
+            self._open(self.path)
+        except OSError as error:  # the simulation runs on without a bag; `error` says why
+            self.error = f"{self.path}: {error.strerror or error}"
         self._thread.start()
 
     # ------------------------------------------------------------- any thread
     def write(self, topic, type_name, data, seconds, latched=False):
         """Queues one message (CDR bytes, encapsulation header included)."""
+        if self.error is not None:
+            self.dropped += 1
+            return
         stamp = int(round(seconds * 1e9))
         if latched:
             self._latched[topic] = (type_name, data, stamp)
@@ -78,8 +87,12 @@ class Recorder:
         self.files.append(path)
 
     def _finish(self):
-        self._writer.finish()
-        self._file.close()
+        if self._file is None:
+            return
+        try:
+            self._writer.finish()
+        finally:
+            self._file.close()  # whatever finish() hit, the descriptor is not leaked
 
     def _channel(self, topic, type_name):
         key = (topic, type_name)
@@ -116,12 +129,12 @@ class Recorder:
                 if self.split_size and self._file.tell() > self.split_size:
                     self._split()
                 self._add(*item)
-            except OSError as error:
-                self.error = f"{self._file.name}: {error.strerror or error}"
+            except Exception as error:  # OSError mostly (ENOSPC, EIO); anything else must not kill the thread
+                self.error = f"{self._file.name}: {getattr(error, 'strerror', None) or error}"
         try:
             self._finish()
-        except OSError as error:
-            self.error = self.error or f"{self._file.name}: {error.strerror or error}"
+        except Exception as error:
+            self.error = self.error or f"{self._file.name}: {getattr(error, 'strerror', None) or error}"
 
 
 def recover(source, target):

@@ -310,7 +310,8 @@ class World:
         state = np.concatenate([b.position[slots], b.orientation[slots], b.velocity[slots]], axis=1)
         bad = ~np.all(np.isfinite(state), axis=1)
         centre = self.world_centre()
-        bad |= np.linalg.norm(np.nan_to_num(b.position[slots] - centre), axis=1) > WORLD_RADIUS
+        with np.errstate(over="ignore"):  # an infinite coordinate is just "far", and bad already
+            bad |= np.linalg.norm(np.nan_to_num(b.position[slots] - centre), axis=1) > WORLD_RADIUS
         if self.ground is not None:
             bad |= b.position[slots, 2] < self.ground["height"] - WORLD_RADIUS
         names = [self._names[slot] for slot in slots[bad]]

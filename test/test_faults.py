@@ -1,0 +1,173 @@
+"""Faults the running simulation must survive (issue 9, SPEC 9): bodies that go non-finite or
+leave the world are removed and named in Simulation.removed while the loop steps on; a failing
+listener or step does not end the loop; the recorder survives a full disk and an unwritable
+path with `error` set (the node puts it on /diagnostics) while the simulation goes on.
+(A kill -9 leaving a recoverable bag is test_bag.test_a_killed_run_recovers.)"""
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from vplayground_ros.api import Requests
+from vplayground_ros.physics.world import WORLD_RADIUS
+from vplayground_ros.recorder import Recorder
+from vplayground_ros.scene import load_world
+from vplayground_ros.simulation import Simulation
+
+SCENE = {"version": 1, "bodies": [{"name": "victim", "position": [0, 0, 0.5]},
+                                  {"name": "bystander", "position": [3, 0, 0.5]},
+                                  {"name": "neighbour", "position": [0, 3, 0.5]}]}
+
+
+def wait_for(condition, timeout=20.0):
+    deadline = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.005)
+
+
+@pytest.fixture
+def sim():
+    world = load_world(SCENE)
+    world.step(1)  # compile before the loop runs, if the JIT cache is cold
+    sim = Simulation(world, real_time_factor=0.0)  # as fast as it goes: many batches per second
+    sim.start()
+    yield sim
+    sim.stop()
+
+
+def slot(world, name):
+    return world._slots[name]  # fault injection reaches past the API on purpose
+
+
+def still_stepping(sim):
+    before = sim.snapshot.step
+    wait_for(lambda: sim.snapshot.step > before + 16)
+
+
+@pytest.mark.parametrize("field, value", [("velocity", np.nan), ("position", np.inf),
+                                          ("orientation", np.nan), ("velocity", -np.inf)])
+def test_a_body_gone_non_finite_is_removed_and_named(sim, field, value):
+    def corrupt(world):
+        getattr(world._bodies, field)[slot(world, "victim"), 0] = value
+    sim.call(corrupt)
+    wait_for(lambda: "victim" in sim.removed)
+    assert sim.removed == ["victim"]
+    assert sim.call(lambda w: w.body_names()) == ["bystander", "neighbour"]
+    still_stepping(sim)
+    assert np.all(np.isfinite(sim.snapshot.state["positions"]))
+
+
+def test_a_body_teleported_out_of_the_world_is_removed(sim):
+    def fling(world):
+        world._bodies.position[slot(world, "victim")] = world.world_centre() + [0.0, 1.5 * WORLD_RADIUS, 0.0]
+    sim.call(fling)
+    wait_for(lambda: "victim" in sim.removed)
+    still_stepping(sim)
+    assert sim.call(lambda w: w.body_names()) == ["bystander", "neighbour"]
+
+
+def test_a_body_thrown_out_at_top_speed_leaves_and_is_removed(sim):
+    requests = Requests(sim)
+    ok, message = requests.spawn("{name: bullet, position: [0, 0, 50], linear_velocity: [10000, 0, 0]}")
+    assert ok, message
+    wait_for(lambda: "bullet" in sim.removed)  # 2,000 m at 10 km/s: 0.2 s of simulated time
+    still_stepping(sim)
+    assert "bystander" in sim.call(lambda w: w.body_names())
+
+
+def test_a_body_spawned_far_away_is_refused_and_the_world_keeps_its_bodies(sim):
+    # The octree root refits around every body; bounds centred on it once made this one body
+    # put every other one "outside the world", and all were removed.
+    requests = Requests(sim)
+    ok, message = requests.spawn("{name: far, position: [100000, 0, 0]}")
+    assert not ok and message.startswith("INVALID_POSE: spawn.position:") and "outside the world" in message
+    ok, message = requests.edit("{entity: bystander, state: {pose: {position: [0, -5000, 1]}}}")
+    assert not ok and message.startswith("INVALID_POSE:"), message
+    still_stepping(sim)
+    assert sim.removed == [] and len(sim.call(lambda w: w.body_names())) == 3
+
+
+def test_a_failing_listener_does_not_stop_the_loop(sim):
+    calls = []
+
+    def broken(snapshot):
+        calls.append(snapshot.step)
+        raise RuntimeError("publisher bug")
+    sim.add_listener(broken)
+    wait_for(lambda: len(calls) > 5)
+    still_stepping(sim)
+    assert sim.fault_count >= 5 and sim.faults[0] == "listener: RuntimeError: publisher bug"
+
+
+def test_a_failing_step_pauses_instead_of_ending_the_loop(sim):
+    world = sim.world
+    original = world.step
+
+    def explode(n=1):
+        world.step = original  # once
+        raise RuntimeError("engine bug")
+    sim.call(lambda w: setattr(w, "step", explode))
+    wait_for(lambda: sim.fault_count == 1)
+    assert sim.paused and sim.faults == ["step: RuntimeError: engine bug"]
+    assert Requests(sim).pause(False)[0]  # and it plays on
+    still_stepping(sim)
+
+
+# ----------------------------------------------------------------------------- recorder
+def record_while_simulating(sim, recorder, until):
+    """Writes a 10 kB message per batch (as the node's publishers do) until `until()`."""
+    payload = bytes(10_000)
+    sim.add_listener(lambda snap: recorder.write("/clock", "rosgraph_msgs/msg/Clock", payload, snap.time))
+    wait_for(until)
+
+
+def test_a_full_disk_stops_the_recording_not_the_simulation(sim):
+    recorder = Recorder("/dev/full")  # every write fails with ENOSPC
+    record_while_simulating(sim, recorder, lambda: recorder.error is not None)
+    assert "No space left on device" in recorder.error
+    still_stepping(sim)
+    started = time.monotonic()
+    recorder.close()
+    assert time.monotonic() - started < 5.0 and "No space left" in recorder.error
+    assert recorder.dropped > 0  # what came after the failure was counted, not queued forever
+
+
+@pytest.mark.parametrize("where", ["under_a_file", "in_proc"])
+def test_an_unwritable_path_is_an_error_not_a_crash(sim, tmp_path, where):
+    if where == "under_a_file":
+        (tmp_path / "a_file").write_text("")
+        path = tmp_path / "a_file" / "bags" / "run.mcap"  # a directory cannot be made in a file
+    else:
+        path = "/proc/vplayground_no_such_dir/run.mcap"  # not even root makes directories here
+    recorder = Recorder(path)
+    assert recorder.error is not None and str(path) in recorder.error
+    record_while_simulating(sim, recorder, lambda: recorder.dropped > 10)
+    still_stepping(sim)
+    recorder.close()
+    assert recorder.files == []
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only directories")
+def test_a_read_only_directory_is_an_error_not_a_crash(sim, tmp_path):
+    tmp_path.chmod(0o500)
+    try:
+        recorder = Recorder(tmp_path / "run.mcap")
+        assert "Permission denied" in recorder.error
+        still_stepping(sim)
+        recorder.close()
+    finally:
+        tmp_path.chmod(0o700)
+
+
+def test_the_node_runs_to_its_duration_on_a_full_disk():
+    pytest.importorskip("rclpy")
+    result = subprocess.run([sys.executable, "-m", "vplayground_ros.cli", "--duration", "2",
+                             "--real-time-factor", "0", "--no-foxglove", "--record", "/dev/full"],
+                            capture_output=True, text=True, timeout=180)
+    output = result.stdout + result.stderr
+    assert result.returncode == 0, output
+    assert "No space left on device" in output
