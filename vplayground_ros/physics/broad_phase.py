@@ -4,7 +4,9 @@ Each object (a box's AABB, a mesh triangle's AABB) lives at the deepest level, a
 `octree_depth`, whose cells are at least as large as the object, and so touches at most 2x2x2
 cells there. A cell is the key `level_offset(L) + morton(x, y, z)`; entries are kept sorted by
 key, so a cell's objects are one contiguous run, its ancestors are single keys and all of its
-descendants at a finer level are one contiguous key range: every query is a binary search.
+descendants at a finer level are one contiguous key range. Body pairs come from merging the
+sorted entries of two levels (a cell's ancestor keys grow with its key), with no per-body
+searches; a single box (a ray's, a body's against the mesh) is a binary search per cell.
 
 Three indexes, rebuilt at different rates:
 - moving: the awake bodies, rebuilt every step;
@@ -39,7 +41,7 @@ def allocate_index(capacity):
 BroadPhase = namedtuple("BroadPhase", [
     "moving", "static",   # OctreeIndex of the moving bodies (per step) and of the resting ones
     "moving_ids",         # (N,) scratch: slots in the moving index
-    "stamp", "scratch",   # (N,) scratch of the pair queries
+    "stamp", "scratch",   # (N,) scratch of the ray casts' index queries
     "pair_a", "pair_b",   # (P,) candidate pairs
     "pair_count",         # (1,) pairs found in the last step
     "playground_body", "playground_triangle",  # (P,) candidate (body, playground triangle) pairs
@@ -203,38 +205,99 @@ def query_index(index, level, box, finer_too, stamp, query_id, out):
 
 
 @njit(cache=True, nogil=True)
-def find_body_pairs(moving_ids, moving, static, aabb_min, aabb_max, levels, awake, static_indexed,
-                    root_min, root_size, stamp, scratch, pair_a, pair_b):
-    """Candidate body pairs whose AABBs overlap and at least one of which moves.
+def level_entries(index, level):
+    """Entries of `index` at `level`: keys of a level lie in [level_offset(L), level_offset(L+1))."""
+    keys = index.keys[:index.count[0]]
+    return np.searchsorted(keys, level_offset(level)), np.searchsorted(keys, level_offset(level + 1))
 
-    Every body of the moving index queries it at its own and coarser levels (same-level pairs
-    are reported by the lower slot, so each pair once) and queries the static index at every
-    level. Returns the pair count, or -1 when pair_a/pair_b are full."""
-    stamp[:] = -1
-    count = 0
-    capacity = len(pair_a)
-    for k in range(len(moving_ids)):
-        i = moving_ids[k]
-        level = levels[i]
-        box = cell_box(aabb_min[i], aabb_max[i], level, root_min, root_size)
-        n = query_index(moving, level, box, False, stamp, 2 * i, scratch)
-        for m in range(n):
-            j = scratch[m]
-            if j == i or (levels[j] == level and j < i) or not (awake[i] or awake[j]):
+
+# Which bodies of a joined pair of indexes may pair up (at least one of them moves).
+MOVING_MOVING, MOVING_STATIC, STATIC_MOVING = 0, 1, 2
+
+
+@njit(cache=True, nogil=True)
+def join_levels(fine, fine_level, coarse, coarse_level, kind, aabb_min, aabb_max, awake,
+                static_indexed, root_min, root_size, pair_a, pair_b, count):
+    """Pairs between the entries of `fine` at fine_level and those of `coarse` at coarse_level
+    (<= fine_level) in the ancestor cells, as a merge: walking the fine cells in key order, their
+    ancestors' keys never decrease, so one cursor crosses the coarse entries once. Two bodies
+    share up to 8 cells; the pair is reported only from the fine cell holding the low corner of
+    their bounds' overlap, so once, with no marks to clear. The moving body of a pair comes
+    first. Returns the new pair count, or -1 when pair_a/pair_b are full."""
+    f0, f1 = level_entries(fine, fine_level)
+    c0, c1 = level_entries(coarse, coarse_level)
+    if f0 == f1 or c0 == c1:
+        return count
+    fine_base, coarse_base = level_offset(fine_level), level_offset(coarse_level)
+    shift = 3 * (fine_level - coarse_level)
+    cells = 1 << fine_level
+    size = root_size / cells
+    fine_keys, fine_ids = fine.keys, fine.ids
+    coarse_keys, coarse_ids = coarse.keys, coarse.ids
+    cursor = c0
+    for e in range(f0, f1):
+        key = fine_keys[e]
+        ancestor = coarse_base + ((key - fine_base) >> shift)
+        while cursor < c1 and coarse_keys[cursor] < ancestor:
+            cursor += 1
+        # Within one index and level, each unordered pair of a cell's entries once.
+        first = max(cursor, e + 1) if kind == MOVING_MOVING and shift == 0 else cursor
+        i = fine_ids[e]
+        for k in range(first, c1):
+            if coarse_keys[k] != ancestor:
+                break
+            j = coarse_ids[k]
+            if kind == MOVING_MOVING:
+                if not (awake[i] or awake[j]):
+                    continue
+            elif kind == MOVING_STATIC:
+                if not (awake[i] and static_indexed[j]):
+                    continue
+            elif not (static_indexed[i] and awake[j]):
                 continue
-            if aabbs_overlap(aabb_min[i], aabb_max[i], aabb_min[j], aabb_max[j]):
-                if count >= capacity:
-                    return -1
+            if not (aabb_min[i, 0] <= aabb_max[j, 0] and aabb_min[j, 0] <= aabb_max[i, 0]
+                    and aabb_min[i, 1] <= aabb_max[j, 1] and aabb_min[j, 1] <= aabb_max[i, 1]
+                    and aabb_min[i, 2] <= aabb_max[j, 2] and aabb_min[j, 2] <= aabb_max[i, 2]):
+                continue
+            corner = morton(cell_coordinate(max(aabb_min[i, 0], aabb_min[j, 0]), root_min[0], size, cells),
+                            cell_coordinate(max(aabb_min[i, 1], aabb_min[j, 1]), root_min[1], size, cells),
+                            cell_coordinate(max(aabb_min[i, 2], aabb_min[j, 2]), root_min[2], size, cells))
+            if fine_base + corner != key:
+                continue
+            if count >= len(pair_a):
+                return -1
+            if kind == STATIC_MOVING:
+                pair_a[count], pair_b[count] = j, i
+            else:
                 pair_a[count], pair_b[count] = i, j
-                count += 1
-        if not awake[i]:
-            continue
-        n = query_index(static, level, box, True, stamp, 2 * i + 1, scratch)
-        for m in range(n):
-            j = scratch[m]
-            if static_indexed[j] and aabbs_overlap(aabb_min[i], aabb_max[i], aabb_min[j], aabb_max[j]):
-                if count >= capacity:
-                    return -1
-                pair_a[count], pair_b[count] = i, j
-                count += 1
+            count += 1
+    return count
+
+
+@njit(cache=True, nogil=True)
+def find_body_pairs(moving, static, aabb_min, aabb_max, awake, static_indexed, root_min,
+                    root_size, pair_a, pair_b):
+    """Candidate body pairs whose AABBs overlap and at least one of which moves: the moving
+    index against itself at every pair of levels, and against the static index at every pair of
+    levels (static entries of bodies that have since woken are skipped). Returns the pair count,
+    or -1 when pair_a/pair_b are full."""
+    count = 0
+    moving_levels, static_levels = moving.level_mask[0], static.level_mask[0]
+    for fine in range(MAX_OCTREE_DEPTH + 1):
+        for coarse in range(fine + 1):
+            if (moving_levels >> fine) & (moving_levels >> coarse) & 1:
+                count = join_levels(moving, fine, moving, coarse, MOVING_MOVING, aabb_min,
+                                    aabb_max, awake, static_indexed, root_min, root_size, pair_a,
+                                    pair_b, count)
+            if count >= 0 and (moving_levels >> fine) & (static_levels >> coarse) & 1:
+                count = join_levels(moving, fine, static, coarse, MOVING_STATIC, aabb_min,
+                                    aabb_max, awake, static_indexed, root_min, root_size, pair_a,
+                                    pair_b, count)
+            # At one level the join above already paired them.
+            if count >= 0 and coarse < fine and (static_levels >> fine) & (moving_levels >> coarse) & 1:
+                count = join_levels(static, fine, moving, coarse, STATIC_MOVING, aabb_min,
+                                    aabb_max, awake, static_indexed, root_min, root_size, pair_a,
+                                    pair_b, count)
+            if count < 0:
+                return -1
     return count

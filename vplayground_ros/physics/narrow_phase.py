@@ -17,33 +17,52 @@ FACE_AXIS_TOLERANCE = 1e-3  # B's face must beat A's by this to become the refer
 
 
 @njit(cache=True, nogil=True)
+def vector3(v, i):
+    """Row i of an (N, 3) array as a tuple (the narrow phase works on tuples: see collide)."""
+    return (v[i, 0], v[i, 1], v[i, 2])
+
+
+@njit(cache=True, nogil=True)
+def matrix3(m, i):
+    """m[i] of an (N, 3, 3) array as a tuple of its rows."""
+    return ((m[i, 0, 0], m[i, 0, 1], m[i, 0, 2]), (m[i, 1, 0], m[i, 1, 1], m[i, 1, 2]),
+            (m[i, 2, 0], m[i, 2, 1], m[i, 2, 2]))
+
+
+@njit(cache=True, nogil=True)
+def axis_dots(ra, rb, i):
+    """(a_i . b_0, a_i . b_1, a_i . b_2) for the axes (columns) of rotations ra and rb."""
+    return (ra[0][i] * rb[0][0] + ra[1][i] * rb[1][0] + ra[2][i] * rb[2][0],
+            ra[0][i] * rb[0][1] + ra[1][i] * rb[1][1] + ra[2][i] * rb[2][1],
+            ra[0][i] * rb[0][2] + ra[1][i] * rb[1][2] + ra[2][i] * rb[2][2])
+
+
+@njit(cache=True, nogil=True)
 def box_box_axis(pa, ra, ha, pb, rb, hb, margin):
     """Best separating axis: (kind 0 face of A / 1 face of B / 2 edges / -1 separated,
     index (face axis, or 3*i + j for edge a_i x b_j), separation, normal A -> B)."""
     d0, d1, d2 = pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]
-    # c[i, j] = a_i . b_j; t = d in A's frame
-    c = np.empty((3, 3))
-    abs_c = np.empty((3, 3))
-    for i in range(3):
-        for j in range(3):
-            v = ra[0, i] * rb[0, j] + ra[1, i] * rb[1, j] + ra[2, i] * rb[2, j]
-            c[i, j] = v
-            abs_c[i, j] = abs(v) + 1e-9  # parallel edges give near-zero crosses, never 0/0
-    t = (d0 * ra[0, 0] + d1 * ra[1, 0] + d2 * ra[2, 0],
-         d0 * ra[0, 1] + d1 * ra[1, 1] + d2 * ra[2, 1],
-         d0 * ra[0, 2] + d1 * ra[1, 2] + d2 * ra[2, 2])
+    # c[i][j] = a_i . b_j (tuples: no heap allocation per pair); t = d in A's frame
+    c = (axis_dots(ra, rb, 0), axis_dots(ra, rb, 1), axis_dots(ra, rb, 2))
+    # Parallel edges give near-zero crosses: the epsilon keeps them from 0/0.
+    abs_c = ((abs(c[0][0]) + 1e-9, abs(c[0][1]) + 1e-9, abs(c[0][2]) + 1e-9),
+             (abs(c[1][0]) + 1e-9, abs(c[1][1]) + 1e-9, abs(c[1][2]) + 1e-9),
+             (abs(c[2][0]) + 1e-9, abs(c[2][1]) + 1e-9, abs(c[2][2]) + 1e-9))
+    t = (d0 * ra[0][0] + d1 * ra[1][0] + d2 * ra[2][0],
+         d0 * ra[0][1] + d1 * ra[1][1] + d2 * ra[2][1],
+         d0 * ra[0][2] + d1 * ra[1][2] + d2 * ra[2][2])
 
     best_a, best_a_axis = -np.inf, -1
     for i in range(3):
-        s = abs(t[i]) - (ha[i] + hb[0] * abs_c[i, 0] + hb[1] * abs_c[i, 1] + hb[2] * abs_c[i, 2])
+        s = abs(t[i]) - (ha[i] + hb[0] * abs_c[i][0] + hb[1] * abs_c[i][1] + hb[2] * abs_c[i][2])
         if s > margin:
             return -1, 0, s, (0.0, 0.0, 0.0)
         if s > best_a:
             best_a, best_a_axis = s, i
     best_b, best_b_axis = -np.inf, -1
     for j in range(3):
-        tb = d0 * rb[0, j] + d1 * rb[1, j] + d2 * rb[2, j]
-        s = abs(tb) - (hb[j] + ha[0] * abs_c[0, j] + ha[1] * abs_c[1, j] + ha[2] * abs_c[2, j])
+        tb = d0 * rb[0][j] + d1 * rb[1][j] + d2 * rb[2][j]
+        s = abs(tb) - (hb[j] + ha[0] * abs_c[0][j] + ha[1] * abs_c[1][j] + ha[2] * abs_c[2][j])
         if s > margin:
             return -1, 0, s, (0.0, 0.0, 0.0)
         if s > best_b:
@@ -53,12 +72,12 @@ def box_box_axis(pa, ra, ha, pb, rb, hb, margin):
         i1, i2 = (i + 1) % 3, (i + 2) % 3
         for j in range(3):
             j1, j2 = (j + 1) % 3, (j + 2) % 3
-            length = np.sqrt(max(1.0 - c[i, j] * c[i, j], 0.0))
+            length = np.sqrt(max(1.0 - c[i][j] * c[i][j], 0.0))
             if length < 1e-5:
                 continue  # parallel edges: the face axes already cover this direction
-            radius_a = ha[i1] * abs_c[i2, j] + ha[i2] * abs_c[i1, j]
-            radius_b = hb[j1] * abs_c[i, j2] + hb[j2] * abs_c[i, j1]
-            s = (abs(t[i2] * c[i1, j] - t[i1] * c[i2, j]) - radius_a - radius_b) / length
+            radius_a = ha[i1] * abs_c[i2][j] + ha[i2] * abs_c[i1][j]
+            radius_b = hb[j1] * abs_c[i][j2] + hb[j2] * abs_c[i][j1]
+            s = (abs(t[i2] * c[i1][j] - t[i1] * c[i2][j]) - radius_a - radius_b) / length
             if s > margin:
                 return -1, 0, s, (0.0, 0.0, 0.0)
             if s > best_e:
@@ -66,20 +85,20 @@ def box_box_axis(pa, ra, ha, pb, rb, hb, margin):
 
     if best_e > max(best_a, best_b) + EDGE_AXIS_TOLERANCE:
         i, j = best_e_axis // 3, best_e_axis % 3
-        n0 = ra[1, i] * rb[2, j] - ra[2, i] * rb[1, j]
-        n1 = ra[2, i] * rb[0, j] - ra[0, i] * rb[2, j]
-        n2 = ra[0, i] * rb[1, j] - ra[1, i] * rb[0, j]
+        n0 = ra[1][i] * rb[2][j] - ra[2][i] * rb[1][j]
+        n1 = ra[2][i] * rb[0][j] - ra[0][i] * rb[2][j]
+        n2 = ra[0][i] * rb[1][j] - ra[1][i] * rb[0][j]
         inv = 1.0 / np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
         if n0 * d0 + n1 * d1 + n2 * d2 < 0.0:
             inv = -inv
         return 2, best_e_axis, best_e, (n0 * inv, n1 * inv, n2 * inv)
     if best_b > best_a + FACE_AXIS_TOLERANCE:
         j = best_b_axis
-        sign = 1.0 if d0 * rb[0, j] + d1 * rb[1, j] + d2 * rb[2, j] >= 0.0 else -1.0
-        return 1, j, best_b, (rb[0, j] * sign, rb[1, j] * sign, rb[2, j] * sign)
+        sign = 1.0 if d0 * rb[0][j] + d1 * rb[1][j] + d2 * rb[2][j] >= 0.0 else -1.0
+        return 1, j, best_b, (rb[0][j] * sign, rb[1][j] * sign, rb[2][j] * sign)
     i = best_a_axis
     sign = 1.0 if t[i] >= 0.0 else -1.0
-    return 0, i, best_a, (ra[0, i] * sign, ra[1, i] * sign, ra[2, i] * sign)
+    return 0, i, best_a, (ra[0][i] * sign, ra[1][i] * sign, ra[2][i] * sign)
 
 
 @njit(cache=True, nogil=True)
@@ -112,7 +131,7 @@ def incident_box_face(p, r, h, normal, out):
     anti-parallel to `normal`, the reference normal pointing at this box."""
     best, axis, sign = -1.0, 0, 1.0
     for k in range(3):
-        d = r[0, k] * normal[0] + r[1, k] * normal[1] + r[2, k] * normal[2]
+        d = r[0][k] * normal[0] + r[1][k] * normal[1] + r[2][k] * normal[2]
         if abs(d) > best:
             best, axis = abs(d), k
             sign = -1.0 if d > 0.0 else 1.0
@@ -121,7 +140,7 @@ def incident_box_face(p, r, h, normal, out):
         su = 1.0 if corner == 0 or corner == 3 else -1.0
         sv = 1.0 if corner < 2 else -1.0
         for e in range(3):
-            out[corner, e] = p[e] + sign * r[e, axis] * h[axis] + su * r[e, k1] * h[k1] + sv * r[e, k2] * h[k2]
+            out[corner, e] = p[e] + sign * r[e][axis] * h[axis] + su * r[e][k1] * h[k1] + sv * r[e][k2] * h[k2]
 
 
 @njit(cache=True, nogil=True)
@@ -149,7 +168,7 @@ def clip_to_box_face(pr, rr, hr, face_axis, normal, poly_a, n, poly_b, margin, o
     for k in range(2):
         axis = (face_axis + 1 + k) % 3
         for sign in (1.0, -1.0):
-            plane = (sign * rr[0, axis], sign * rr[1, axis], sign * rr[2, axis])
+            plane = (sign * rr[0][axis], sign * rr[1][axis], sign * rr[2][axis])
             offset = plane[0] * pr[0] + plane[1] * pr[1] + plane[2] * pr[2] + hr[axis]
             n = clip_polygon(poly_a, n, poly_b, plane, offset)
             poly_a, poly_b = poly_b, poly_a
@@ -165,9 +184,9 @@ def box_edge(p, r, h, axis, direction):
     c0, c1, c2 = p[0], p[1], p[2]
     for k in range(3):
         if k != axis:
-            s = h[k] if r[0, k] * direction[0] + r[1, k] * direction[1] + r[2, k] * direction[2] > 0.0 else -h[k]
-            c0, c1, c2 = c0 + r[0, k] * s, c1 + r[1, k] * s, c2 + r[2, k] * s
-    return (c0, c1, c2), (r[0, axis], r[1, axis], r[2, axis]), h[axis]
+            s = h[k] if r[0][k] * direction[0] + r[1][k] * direction[1] + r[2][k] * direction[2] > 0.0 else -h[k]
+            c0, c1, c2 = c0 + r[0][k] * s, c1 + r[1][k] * s, c2 + r[2][k] * s
+    return (c0, c1, c2), (r[0][axis], r[1][axis], r[2][axis]), h[axis]
 
 
 @njit(cache=True, nogil=True)
@@ -279,15 +298,15 @@ def box_triangle(p, r, h, tri, tri_normal, margin, poly_a, poly_b, out_point, ou
     front = (p[0] - v0[0]) * n[0] + (p[1] - v0[1]) * n[1] + (p[2] - v0[2]) * n[2]
     if front <= 0.0:
         return 0, (0.0, 0.0, 0.0)  # one-sided: behind the face is the inside of the solid
-    face_gap = front - (h[0] * abs(r[0, 0] * n[0] + r[1, 0] * n[1] + r[2, 0] * n[2])
-                        + h[1] * abs(r[0, 1] * n[0] + r[1, 1] * n[1] + r[2, 1] * n[2])
-                        + h[2] * abs(r[0, 2] * n[0] + r[1, 2] * n[1] + r[2, 2] * n[2]))
+    face_gap = front - (h[0] * abs(r[0][0] * n[0] + r[1][0] * n[1] + r[2][0] * n[2])
+                        + h[1] * abs(r[0][1] * n[0] + r[1][1] * n[1] + r[2][1] * n[2])
+                        + h[2] * abs(r[0][2] * n[0] + r[1][2] * n[1] + r[2][2] * n[2]))
     if face_gap > margin:
         return 0, (0.0, 0.0, 0.0)
     best, best_kind, best_axis, best_sign = face_gap, 0, 0, 1.0
     best_dir = (0.0, 0.0, 0.0)
     for k in range(3):
-        a = (r[0, k], r[1, k], r[2, k])
+        a = (r[0][k], r[1][k], r[2][k])
         gap, sign = interval_separation(
             p[0] * a[0] + p[1] * a[1] + p[2] * a[2], h[k],
             v0[0] * a[0] + v0[1] * a[1] + v0[2] * a[2], v1[0] * a[0] + v1[1] * a[1] + v1[2] * a[2],
@@ -297,20 +316,20 @@ def box_triangle(p, r, h, tri, tri_normal, margin, poly_a, poly_b, out_point, ou
         if gap > best:
             best, best_kind, best_axis, best_sign = gap, 1, k, sign
     for j in range(3):
-        e0 = tri[(j + 1) % 3, 0] - tri[j, 0]
-        e1 = tri[(j + 1) % 3, 1] - tri[j, 1]
-        e2 = tri[(j + 1) % 3, 2] - tri[j, 2]
+        e0 = tri[(j + 1) % 3][0] - tri[j][0]
+        e1 = tri[(j + 1) % 3][1] - tri[j][1]
+        e2 = tri[(j + 1) % 3][2] - tri[j][2]
         for k in range(3):
-            l0 = r[1, k] * e2 - r[2, k] * e1
-            l1 = r[2, k] * e0 - r[0, k] * e2
-            l2 = r[0, k] * e1 - r[1, k] * e0
+            l0 = r[1][k] * e2 - r[2][k] * e1
+            l1 = r[2][k] * e0 - r[0][k] * e2
+            l2 = r[0][k] * e1 - r[1][k] * e0
             length = np.sqrt(l0 * l0 + l1 * l1 + l2 * l2)
             if length < 1e-9:
                 continue  # edge parallel to a box axis: the face axes cover it
             l0, l1, l2 = l0 / length, l1 / length, l2 / length
-            radius = (h[0] * abs(r[0, 0] * l0 + r[1, 0] * l1 + r[2, 0] * l2)
-                      + h[1] * abs(r[0, 1] * l0 + r[1, 1] * l1 + r[2, 1] * l2)
-                      + h[2] * abs(r[0, 2] * l0 + r[1, 2] * l1 + r[2, 2] * l2))
+            radius = (h[0] * abs(r[0][0] * l0 + r[1][0] * l1 + r[2][0] * l2)
+                      + h[1] * abs(r[0][1] * l0 + r[1][1] * l1 + r[2][1] * l2)
+                      + h[2] * abs(r[0][2] * l0 + r[1][2] * l1 + r[2][2] * l2))
             gap, sign = interval_separation(
                 p[0] * l0 + p[1] * l1 + p[2] * l2, radius,
                 v0[0] * l0 + v0[1] * l1 + v0[2] * l2, v1[0] * l0 + v1[1] * l1 + v1[2] * l2,
@@ -336,10 +355,10 @@ def box_triangle(p, r, h, tri, tri_normal, margin, poly_a, poly_b, out_point, ou
         return count, (-n[0], -n[1], -n[2])
     if best_kind == 1:
         k = best_axis
-        normal = (r[0, k] * best_sign, r[1, k] * best_sign, r[2, k] * best_sign)
+        normal = (r[0][k] * best_sign, r[1][k] * best_sign, r[2][k] * best_sign)
         for corner in range(3):
             for e in range(3):
-                poly_a[corner, e] = tri[corner, e]
+                poly_a[corner, e] = tri[corner][e]
         count = clip_to_box_face(p, r, h, k, normal, poly_a, 3, poly_b, margin, out_point, out_depth)
         return count, normal
     k, j = best_axis // 3, best_axis % 3
@@ -363,12 +382,12 @@ def box_ground(p, r, h, height, margin, out_point, out_depth):
         sx = 1.0 if corner & 1 else -1.0
         sy = 1.0 if corner & 2 else -1.0
         sz = 1.0 if corner & 4 else -1.0
-        z = p[2] + sx * r[2, 0] * h[0] + sy * r[2, 1] * h[1] + sz * r[2, 2] * h[2]
+        z = p[2] + sx * r[2][0] * h[0] + sy * r[2][1] * h[1] + sz * r[2][2] * h[2]
         gap = z - height
         if gap > margin:
             continue
-        out_point[n, 0] = p[0] + sx * r[0, 0] * h[0] + sy * r[0, 1] * h[1] + sz * r[0, 2] * h[2]
-        out_point[n, 1] = p[1] + sx * r[1, 0] * h[0] + sy * r[1, 1] * h[1] + sz * r[1, 2] * h[2]
+        out_point[n, 0] = p[0] + sx * r[0][0] * h[0] + sy * r[0][1] * h[1] + sz * r[0][2] * h[2]
+        out_point[n, 1] = p[1] + sx * r[1][0] * h[0] + sy * r[1][1] * h[1] + sz * r[1][2] * h[2]
         out_point[n, 2] = z - 0.5 * gap
         out_depth[n] = -gap
         n += 1
@@ -376,39 +395,15 @@ def box_ground(p, r, h, height, margin, out_point, out_depth):
 
 
 @njit(cache=True, nogil=True)
-def emit_manifold(contacts, bodies, a, b, key_b, normal, scratch_point, scratch_depth, n, keep):
-    """Appends the (reduced) manifold of a and b. key_b identifies the other object in the warm
-    start table (a slot, GROUND, or a playground triangle). False when the buffers are full."""
-    if n == 0:
-        return True
-    kept = reduce_manifold(scratch_point, scratch_depth, n, normal, keep)
-    start, m = contacts.count[0], contacts.manifold_count[0]
-    if start + kept > len(contacts.body_a) or m >= len(contacts.manifold_start):
-        return False
-    r, p = bodies.rotation[a], bodies.position[a]
-    for k in range(kept):
-        c = start + k
-        src = keep[k]
-        contacts.body_a[c], contacts.body_b[c] = a, b
-        for e in range(3):
-            contacts.point[c, e] = scratch_point[src, e]
-            contacts.normal[c, e] = normal[e]
-        contacts.depth[c] = scratch_depth[src]
-        dx, dy, dz = scratch_point[src, 0] - p[0], scratch_point[src, 1] - p[1], scratch_point[src, 2] - p[2]
-        for e in range(3):
-            contacts.local_a[c, e] = r[0, e] * dx + r[1, e] * dy + r[2, e] * dz
-    contacts.manifold_start[m], contacts.manifold_size[m] = start, kept
-    contacts.manifold_a[m], contacts.manifold_b[m] = a, key_b
-    contacts.count[0] = start + kept
-    contacts.manifold_count[0] = m + 1
-    return True
-
-
-@njit(cache=True, nogil=True)
 def collide(contacts, bodies, broad, playground, ground_enabled, ground_height):
     """Manifolds of every candidate pair, of every (body, playground triangle) candidate and of
-    every awake body with the ground. Returns False when the contact buffers are full (nothing
-    of the step has been applied yet)."""
+    every awake body with the ground, each reduced to at most 4 points and appended to
+    `contacts`. Returns False when the contact buffers are full (nothing of the step has been
+    applied yet).
+
+    One flat loop over the three kinds of job with one emitting block, and the geometry on
+    tuples: Numba counts references to every array (and view) handed to a call, and that cost
+    more than the geometry when a helper took `contacts` and `bodies` per manifold."""
     contacts.count[0] = 0
     contacts.manifold_count[0] = 0
     poly_a = np.empty((MAX_CLIP_POINTS, 3))
@@ -416,37 +411,63 @@ def collide(contacts, bodies, broad, playground, ground_enabled, ground_height):
     scratch_point = np.empty((MAX_CLIP_POINTS, 3))
     scratch_depth = np.empty(MAX_CLIP_POINTS)
     keep = np.empty(4, np.int64)
-    reach = bodies.speculative_reach
+    reach, awake = bodies.speculative_reach, bodies.awake
+    position, rotation, half_extents = bodies.position, bodies.rotation, bodies.half_extents
+    body_a, body_b, point, normal_out = contacts.body_a, contacts.body_b, contacts.point, contacts.normal
+    depth, local_a = contacts.depth, contacts.local_a
+    manifold_start, manifold_size = contacts.manifold_start, contacts.manifold_size
+    manifold_a, manifold_b = contacts.manifold_a, contacts.manifold_b
     pair_a, pair_b = broad.pair_a, broad.pair_b
-    for k in range(broad.pair_count[0]):
-        a, b = pair_a[k], pair_b[k]
-        if not bodies.awake[a]:
-            a, b = b, a  # the moving body first: the ground-contact code and solver expect it
-        margin = CONTACT_MARGIN + reach[a] + reach[b]
-        n, normal = box_box(bodies.position[a], bodies.rotation[a], bodies.half_extents[a],
-                            bodies.position[b], bodies.rotation[b], bodies.half_extents[b],
-                            margin, poly_a, poly_b, scratch_point, scratch_depth)
-        if not emit_manifold(contacts, bodies, a, b, b, normal, scratch_point, scratch_depth, n, keep):
-            return False
-    for k in range(broad.playground_count[0]):
-        i, t = broad.playground_body[k], broad.playground_triangle[k]
-        n, normal = box_triangle(bodies.position[i], bodies.rotation[i], bodies.half_extents[i],
-                                 playground.triangles[t], playground.normals[t],
-                                 CONTACT_MARGIN + reach[i], poly_a, poly_b, scratch_point,
-                                 scratch_depth)
-        # Each triangle is its own manifold (warm-start key -(3 + t)); all are the PLAYGROUND.
-        if not emit_manifold(contacts, bodies, i, PLAYGROUND, -3 - t, normal, scratch_point,
-                             scratch_depth, n, keep):
-            return False
-    if ground_enabled:
-        down = (0.0, 0.0, -1.0)
-        for i in range(len(bodies.active)):
-            if not bodies.awake[i] or bodies.aabb_min[i, 2] > ground_height + 0.5 * CONTACT_MARGIN:
+    body_pairs, mesh_pairs = broad.pair_count[0], broad.playground_count[0]
+    ground_jobs = len(bodies.active) if ground_enabled else 0
+    down = (0.0, 0.0, -1.0)
+    count = manifolds = 0
+    for job in range(body_pairs + mesh_pairs + ground_jobs):
+        if job < body_pairs:
+            a, b = pair_a[job], pair_b[job]
+            if not awake[a]:
+                a, b = b, a  # the moving body first: the ground-contact code and solver expect it
+            key_b = b
+            n, normal = box_box(vector3(position, a), matrix3(rotation, a), vector3(half_extents, a),
+                                vector3(position, b), matrix3(rotation, b), vector3(half_extents, b),
+                                CONTACT_MARGIN + reach[a] + reach[b], poly_a, poly_b,
+                                scratch_point, scratch_depth)
+        elif job < body_pairs + mesh_pairs:
+            a, t = broad.playground_body[job - body_pairs], broad.playground_triangle[job - body_pairs]
+            # Each triangle is its own manifold (warm-start key -(3 + t)); all are the PLAYGROUND.
+            b, key_b = PLAYGROUND, -3 - t
+            n, normal = box_triangle(vector3(position, a), matrix3(rotation, a),
+                                     vector3(half_extents, a), matrix3(playground.triangles, t),
+                                     vector3(playground.normals, t), CONTACT_MARGIN + reach[a],
+                                     poly_a, poly_b, scratch_point, scratch_depth)
+        else:
+            a = job - body_pairs - mesh_pairs
+            if not awake[a] or bodies.aabb_min[a, 2] > ground_height + 0.5 * CONTACT_MARGIN:
                 continue
-            margin = CONTACT_MARGIN + reach[i]
-            n = box_ground(bodies.position[i], bodies.rotation[i], bodies.half_extents[i],
-                           ground_height, margin, scratch_point, scratch_depth)
-            if not emit_manifold(contacts, bodies, i, GROUND, GROUND, down, scratch_point,
-                                 scratch_depth, n, keep):
-                return False
+            b, key_b, normal = GROUND, GROUND, down
+            n = box_ground(vector3(position, a), matrix3(rotation, a), vector3(half_extents, a), ground_height,
+                           CONTACT_MARGIN + reach[a], scratch_point, scratch_depth)
+        if n == 0:
+            continue
+        kept = reduce_manifold(scratch_point, scratch_depth, n, normal, keep)
+        if count + kept > len(body_a) or manifolds >= len(manifold_start):
+            return False
+        for k in range(kept):
+            c = count + k
+            src = keep[k]
+            body_a[c], body_b[c] = a, b
+            for e in range(3):
+                point[c, e] = scratch_point[src, e]
+                normal_out[c, e] = normal[e]
+            depth[c] = scratch_depth[src]
+            dx = scratch_point[src, 0] - position[a, 0]
+            dy = scratch_point[src, 1] - position[a, 1]
+            dz = scratch_point[src, 2] - position[a, 2]
+            for e in range(3):  # the point in A's frame: its identity for the warm start
+                local_a[c, e] = rotation[a, 0, e] * dx + rotation[a, 1, e] * dy + rotation[a, 2, e] * dz
+        manifold_start[manifolds], manifold_size[manifolds] = count, kept
+        manifold_a[manifolds], manifold_b[manifolds] = a, key_b
+        count += kept
+        manifolds += 1
+        contacts.count[0], contacts.manifold_count[0] = count, manifolds
     return True

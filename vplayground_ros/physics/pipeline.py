@@ -93,10 +93,9 @@ def detect(bodies, broad, playground, contacts, settings):
     if not build_index(broad.moving, moving_ids, bodies.aabb_min, bodies.aabb_max,
                        bodies.octree_level, s.root_min, s.root_size):
         return GROW_INDEX
-    pairs = find_body_pairs(moving_ids, broad.moving, broad.static, bodies.aabb_min,
-                            bodies.aabb_max, bodies.octree_level, bodies.awake,
-                            bodies.static_indexed, s.root_min, s.root_size, broad.stamp,
-                            broad.scratch, broad.pair_a, broad.pair_b)
+    pairs = find_body_pairs(broad.moving, broad.static, bodies.aabb_min, bodies.aabb_max,
+                            bodies.awake, bodies.static_indexed, s.root_min, s.root_size,
+                            broad.pair_a, broad.pair_b)
     if pairs < 0:
         return GROW_PAIRS
     broad.pair_count[0] = pairs

@@ -126,6 +126,7 @@ def drive_vehicles(vehicles, bodies, broad, playground, ground_enabled, ground_h
     springs are evaluated on the same state, then applied; the tyres follow one by one, each
     seeing what the others already did (so four wheels never cancel the same slip four times)."""
     position, velocity = bodies.position, bodies.velocity
+    broad.stamp[:] = -1  # the rays' query ids repeat every step
     for v in range(len(vehicles.active)):
         if not vehicles.active[v]:
             continue
