@@ -1,12 +1,17 @@
 # make run  : set up .venv and run the simulator node on the built-in default scene
 # make test : set up .venv and run the whole test suite
 # make bench: this engine against PyBullet and MuJoCo, and the node's overhead (minutes; not in make test)
+# make fuzz : the hostile-input tests with FUZZ_EXAMPLES (default 5000) per property, randomised
+# make soak : the node under steady traffic for DURATION seconds (default 1200); memory, RTF, late ticks
 PYTHON ?= python3.11
 VENV   ?= .venv
 PY      = $(VENV)/bin/python
 STAMP   = $(VENV)/.installed
 
-.PHONY: run test bench setup clean
+FUZZ_EXAMPLES ?= 5000
+DURATION      ?= 1200
+
+.PHONY: run test bench fuzz soak setup clean
 
 setup: $(STAMP)
 
@@ -28,6 +33,13 @@ run: $(STAMP)
 
 test: $(STAMP)
 	$(PY) -m pytest -q test
+
+fuzz: $(STAMP)
+	VPLAYGROUND_FUZZ_EXAMPLES=$(FUZZ_EXAMPLES) $(PY) -m pytest -q -p no:logging test/test_fuzz.py
+
+soak: $(STAMP)
+	mkdir -p bench/results
+	$(PY) bench/soak.py --duration $(DURATION) --output bench/results/soak_$$(date +%Y%m%d_%H%M%S).txt
 
 bench: $(STAMP)
 	$(PY) -m pip install --quiet -e ".[bench]"
