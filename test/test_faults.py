@@ -111,8 +111,8 @@ def test_a_failing_step_pauses_instead_of_ending_the_loop(sim):
         world.step = original  # once
         raise RuntimeError("engine bug")
     sim.call(lambda w: setattr(w, "step", explode))
-    wait_for(lambda: sim.fault_count == 1)
-    assert sim.paused and sim.faults == ["step: RuntimeError: engine bug"]
+    wait_for(lambda: sim.fault_count == 1 and sim.paused)
+    assert sim.faults == ["step: RuntimeError: engine bug"]
     assert Requests(sim).pause(False)[0]  # and it plays on
     still_stepping(sim)
 

@@ -154,8 +154,8 @@ class Simulation:
                 try:
                     world.step(steps)
                 except Exception as error:  # an engine bug: keep the loop (and the node) alive
-                    self._fault("step", error)
                     self.paused, self._pending_steps = True, 0  # not the same failure 100 times a second
+                    self._fault("step", error)
                 self.step_seconds += time.perf_counter() - started
                 self.removed += world.remove_escaped()
                 self._publish()
