@@ -3,6 +3,7 @@ simulator in a process where rclpy and every ROS message package fail to import:
 window must work without a ROS install."""
 import json
 import math
+import random
 import re
 import struct
 import subprocess
@@ -207,3 +208,52 @@ def test_foxglove_parser_accepts_every_advertised_schema(client, tmp_path):
     path.write_text(json.dumps(schemas))
     parsed = json.loads(run_script("parse_schemas.js", ROSMSG_PARSER, path))
     assert set(parsed) == set(schemas) and all(count >= 1 for count in parsed.values())
+
+
+def test_hostile_client_changes_nothing_and_the_server_keeps_serving(client):
+    """Random bytes and malformed JSON on every input channel, garbage service payloads in
+    both encodings, and parameter sets of every parameter with values of the wrong kind: no
+    crash, no body added or removed, the simulation still running."""
+    rng = random.Random(7)
+    client.call(f"{NS}/pause", {"data": True})
+    before = sorted(m.name for m in client.call(f"{NS}/get_entities", {}).markers)
+    parameters = client.get_parameters()
+    tried = 0
+    for topic in ("/cmd_vel", "/clicked_point", "/initialpose", f"{NS}/push"):
+        for encoding in ("cdr", "json"):
+            channel = client.advertise(topic, encoding, "geometry_msgs/msg/Twist")
+            for _ in range(25):
+                junk = rng.choice([bytes(rng.getrandbits(8) for _ in range(rng.randrange(0, 64))),
+                                   b"[" * 5000, b'{"linear": "fast"}', b"\x00\x01\x00\x00", b"null",
+                                   json.dumps({"header": {"frame_id": "x" * 10000}}).encode()])
+                client.publish(channel, junk)
+                tried += 1
+    for name, service in client.services.items():
+        if name.endswith(("/pause", "/step", "/reset", "/wake_all", "/set_freezing", "/load_scene")):
+            continue  # well-formed calls of these change state by design; their bad input is tested above
+        for _ in range(10):
+            encoding = rng.choice([b"cdr", b"json", b"protobuf"])
+            junk = bytes(rng.getrandbits(8) for _ in range(rng.randrange(0, 48)))
+            call = 10**6 + tried
+            client.ws.send(struct.pack("<BIII", 2, service["id"], call, len(encoding)) + encoding + junk)
+            assert client.wait(lambda: call in client.responses)
+            client.responses.pop(call)
+            tried += 1
+    wrong = ["text", ["a", "b"], {"nested": {"deep": [1]}}, 1e308, -1, True, [0.0] * 100]
+    for name, current in parameters.items():
+        for value in wrong:
+            if isinstance(value, bool) and isinstance(current, bool):
+                continue  # a right kind for a switch (the others are wrong or out of range for all)
+            client.set_parameters({name: value})
+            tried += 1
+    # A null value or a mixed array is refused by the protocol layer itself, with an error status.
+    for value in (None, [1, "a"]):
+        errors = sum(s["level"] == 2 for s in client.statuses)
+        client.ws.send(json.dumps({"op": "setParameters", "parameters": [{"name": "gravity", "value": value}]}))
+        assert client.wait(lambda: sum(s["level"] == 2 for s in client.statuses) > errors)
+    assert tried > 400
+    assert client.get_parameters() == parameters
+    assert sorted(m.name for m in client.call(f"{NS}/get_entities", {}).markers) == before
+    assert client.call(f"{NS}/pause", {"data": False}).success
+    stamp = client.times[-1]
+    assert client.wait(lambda: client.times[-1] > stamp)  # still stepping
