@@ -201,9 +201,21 @@ def test_scene_services(ros):
     names = list(ros.sim.snapshot.names)
     assert ros.call(LoadMap, f"{NS}/load_scene", LoadMap.Request(map_url=str(tmp_path / "bad.yaml"))).result == 2
     assert ros.sim.snapshot.names == names  # the old world stays
+    variant = tmp_path / "slower.yaml"
+    scene = yaml.safe_load(path.read_text())
+    saved_rate = scene["settings"]["steps_per_second"]
+    scene["settings"]["steps_per_second"] = 100
+    variant.write_text(yaml.safe_dump(scene))
+    assert ros.call(LoadMap, f"{NS}/load_scene", LoadMap.Request(map_url=str(variant))).result == 0
+    assert ros.node.get_parameter("steps_per_second").value == 100  # parameters follow the loaded scene
     assert ros.call(LoadMap, f"{NS}/load_scene", LoadMap.Request(map_url=str(path))).result == 0
+    assert ros.node.get_parameter("steps_per_second").value == saved_rate
     assert ros.call(Trigger, f"{NS}/wake_all", Trigger.Request()).success
     assert ros.call(SetBool, f"{NS}/set_freezing", SetBool.Request(data=True)).message.startswith("ALREADY_IN_TARGET_STATE:")
+    assert ros.call(SetBool, f"{NS}/set_freezing", SetBool.Request(data=False)).success
+    assert ros.node.get_parameter("freezing.enabled").value is False  # the parameter follows the service
+    assert ros.call(SetBool, f"{NS}/set_freezing", SetBool.Request(data=True)).success
+    assert ros.node.get_parameter("freezing.enabled").value is True
     features = ros.call(Trigger, f"{NS}/get_simulator_features", Trigger.Request())
     assert features.success and "vplayground_yaml" in features.message
     ros.text("spawn", "{name: temporary}")

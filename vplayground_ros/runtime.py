@@ -50,6 +50,17 @@ class Runtime:
         while not self._stop.is_set():
             self._stop.wait(self.broadcaster.tick())
 
+    def sync_parameters(self):
+        """After a service changed the world's settings (a scene load, a reset, ~/set_freezing):
+        the physics parameters take the world's values, so `ros2 param get` and Foxglove's
+        Parameters panel tell the truth."""
+        current = parameter_table(self.sim.world, self.options, self.requests)
+        changed = {p.name: p.default for p in current if p.name in PHYSICS and p.default != self.parameters[p.name]}
+        if changed:
+            ok, reason = self.set_parameters(changed)
+            if not ok:
+                self.log.warning(f"parameters not updated from the world: {reason}")
+
     def _apply(self, changed):
         """A validated parameter change, acting on the running simulation."""
         physics = settings_from({n: v for n, v in changed.items() if n in PHYSICS})
