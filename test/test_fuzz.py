@@ -377,7 +377,7 @@ def edit_request(draw):
                 st.fixed_dictionaries({0: st.fixed_dictionaries({"radius": bad_number(0.0, 1e9, True)})}),
                 st.fixed_dictionaries({1: st.dictionaries(st.sampled_from(["tyre", "colour"]), JUNK, min_size=1)}),
                 NOT_NUMBERS)}),
-            st.fixed_dictionaries({"chassis": JUNK}), NOT_NUMBERS))}
+            st.fixed_dictionaries({"chassis": JUNK}), NOT_NUMBERS.filter(lambda v: v is not None)))}  # null: no edit
         if request["entity"] == "tower_1":
             request["vehicle"] = {"engine_power": 10.0}  # not a vehicle
         style = "block" if style == "json" else style  # wheel indices are integers: YAML only
@@ -757,3 +757,50 @@ def test_a_mesh_outside_the_scene_directories_is_refused(harness, tmp_path_facto
         assert harness.requests.load_scene(str(default))[0] == api.MAP_SUCCESS
     finally:
         harness.requests.scene_directories = [harness.directory]
+
+
+# ---------------------------------------------------------------------------- parameters
+PARAMETER_VALUES = st.one_of(  # what a ROS or Foxglove parameter can carry
+    st.booleans(), st.integers(-2 ** 63, 2 ** 63 - 1), st.floats(), BAD_FLOATS.filter(lambda v: isinstance(v, float)),
+    st.text(max_size=60), st.binary(max_size=20), st.lists(st.booleans(), max_size=4),
+    st.lists(st.integers(-2 ** 63, 2 ** 63 - 1), max_size=4), st.lists(st.floats(), max_size=4),
+    st.lists(st.text(max_size=10), max_size=4))
+
+
+@pytest.fixture(scope="module")
+def runtime(harness):
+    import argparse
+    import logging
+
+    from vplayground_ros.runtime import Runtime
+    options = argparse.Namespace(scene="default_scene.yaml", real_time_factor=1.0, start_paused=True, duration=None,
+                                 record=None, record_split_size=0, foxglove=None)
+    return Runtime(harness.sim, options, logging.getLogger("test_fuzz"))
+
+
+def parameter_names():
+    import argparse
+
+    from vplayground_ros.parameters import parameter_table
+    world = load_world({"version": 1})
+    options = argparse.Namespace(scene="", real_time_factor=1.0, start_paused=False, duration=None, record=None,
+                                 record_split_size=0, foxglove=None)
+    return [spec.name for spec in parameter_table(world, options, Requests(Simulation(world)))] + ["no_such.parameter"]
+
+
+@pytest.mark.parametrize("name", parameter_names())
+@settings(FUZZ, max_examples=max(20, FUZZ_EXAMPLES // 4))
+@given(value=PARAMETER_VALUES)
+def test_parameter_sets_refuse_bad_values_and_change_nothing(harness, runtime, name, value):
+    store = runtime.parameters
+    TRIED["parameters"] += 1
+    values, before = dict(store.values), harness.fingerprint()
+    ok, reason = store.set({name: value})
+    if ok:  # a valid value of the right type: put the old one back for the next example
+        ACCEPTED["parameters"] += 1
+        assert store.set({name: values[name]})[0]
+    else:
+        assert name in reason and len(reason) <= MAX_MESSAGE, reason
+        assert store.values == values
+        assert harness.fingerprint() == before
+    harness.steps_on()
