@@ -79,6 +79,15 @@ def test_runs_without_ros_and_advertises_every_topic_and_service(client, server)
     assert {"clientPublish", "parameters", "services", "time"} <= set(client.server_info["capabilities"])
 
 
+def test_a_taken_port_is_a_clear_error(server):
+    port = server[0].rsplit(":", 1)[1]
+    result = subprocess.run([sys.executable, "-m", "vplayground_ros.cli", "--no-ros", "--no-record", "--foxglove", port],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 2
+    assert f"cannot listen on 127.0.0.1:{port}" in result.stdout + result.stderr
+    assert "Traceback" not in result.stdout + result.stderr
+
+
 def test_subscribed_frames_decode_to_their_types_stamped_with_sim_time(client):
     client.subscribe(f"{NS}/bodies/poses", "/odom", f"{NS}/bodies/markers", "/diagnostics", "/clock", "/tf",
                      f"{NS}/scene/markers")

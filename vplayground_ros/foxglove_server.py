@@ -40,11 +40,14 @@ class FoxgloveServer:
         self.client_channels = {}  # (client id, channel id) -> (subscription key, decode)
         self.subscriptions = 0
         self._lock = threading.Lock()
-        self.server = foxglove.start_server(
-            name="vplayground", host=host, port=port, context=self.context,
-            capabilities=[Capability.ClientPublish, Capability.Parameters, Capability.Services, Capability.Time],
-            server_listener=self, supported_encodings=["cdr", "json"],
-            services=[self._service(s) for s in runtime.services])
+        try:
+            self.server = foxglove.start_server(
+                name="vplayground", host=host, port=port, context=self.context,
+                capabilities=[Capability.ClientPublish, Capability.Parameters, Capability.Services, Capability.Time],
+                server_listener=self, supported_encodings=["cdr", "json"],
+                services=[self._service(s) for s in runtime.services])
+        except RuntimeError as error:  # the SDK's FoxgloveError: the port is taken, say
+            raise OSError(f"the Foxglove server cannot listen on {host}:{port}: {error}") from None
         self.url = f"ws://{host}:{self.server.port}"
         runtime.parameters.listen(self._parameters_changed)
         runtime.broadcaster.add_sink(self)
