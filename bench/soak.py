@@ -132,7 +132,18 @@ class Soak:
         self.pending = still
 
 
+STOP = []  # set by SIGINT/SIGTERM: the soak ends early and still reports what it measured
+
+
+def interrupted(started):
+    if STOP:
+        print(f"soak: interrupted after {time.monotonic() - started:.0f} s; reporting so far", flush=True)
+    return bool(STOP)
+
+
 def run(args):
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: STOP.append(True))
     import rclpy
 
     bag_dir = Path(tempfile.mkdtemp(prefix="vplayground_soak_"))
@@ -145,7 +156,8 @@ def run(args):
     process = subprocess.Popen(command, stdout=node_log, stderr=subprocess.STDOUT, env=env)
     print(f"soak: {' '.join(command)} (pid {process.pid}), {args.duration:g} s, warm-up {args.warmup:g} s, "
           f"node log {log_path}", flush=True)
-    rclpy.init()
+    from rclpy.signals import SignalHandlerOptions
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)  # Ctrl-C ends the loop, not rclpy
     node = rclpy.create_node("vplayground_soak")
     soak = Soak(args, node, process.pid)
     minutes = []
@@ -157,7 +169,7 @@ def run(args):
         samples = []  # (wall s since start, sim s, rss bytes)
         sim_start = soak.sim_time
         minute_start = (started, soak.sim_time, 0)
-        while time.monotonic() - started < args.duration:
+        while time.monotonic() - started < args.duration and not interrupted(started):
             if process.poll() is not None:
                 raise RuntimeError(f"the node exited with {process.returncode}")
             rclpy.spin_once(node, timeout_sec=0.01)
@@ -200,7 +212,7 @@ def run(args):
         except subprocess.TimeoutExpired:
             process.kill()
         node.destroy_node()
-        rclpy.shutdown()
+        rclpy.try_shutdown()
         node_log.close()
 
     from vplayground_ros.recorder import summary
