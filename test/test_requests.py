@@ -1,4 +1,7 @@
 """The SPEC 6.3 request handlers, ROS-free (the node and the Foxglove server share them)."""
+import json
+import time
+
 import numpy as np
 import pytest
 import yaml
@@ -149,3 +152,15 @@ def test_runner_steps_in_real_time_and_applies_commands_between_batches():
     assert sim.wait(30)
     assert sim.world.time == pytest.approx(1.0)
     assert seen == sorted(seen) and seen[-1] == pytest.approx(1.0)
+
+
+def test_a_full_world_is_served_in_linear_time():
+    # 10,000 bodies (the default max_bodies): spawn, list and remove stay well under a second
+    # each; a per-entity scan of the vehicles made ~/get_entities quadratic (~10 s).
+    requests = Requests(Simulation(load_world({"version": 1})))
+    items = [{"position": [k % 100 - 50, k // 100 - 50, 1]} for k in range(10_000)]
+    started = time.perf_counter()
+    assert requests.spawn(json.dumps(items))[0]
+    assert len(requests.entities()) == 10_000
+    assert requests.remove("{all: true}")[0]
+    assert time.perf_counter() - started < 5.0
