@@ -164,3 +164,21 @@ def test_a_full_world_is_served_in_linear_time():
     assert len(requests.entities()) == 10_000
     assert requests.remove("{all: true}")[0]
     assert time.perf_counter() - started < 5.0
+
+
+def test_bulk_removal_wakes_what_removal_one_by_one_wakes():
+    def frozen_row():  # two rows of touching frozen boxes, far apart
+        return load_world({"version": 1, "bodies": [
+            {"name": f"b{k}", "position": [k + (50.0 if k >= 10 else 0.0), 0, 0.5], "frozen": True}
+            for k in range(20)]})
+    one, bulk = frozen_row(), frozen_row()
+    doomed = ["b3", "b12", "b15", "b19"]
+    for name in doomed:
+        one.remove_body(name)
+    bulk.remove_bodies(doomed)
+    assert bulk.body_names() == one.body_names()
+    frozen = bulk.state()["frozen"]
+    assert np.array_equal(frozen, one.state()["frozen"]) and 0 < frozen.sum() < len(frozen)
+    with pytest.raises(KeyError, match="nobody"):
+        bulk.remove_bodies(["b0", "nobody"])
+    assert "b0" in bulk.body_names()

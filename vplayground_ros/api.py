@@ -232,8 +232,7 @@ class Requests:
             for _, vehicle, spec, _ in prepared:
                 added.append(world.add_vehicle(spec) if vehicle else world.add_body(spec))
         except Exception:
-            for name in added:  # all or nothing
-                world.remove_body(name)
+            world.remove_bodies(added)  # all or nothing
             raise
         return reply(OK, ", ".join(added))
 
@@ -310,8 +309,7 @@ class Requests:
         if strict and doomed and doomed[0] not in present:
             raise RequestError(NOT_FOUND, f"no entity named {specs.quote(doomed[0])}")
         doomed = [name for name in doomed if name in present]  # a filter's may have gone meanwhile
-        for name in doomed:
-            world.remove_body(name)
+        world.remove_bodies(doomed)
         return reply(OK, ", ".join(doomed))
 
     @handled
@@ -375,9 +373,7 @@ class Requests:
         initial.update({v["name"]: v for v in self.initial["vehicles"]})
         done = []
         if scope & SCOPE_SPAWNED:
-            for name in world.body_names():
-                if name not in initial:
-                    world.remove_body(name)
+            world.remove_bodies([name for name in world.body_names() if name not in initial])
             done.append("spawned removed")
         if scope & SCOPE_STATE:
             present = set(world.body_names())

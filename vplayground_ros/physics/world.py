@@ -261,6 +261,42 @@ class World:
         slot = self._slot(name)
         self._wake_touching(slot)
         self._forget_contacts(slot)
+        self._release(name, slot)
+
+    def remove_bodies(self, names):
+        """Removes many bodies at once; a KeyError for an unknown name removes none. What they
+        touch is woken and their contacts dropped in one pass: one by one, each removal scans
+        every frozen body and contact, and removing 10,000 resting boxes took ~9 s."""
+        names = list(dict.fromkeys(names))
+        slots = np.array([self._slot(name) for name in names], dtype=np.int64)
+        if len(slots) == 0:
+            return
+        b = self._bodies
+        doomed = np.zeros(len(b.active), dtype=bool)
+        doomed[slots] = True
+        sleepers = np.nonzero(b.active & b.frozen & ~doomed)[0]
+        if len(sleepers):
+            lo, hi = box_bounds(b.position[slots], b.orientation[slots], b.half_extents[slots])
+            s_lo, s_hi = box_bounds(b.position[sleepers], b.orientation[sleepers], b.half_extents[sleepers])
+            touched = np.zeros(len(sleepers), dtype=bool)
+            rows = max(1, 4_000_000 // len(sleepers))  # pair tests per pass, bounding the memory
+            for k in range(0, len(slots), rows):
+                overlap = np.all((s_lo[None] <= hi[k:k + rows, None] + CONTACT_MARGIN)
+                                 & (lo[k:k + rows, None] - CONTACT_MARGIN <= s_hi[None]), axis=2)
+                touched |= overlap.any(axis=0)
+            for other in sleepers[touched]:
+                self._wake(other)
+        c = self._contacts[0]
+        n = int(c.count[0])
+        body_b = c.body_b[:n]
+        involved = doomed[c.body_a[:n]] | ((body_b >= 0) & doomed[np.maximum(body_b, 0)])
+        c.impulse[:n][involved] = 0.0
+        c.friction_world[:n][involved] = 0.0
+        for name, slot in zip(names, slots):
+            self._release(name, int(slot))
+
+    def _release(self, name, slot):
+        """Frees a body's slot and name (what it touched already woken)."""
         b = self._bodies
         if b.static_indexed[slot]:
             self._broad.stale[0] += 1
@@ -315,8 +351,7 @@ class World:
         if self.ground is not None:
             bad |= b.position[slots, 2] < self.ground["height"] - WORLD_RADIUS
         names = [self._names[slot] for slot in slots[bad]]
-        for name in names:
-            self.remove_body(name)
+        self.remove_bodies(names)
         return names
 
     def wake_all(self):
