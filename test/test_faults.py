@@ -4,9 +4,11 @@ listener or step does not end the loop; the recorder survives a full disk and an
 path with `error` set (the node puts it on /diagnostics) while the simulation goes on.
 (A kill -9 leaving a recoverable bag is test_bag.test_a_killed_run_recovers.)"""
 import os
+import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -171,3 +173,77 @@ def test_the_node_runs_to_its_duration_on_a_full_disk():
     output = result.stdout + result.stderr
     assert result.returncode == 0, output
     assert "No space left on device" in output
+
+
+def test_the_node_refuses_a_hostile_corpus_keeps_stepping_and_finishes_its_bag(tmp_path):
+    """End to end through ROS: the services' replies are coded, /clock goes on, the bag is whole."""
+    rclpy = pytest.importorskip("rclpy")
+    from diagnostic_msgs.srv import AddDiagnostics
+    from nav_msgs.srv import LoadMap
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rosgraph_msgs.msg import Clock
+
+    from vplayground_ros.api import MAX_PAYLOAD
+    from vplayground_ros.recorder import summary
+
+    bag = tmp_path / "hostile.mcap"
+    node_process = subprocess.Popen([sys.executable, "-m", "vplayground_ros.cli", "--real-time-factor", "1",
+                                     "--no-foxglove", "--record", str(bag)], cwd=tmp_path,
+                                    stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    context = Context()
+    rclpy.init(context=context)
+    client = rclpy.create_node("hostile_client", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(client)
+    clock = []
+    client.create_subscription(Clock, "/clock", lambda msg: clock.append(msg.clock.sec + 1e-9 * msg.clock.nanosec), 10)
+    services = {name: client.create_client(AddDiagnostics, f"/vplayground/{name}")
+                for name in ("spawn", "remove", "save_scene")}
+    load = client.create_client(LoadMap, "/vplayground/load_scene")
+
+    def call(service, request, timeout=30.0):
+        future = service.call_async(request)
+        executor.spin_until_future_complete(future, timeout_sec=timeout)
+        assert future.done()
+        return future.result()
+
+    bomb = "{mass: [&a [1,1,1,1,1,1,1,1,1,1], " + ", ".join(
+        f"&{c} [" + ", ".join([f"*{p}"] * 10) + "]" for p, c in zip("abcdefg", "bcdefgh")) + "]}"
+    corpus = [
+        ("spawn", bomb, "RESULT_OPERATION_FAILED: spawn.mass: expected a number"),
+        ("spawn", "[" + ",".join(["{}"] * 300_000) + "]", "RESULT_OPERATION_FAILED: spawn of 300000"),
+        ("spawn", "x" * (MAX_PAYLOAD + 1), "RESULT_OPERATION_FAILED: request is larger"),
+        ("spawn", "[" * 5000 + "]" * 5000, "RESULT_OPERATION_FAILED: request is nested too deeply"),
+        ("spawn", "{\"mass\": 1e999999, \"name\": \"c\"}", "RESULT_OPERATION_FAILED: spawn.mass: must be finite"),
+        ("spawn", '{"name": "car\\n"}', "NAME_INVALID: spawn.name"),
+        ("spawn", "{name: far, position: [0, 0, 90000]}", "INVALID_POSE: spawn.position"),
+        ("remove", '{"filter": "^(a|aa)+$"}', "RESULT_NOT_FOUND:"),
+        ("remove", "{entity: [car]}", "RESULT_NOT_FOUND:"),
+        ("save_scene", "/etc/vplayground.yaml", "RESULT_OPERATION_FAILED: save_scene.path"),
+        ("save_scene", f"../../../../../../tmp/escape_{os.getpid()}.yaml", "RESULT_OPERATION_FAILED: save_scene.path"),
+    ]
+    try:
+        assert all(s.wait_for_service(timeout_sec=60.0) for s in (*services.values(), load))
+        for service, payload, prefix in corpus:
+            response = call(services[service], AddDiagnostics.Request(load_namespace=payload))
+            assert not response.success and response.message.startswith(prefix), (service, response.message[:200])
+        for path in ("/etc/passwd", "../../../../etc/hosts.yaml", str(tmp_path / "missing.yaml")):
+            assert call(load, LoadMap.Request(map_url=path)).result == LoadMap.Response.RESULT_MAP_DOES_NOT_EXIST
+        executor.spin_once(timeout_sec=0.5)
+        before = clock[-1]
+        end = time.monotonic() + 10.0
+        while clock[-1] < before + 0.5 and time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.1)
+        assert clock[-1] >= before + 0.5  # still stepping, in real time
+        response = call(services["spawn"], AddDiagnostics.Request(load_namespace="{name: fine, position: [0, 0, 5]}"))
+        assert response.success, response.message
+    finally:
+        executor.shutdown()
+        client.destroy_node()
+        rclpy.try_shutdown(context=context)
+        node_process.send_signal(signal.SIGINT)
+        output, _ = node_process.communicate(timeout=60)
+    assert node_process.returncode == 0, output[-2000:]
+    counts = summary(bag)  # a summary: the bag was finished
+    assert counts["/clock"] > 10 and not Path(f"/tmp/escape_{os.getpid()}.yaml").exists()
