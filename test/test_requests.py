@@ -182,3 +182,13 @@ def test_bulk_removal_wakes_what_removal_one_by_one_wakes():
     with pytest.raises(KeyError, match="nobody"):
         bulk.remove_bodies(["b0", "nobody"])
     assert "b0" in bulk.body_names()
+
+
+def test_renaming_keeps_names_valid_and_stays_linear(requests):
+    long = "n" * 64  # the longest name: its _2 must not make it 66 characters
+    assert requests.spawn(f"{{name: {long}}}")[0]
+    ok, message = requests.spawn(f"{{name: {long}, allow_renaming: true}}")
+    assert ok and message == f"RESULT_OK: {'n' * 62}_2"
+    started = time.perf_counter()
+    ok, message = requests.spawn(json.dumps([{"name": "a", "allow_renaming": True}] * 5000))
+    assert ok and message.endswith("a_5001") and time.perf_counter() - started < 5.0

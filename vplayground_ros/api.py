@@ -545,10 +545,16 @@ def unique_name(name, taken, suffixes):
     """name_2, name_3, ...: the first not taken. `suffixes` remembers where each name's search
     stopped, so renaming thousands of copies of one name stays linear."""
     k = suffixes.get(name, 2)
-    while f"{name}_{k}" in taken:
+    while candidate(name, k) in taken:
         k += 1
     suffixes[name] = k + 1
-    return f"{name}_{k}"
+    return candidate(name, k)
+
+
+def candidate(name, k):
+    """name_k, the name shortened so that it stays within the 64 characters a name may have."""
+    suffix = f"_{k}"
+    return name[:64 - len(suffix)] + suffix
 
 
 def describe(world, name, vehicles=None):
