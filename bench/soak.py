@@ -165,7 +165,7 @@ def run(args):
         soak.wait_ready()
         started = time.monotonic()
         next_drive = next_traffic = next_sample = started
-        rss_start = None
+        rss_start, late_start = None, 0
         samples = []  # (wall s since start, sim s, rss bytes)
         sim_start = soak.sim_time
         minute_start = (started, soak.sim_time, 0)
@@ -187,6 +187,7 @@ def run(args):
                 samples.append((now - started, soak.sim_time, rss))
                 if rss_start is None and now - started >= args.warmup:
                     rss_start = (now - started, rss)
+                    late_start = int(soak.diagnostics.get("vplayground: simulation", {}).get("late_ticks", 0))
             if now - minute_start[0] >= 60.0:
                 wall = now - minute_start[0]
                 rtf = (soak.sim_time - minute_start[1]) / wall
@@ -234,6 +235,7 @@ def run(args):
         "rtf_per_minute_min": min(rtf_values) if rtf_values else None,
         "rtf_per_minute_max": max(rtf_values) if rtf_values else None,
         "late_ticks": int(sim.get("late_ticks", -1)),
+        "late_ticks_after_warmup": int(sim.get("late_ticks", -1)) - late_start,
         "step_ms_mean": float(sim.get("step_ms", "nan")),
         "requests": dict(soak.done),
         "request_latency_ms_p50": round(1e3 * sorted(soak.latencies)[len(soak.latencies) // 2], 2) if soak.latencies else None,
