@@ -14,6 +14,12 @@ from .constants import WARM_START_MATCH_DISTANCE
 GROUND = -1
 PLAYGROUND = -2
 
+# A solver row: the unit direction d, the lever arms r_A x d and r_B x d, and the angular
+# responses I_A^-1 (r_A x d) and I_B^-1 (r_B x d), 3 each: 15 numbers instead of a 12-wide
+# Jacobian and its response (24), so a sweep streams less memory.
+DIRECTION, ARM_A, ARM_B, TURN_A, TURN_B = 0, 3, 6, 9, 12
+ROW_SIZE = 15
+
 Contacts = namedtuple("Contacts", [
     "count",              # (1,) points in use
     "body_a", "body_b",   # (K,) int64
@@ -21,11 +27,12 @@ Contacts = namedtuple("Contacts", [
     "normal",             # (K, 3) unit, from A to B
     "depth",              # (K,) m
     "local_a",            # (K, 3) the point in A's body frame: identity across steps
-    # The solver's view: each point has three rows (normal, tangent 1, tangent 2). A row's
-    # Jacobian J (12: A's linear and angular part, then B's) gives the relative velocity along
-    # it as J . (v_A, v_B); `response` is M^-1 J^T, what a unit impulse does to the velocities.
+    # The solver's view: each point has three rows (normal, tangent 1, tangent 2), laid out as
+    # DIRECTION ... TURN_B say: what the relative velocity along a row is made of, and what a
+    # unit impulse along it does to the two bodies' velocities.
     "velocity_a", "velocity_b",  # (K,) rows of the velocity arrays (the static world's last row)
-    "jacobian", "response",      # (K, 3, 12)
+    "rows",               # (K, 3, ROW_SIZE)
+    "row_inv_mass",       # (K, 2) A's and B's inverse mass in the solver (0 when static)
     "row_mass",           # (K, 3) effective mass 1 / (J M^-1 J^T) of each row
     "restitution",        # (K,) pair elasticity
     "friction_coefficient",  # (K,) pair static or dynamic coefficient, chosen per step
@@ -48,8 +55,8 @@ def allocate_contacts(points, manifolds):
     table = 1 << int(np.ceil(np.log2(2 * manifolds + 2)))
     return Contacts(
         count=i(1), body_a=i(points), body_b=i(points), point=f(3), normal=f(3), depth=f(),
-        local_a=f(3), velocity_a=i(points), velocity_b=i(points), jacobian=f(3, 12),
-        response=f(3, 12), row_mass=f(3), restitution=f(), friction_coefficient=f(),
+        local_a=f(3), velocity_a=i(points), velocity_b=i(points), rows=f(3, ROW_SIZE),
+        row_inv_mass=f(2), row_mass=f(3), restitution=f(), friction_coefficient=f(),
         approach_speed=f(), collision_impulse=f(), collision_friction=f(2), impulse=f(),
         friction=f(2), friction_world=f(3), position_impulse=f(), collision_target=f(),
         contact_target=f(), position_target=f(), solve_order=i(points), manifold_count=i(1),

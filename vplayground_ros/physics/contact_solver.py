@@ -28,6 +28,7 @@ from numba import njit
 
 from .constants import (LINEAR_SLOP, MAX_CORRECTION_SPEED, POSITION_CORRECTION,
                         RESTITUTION_THRESHOLD, STICKING_SPEED)
+from .contact import ARM_A, ARM_B, DIRECTION, TURN_A, TURN_B
 from .math3d import cross
 
 # A row whose target is this low is not solved in that pass.
@@ -48,13 +49,14 @@ def tangent_basis(n):
 
 @njit(cache=True, nogil=True)
 def prepare_contacts(contacts, bodies, ground_material, gravity, dt):
-    """Rows (Jacobians, responses, effective masses), pair materials, the targets of the three
-    passes, and the warm-start friction projected onto this step's tangents."""
+    """Rows (directions, lever arms, angular responses, effective masses), pair materials, the
+    targets of the three passes, and the warm-start friction projected onto this step's
+    tangents."""
     ground_elasticity, ground_static, ground_dynamic = ground_material
     position, velocity = bodies.position, bodies.velocity
     inv_mass, inv_inertia = bodies.solver_inv_mass, bodies.inv_inertia_world
     static_row = len(bodies.active)
-    jac, resp, row_mass = contacts.jacobian, contacts.response, contacts.row_mass
+    rows, row_mass, row_inv_mass = contacts.rows, contacts.row_mass, contacts.row_inv_mass
     inv_dt = 1.0 / dt
     for c in range(contacts.count[0]):
         a, b = contacts.body_a[c], contacts.body_b[c]
@@ -64,21 +66,22 @@ def prepare_contacts(contacts, bodies, ground_material, gravity, dt):
         row_b = b if b >= 0 else static_row
         r_b = (p[0] - position[b, 0], p[1] - position[b, 1], p[2] - position[b, 2]) if b >= 0 else (0.0, 0.0, 0.0)
         contacts.velocity_a[c], contacts.velocity_b[c] = a, row_b
+        m_a = inv_mass[a]
+        m_b = inv_mass[b] if b >= 0 else 0.0
+        row_inv_mass[c, 0], row_inv_mass[c, 1] = m_a, m_b
         t1, t2 = tangent_basis(n)
         for row, d in enumerate((n, t1, t2)):
             arm_a, arm_b = cross(r_a, d), cross(r_b, d)
-            k = 0.0
+            k = (m_a + m_b) * (d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
             for e in range(3):
-                jac[c, row, e], jac[c, row, 3 + e] = -d[e], -arm_a[e]
-                jac[c, row, 6 + e], jac[c, row, 9 + e] = d[e], arm_b[e]
-                resp[c, row, e] = -inv_mass[a] * d[e]
-                resp[c, row, 6 + e] = inv_mass[b] * d[e] if b >= 0 else 0.0
-                resp[c, row, 3 + e] = -(inv_inertia[a, e, 0] * arm_a[0] + inv_inertia[a, e, 1] * arm_a[1]
-                                        + inv_inertia[a, e, 2] * arm_a[2])
-                resp[c, row, 9 + e] = (inv_inertia[b, e, 0] * arm_b[0] + inv_inertia[b, e, 1] * arm_b[1]
-                                       + inv_inertia[b, e, 2] * arm_b[2]) if b >= 0 else 0.0
-            for e in range(12):
-                k += jac[c, row, e] * resp[c, row, e]
+                turn_a = (inv_inertia[a, e, 0] * arm_a[0] + inv_inertia[a, e, 1] * arm_a[1]
+                          + inv_inertia[a, e, 2] * arm_a[2])
+                turn_b = (inv_inertia[b, e, 0] * arm_b[0] + inv_inertia[b, e, 1] * arm_b[1]
+                          + inv_inertia[b, e, 2] * arm_b[2]) if b >= 0 else 0.0
+                rows[c, row, DIRECTION + e] = d[e]
+                rows[c, row, ARM_A + e], rows[c, row, ARM_B + e] = arm_a[e], arm_b[e]
+                rows[c, row, TURN_A + e], rows[c, row, TURN_B + e] = turn_a, turn_b
+                k += arm_a[e] * turn_a + arm_b[e] * turn_b
             row_mass[c, row] = 1.0 / k if k > 0.0 else 0.0
         if b >= 0:
             elasticity, mu_s, mu_d = (bodies.elasticity[b], bodies.static_friction[b],
@@ -88,10 +91,11 @@ def prepare_contacts(contacts, bodies, ground_material, gravity, dt):
         restitution = max(bodies.elasticity[a], elasticity)
         contacts.restitution[c] = restitution
         vn = v1 = v2 = 0.0
-        for e in range(6):
-            vn += jac[c, 0, e] * velocity[a, e] + jac[c, 0, 6 + e] * velocity[row_b, e]
-            v1 += jac[c, 1, e] * velocity[a, e] + jac[c, 1, 6 + e] * velocity[row_b, e]
-            v2 += jac[c, 2, e] * velocity[a, e] + jac[c, 2, 6 + e] * velocity[row_b, e]
+        for e in range(3):
+            dv, wa, wb = velocity[row_b, e] - velocity[a, e], velocity[a, 3 + e], velocity[row_b, 3 + e]
+            vn += n[e] * dv - rows[c, 0, ARM_A + e] * wa + rows[c, 0, ARM_B + e] * wb
+            v1 += t1[e] * dv - rows[c, 1, ARM_A + e] * wa + rows[c, 1, ARM_B + e] * wb
+            v2 += t2[e] * dv - rows[c, 2, ARM_A + e] * wa + rows[c, 2, ARM_B + e] * wb
         contacts.approach_speed[c] = vn
         if v1 * v1 + v2 * v2 < STICKING_SPEED * STICKING_SPEED:
             contacts.friction_coefficient[c] = np.sqrt(bodies.static_friction[a] * mu_s)
@@ -132,10 +136,13 @@ def solve_rows(velocity, contacts, sweeps, target, normal_impulse, friction, wit
     along gravity, then top to bottom, alternating as the 2008 program alternated its order (no
     contact is always solved last, and so always wins): upward sweeps hand a stack's support up,
     downward ones its weight down, which converges tall stacks and walls in the 2008 iteration
-    counts. Within a manifold that also puts the lowest (most loaded) corner first. Per point: the friction circle (when asked), then the normal row driven to at least
-    its target with a non-negative accumulated impulse. (Per-point work is inlined: Numba would
-    pay reference counting for each array passed to a helper.)"""
-    jac, resp, row_mass = contacts.jacobian, contacts.response, contacts.row_mass
+    counts. Within a manifold that also puts the lowest (most loaded) corner first. Per point: the
+    friction circle (when asked), then the normal row driven to at least its target with a
+    non-negative accumulated impulse. A row's relative velocity is d . (v_B - v_A) + arm_B . w_B
+    - arm_A . w_A; an impulse j along it changes v by -/+ inv_mass j d and w by -/+ j turn.
+    (Per-point work is inlined: Numba would pay reference counting for each array passed to a
+    helper.)"""
+    rows, row_mass, row_inv_mass = contacts.rows, contacts.row_mass, contacts.row_inv_mass
     rows_a, rows_b, mu = contacts.velocity_a, contacts.velocity_b, contacts.friction_coefficient
     order, count = contacts.solve_order, contacts.count[0]
     for sweep in range(sweeps):
@@ -145,11 +152,13 @@ def solve_rows(velocity, contacts, sweeps, target, normal_impulse, friction, wit
             if goal <= INACTIVE:
                 continue
             a, b = rows_a[c], rows_b[c]
+            m_a, m_b = row_inv_mass[c, 0], row_inv_mass[c, 1]
             if with_friction:
                 v1 = v2 = 0.0
-                for e in range(6):
-                    v1 += jac[c, 1, e] * velocity[a, e] + jac[c, 1, 6 + e] * velocity[b, e]
-                    v2 += jac[c, 2, e] * velocity[a, e] + jac[c, 2, 6 + e] * velocity[b, e]
+                for e in range(3):
+                    dv, wa, wb = velocity[b, e] - velocity[a, e], velocity[a, 3 + e], velocity[b, 3 + e]
+                    v1 += rows[c, 1, DIRECTION + e] * dv - rows[c, 1, ARM_A + e] * wa + rows[c, 1, ARM_B + e] * wb
+                    v2 += rows[c, 2, DIRECTION + e] * dv - rows[c, 2, ARM_A + e] * wa + rows[c, 2, ARM_B + e] * wb
                 old1, old2 = friction[c, 0], friction[c, 1]
                 new1, new2 = old1 - row_mass[c, 1] * v1, old2 - row_mass[c, 2] * v2
                 magnitude = np.sqrt(new1 * new1 + new2 * new2)
@@ -159,19 +168,25 @@ def solve_rows(velocity, contacts, sweeps, target, normal_impulse, friction, wit
                     new2 *= limit / magnitude
                 friction[c, 0], friction[c, 1] = new1, new2
                 d1, d2 = new1 - old1, new2 - old2
-                for e in range(6):
-                    velocity[a, e] += resp[c, 1, e] * d1 + resp[c, 2, e] * d2
-                    velocity[b, e] += resp[c, 1, 6 + e] * d1 + resp[c, 2, 6 + e] * d2
+                for e in range(3):
+                    linear = rows[c, 1, DIRECTION + e] * d1 + rows[c, 2, DIRECTION + e] * d2
+                    velocity[a, e] -= m_a * linear
+                    velocity[b, e] += m_b * linear
+                    velocity[a, 3 + e] -= rows[c, 1, TURN_A + e] * d1 + rows[c, 2, TURN_A + e] * d2
+                    velocity[b, 3 + e] += rows[c, 1, TURN_B + e] * d1 + rows[c, 2, TURN_B + e] * d2
             vn = 0.0
-            for e in range(6):
-                vn += jac[c, 0, e] * velocity[a, e] + jac[c, 0, 6 + e] * velocity[b, e]
+            for e in range(3):
+                vn += (rows[c, 0, DIRECTION + e] * (velocity[b, e] - velocity[a, e])
+                       - rows[c, 0, ARM_A + e] * velocity[a, 3 + e] + rows[c, 0, ARM_B + e] * velocity[b, 3 + e])
             old = normal_impulse[c]
             new = max(old + row_mass[c, 0] * (goal - vn), 0.0)
             normal_impulse[c] = new
             d = new - old
-            for e in range(6):
-                velocity[a, e] += resp[c, 0, e] * d
-                velocity[b, e] += resp[c, 0, 6 + e] * d
+            for e in range(3):
+                velocity[a, e] -= m_a * d * rows[c, 0, DIRECTION + e]
+                velocity[b, e] += m_b * d * rows[c, 0, DIRECTION + e]
+                velocity[a, 3 + e] -= d * rows[c, 0, TURN_A + e]
+                velocity[b, 3 + e] += d * rows[c, 0, TURN_B + e]
 
 
 @njit(cache=True, nogil=True)
@@ -183,13 +198,16 @@ def collision_pass(contacts, bodies, iterations):
 @njit(cache=True, nogil=True)
 def warm_start(contacts, bodies):
     """Applies last step's contact-pass impulses: stacks start each solve near the answer."""
-    velocity, resp = bodies.velocity, contacts.response
+    velocity, rows, row_inv_mass = bodies.velocity, contacts.rows, contacts.row_inv_mass
     for c in range(contacts.count[0]):
         a, b = contacts.velocity_a[c], contacts.velocity_b[c]
         pn, f1, f2 = contacts.impulse[c], contacts.friction[c, 0], contacts.friction[c, 1]
-        for e in range(6):
-            velocity[a, e] += resp[c, 0, e] * pn + resp[c, 1, e] * f1 + resp[c, 2, e] * f2
-            velocity[b, e] += resp[c, 0, 6 + e] * pn + resp[c, 1, 6 + e] * f1 + resp[c, 2, 6 + e] * f2
+        for e in range(3):
+            linear = rows[c, 0, DIRECTION + e] * pn + rows[c, 1, DIRECTION + e] * f1 + rows[c, 2, DIRECTION + e] * f2
+            velocity[a, e] -= row_inv_mass[c, 0] * linear
+            velocity[b, e] += row_inv_mass[c, 1] * linear
+            velocity[a, 3 + e] -= rows[c, 0, TURN_A + e] * pn + rows[c, 1, TURN_A + e] * f1 + rows[c, 2, TURN_A + e] * f2
+            velocity[b, 3 + e] += rows[c, 0, TURN_B + e] * pn + rows[c, 1, TURN_B + e] * f1 + rows[c, 2, TURN_B + e] * f2
 
 
 @njit(cache=True, nogil=True)
@@ -200,8 +218,8 @@ def contact_pass(contacts, bodies, iterations):
                contacts.friction, True)
     solve_rows(bodies.pseudo_velocity, contacts, iterations, contacts.position_target,
                contacts.position_impulse, contacts.friction, False)
-    jac = contacts.jacobian
+    rows = contacts.rows
     for c in range(contacts.count[0]):
         f1, f2 = contacts.friction[c, 0], contacts.friction[c, 1]
-        for e in range(3):  # the tangents are B's linear parts of rows 1 and 2
-            contacts.friction_world[c, e] = f1 * jac[c, 1, 6 + e] + f2 * jac[c, 2, 6 + e]
+        for e in range(3):
+            contacts.friction_world[c, e] = f1 * rows[c, 1, DIRECTION + e] + f2 * rows[c, 2, DIRECTION + e]

@@ -12,12 +12,14 @@ from .math3d import integrate_orientation, quat_to_matrix
 
 
 @njit(cache=True, nogil=True)
-def update_bodies(bodies, dt, root_size, depth):
+def update_bodies(bodies, dt, root_size, depth, refresh_static):
     """Rotations, solver masses, speculative reach and the broad-phase bounds (grown by this
-    step's motion) of every body."""
+    step's motion) of every body. Bodies in the static index are skipped unless
+    `refresh_static`: they have not moved since they were indexed (the World un-indexes a body
+    it edits), so their derived state still holds, and a settled pile costs next to nothing."""
     velocity, position = bodies.velocity, bodies.position
     for i in range(len(bodies.active)):
-        if not bodies.active[i]:
+        if not bodies.active[i] or (bodies.static_indexed[i] and not refresh_static):
             continue
         if not finite_state(bodies, i):
             quarantine(bodies, i)

@@ -29,7 +29,8 @@ Settings = namedtuple("Settings", [
 # step_world's status: why it returned before doing every step.
 DONE, GROW_PAIRS, GROW_CONTACTS, GROW_INDEX = 0, 1, 2, 3
 
-# Stages timed when step_world is asked to profile (nanoseconds summed over its steps).
+# Stages timed when step_world is asked to profile (nanoseconds of the stepping thread's CPU
+# time summed over its steps: other processes on a shared machine do not inflate them).
 STAGES = ("derived state", "detection", "wake", "collision pass", "forces and wheels",
           "contact pass", "positions", "freezing")
 
@@ -41,11 +42,12 @@ warnings.filterwarnings("ignore", message="Code running in object mode won't all
 
 @njit(cache=True, nogil=True)
 def clock_ns(profile):
-    """Monotonic nanoseconds when profiling (briefly takes the GIL to read the clock), else 0."""
+    """This thread's CPU nanoseconds when profiling (briefly takes the GIL to read the clock),
+    else 0."""
     if not profile:
         return 0
     with objmode(now="int64"):
-        now = time.perf_counter_ns()
+        now = time.thread_time_ns()
     return now
 
 
@@ -120,8 +122,9 @@ def step_world(steps, bodies, playground, vehicles, settings, broad, previous, c
     s = settings
     for done in range(steps):
         t0 = clock_ns(profile)
-        # 1. Derived state: rotations, solver masses, broad-phase bounds.
-        update_bodies(bodies, s.dt, s.root_size, s.octree_depth)
+        # 1. Derived state: rotations, solver masses, broad-phase bounds (of every body when the
+        #    octree changed under the static index).
+        update_bodies(bodies, s.dt, s.root_size, s.octree_depth, broad.force_rebuild[0])
         if static_index_outdated(bodies, broad) and not rebuild_static_index(bodies, broad, s):
             return done, GROW_INDEX
         t1 = clock_ns(profile)
@@ -135,7 +138,7 @@ def step_world(steps, bodies, playground, vehicles, settings, broad, previous, c
         #    own contacts so they do not sink for a step.
         woken, stale = wake_touched(current, bodies, s.freezing_linear_speed)
         if woken > 0:
-            update_bodies(bodies, s.dt, s.root_size, s.octree_depth)
+            update_bodies(bodies, s.dt, s.root_size, s.octree_depth, False)
             broad.stale[0] += stale
             status = detect(bodies, broad, playground, current, s)
             if status != DONE:

@@ -425,7 +425,7 @@ class World:
             self.stats[key] += int(counters[index])
 
     def stage_seconds(self):
-        """Seconds spent in each stage of the step while `profiling` was on."""
+        """CPU seconds spent in each stage of the step while `profiling` was on."""
         return {stage: float(ns) * 1e-9 for stage, ns in zip(STAGES, self._stage_ns)}
 
     # ------------------------------------------------------------------ queries
