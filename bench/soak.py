@@ -101,7 +101,9 @@ class Soak:
         if self.serial % BAD_EVERY == 0:
             self.send("spawn", "{name: soak_bad, size: [1, -1, 1], mass: .nan}", expect_ok=False)
             return
-        name = f"soak_{self.serial}"
+        # Unique names (every box a new one, as clicked_point drops make) or a pool of 2 x KEEP
+        # reused ones: the difference is what per-name caches cost.
+        name = f"soak_{self.serial if self.args.names == 'unique' else self.serial % (2 * KEEP)}"
         x, y = random.uniform(-15, 15), random.uniform(-15, 15)
         self.send("spawn", json.dumps({"name": name, "size": [0.5, 0.5, 0.5], "position": [x, y, 3.0],
                                        "rpy": [random.uniform(-1, 1) for _ in range(3)]}))
@@ -263,6 +265,8 @@ def main(argv=None):
                         help="seconds before the start RSS is taken (default: a tenth of the run, 30-120 s)")
     parser.add_argument("--output", default=None, help="also write <output>.json and <output>.node.log")
     parser.add_argument("--keep-bag", action="store_true")
+    parser.add_argument("--names", choices=("unique", "pool"), default="unique",
+                        help="spawn a new name each time (default) or reuse a pool of 2 x KEEP names")
     parser.add_argument("--vplayground", default=str(Path(sys.executable).parent / "vplayground"),
                         help="the console script to run")
     args = parser.parse_args(argv)
