@@ -309,7 +309,7 @@ def print_table(rows):
     print(f"{'scene':<28} {'bodies':>6} {'engine':<14} {'sim s':>5} {'falling ms':>13} {'resting ms':>13} "
           f"{'RTF':>7} {'wall':>7} {'ours x':>7}  stability")
     for row in rows:
-        ratio = f"{row['ours_x']:.2f}" if "ours_x" in row else ""
+        ratio = f"{row['ours_x']:.{2 if row['ours_x'] < 100 else 0}f}" if "ours_x" in row else ""
         print(f"{row['scene']:<28} {row['bodies']:>6} {row['engine']:<14} {row['simulated_s']:>5.1f} "
               f"{medians(row.get('falling')):>13} {medians(row.get('resting')):>13} {row['rtf']:>7.2f} "
               f"{row['rtf_wall']:>7.2f} {ratio:>7}  {stability(row)}")
@@ -319,7 +319,7 @@ def medians(phase_figures):
     if not phase_figures:
         return ""
     median, p95 = phase_figures["median_ms"], phase_figures["p95_ms"]
-    digits = 2 if median >= 1 else 3
+    digits = 3 if median < 1 else (2 if median < 100 else 0)
     return f"{median:.{digits}f}/{p95:.{digits}f}"
 
 
@@ -360,8 +360,8 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small scenes, a few seconds in all")
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
-    parser.add_argument("--budget", type=float, default=40.0,
-                        help="CPU seconds one engine may spend on one scene before its run stops (default 40)")
+    parser.add_argument("--budget", type=float, default=50.0,
+                        help="CPU seconds one engine may spend on one scene before its run stops (default 50)")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
