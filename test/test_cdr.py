@@ -71,3 +71,12 @@ def test_tf_message_round_trip_without_tf2_msgs():
         assert t.header.stamp.sec == 7 and t.header.stamp.nanosec == 125_000_000
         tr, rot = t.transform.translation, t.transform.rotation
         assert [tr.x, tr.y, tr.z, rot.x, rot.y, rot.z, rot.w] == list(p)
+
+
+def test_templates_of_removed_names_are_not_kept():
+    """Hours of spawning and removing bodies with new names must not grow the encoders."""
+    encoder = cdr.TransformEncoder()
+    for k in range(300):
+        names = [f"crate_{k}_{j}" for j in range(5)]
+        encoder.encode(float(k), ["world"] * 5, names, np.zeros((5, 7)))
+    assert len(encoder._elements._templates) <= 2 * 5  # this layout's names, at most two alignments each

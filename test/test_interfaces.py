@@ -65,3 +65,4 @@ def test_encoded_bytes_match_rclpy_where_it_is_installed():
     decoded = rclpy_serialization.deserialize_message(interfaces.encode("nav_msgs/msg/Odometry", message), Odometry)
     assert (decoded.header.stamp.sec, decoded.header.frame_id, decoded.child_frame_id) == (3, "odom", "base_link")
     assert (decoded.pose.pose.position.x, decoded.pose.pose.orientation.w) == (1.5, 1.0)
+

@@ -74,6 +74,7 @@ class Broadcaster:
         self.sinks = []
         self.frames = tuple(parameters[p] for p in ("world_frame", "odom_frame", "base_frame"))
         self.marker_ids = {}
+        self._next_marker_id = 0
         self.marker_encoder = cdr.BodyMarkerEncoder()
         self.tf_encoder = cdr.TransformEncoder()
         self._last_clock = -math.inf
@@ -195,14 +196,24 @@ class Broadcaster:
             self.send("tf", self.tf_encoder.encode(snap.time, parents, children, poses), snap.time)
 
     def marker_id(self, name):
+        """A body's marker id, stable while it exists."""
         if name not in self.marker_ids:
-            self.marker_ids[name] = len(self.marker_ids)
+            self.marker_ids[name] = self._next_marker_id
+            self._next_marker_id += 1
         return self.marker_ids[name]
+
+    def forget_removed(self, names):
+        """Drops the ids of bodies that are gone, so spawning and removing for hours never
+        grows the table."""
+        if len(self.marker_ids) > 2 * len(names) + 64:
+            present = set(names)
+            self.marker_ids = {n: i for n, i in self.marker_ids.items() if n in present}
 
     def publish_markers(self):
         snap = self.sim.snapshot
         world_frame = self.frames[0]
         if self.wanted("body_markers"):
+            self.forget_removed(snap.names)
             self.send("body_markers", messages.body_markers(snap, world_frame, self.marker_id,
                                                             self.marker_encoder), snap.time)
         car = self.car(snap)

@@ -141,12 +141,13 @@ class TemplateEncoder:
             return self._last_layout[1]
         chunks, stamps, fields = [], [], {}
         position = alignment
+        used = {}  # the templates this layout needs: names of removed bodies are not kept forever
         for key in keys:
             pad = -position % 4  # every element starts with its header's int32
             if pad:
                 chunks.append(b"\x00" * pad)
                 position += pad
-            template, offsets = self.template(key, position % 8)
+            template, offsets = used[(key, position % 8)] = self.template(key, position % 8)
             chunks.append(template)
             stamps.append(position - alignment)
             for field, at in offsets.items():
@@ -154,6 +155,7 @@ class TemplateEncoder:
             position += len(template)
         layout = (np.frombuffer(b"".join(chunks), np.uint8), np.array(stamps),
                   {field: np.array(at) for field, at in fields.items()})
+        self._templates = used
         self._last_layout = (cache_key, layout)
         return layout
 
