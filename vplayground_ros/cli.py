@@ -18,6 +18,7 @@ from .scene import SceneError, load_world
 from .simulation import Simulation
 
 STATUS_PERIOD = 2.0  # s of wall time between status lines
+STARTING = "starting: Numba loads the engine from its cache, or compiles it (about a minute on a first run)"
 
 
 def parse_args(argv):
@@ -152,7 +153,8 @@ def run(sim, options, recorder, ros_args, stop):
                 stop.wait(0.1)
             if time.monotonic() >= status_due:
                 status_due += STATUS_PERIOD
-                log.info(status_line(sim))
+                starting = sim.snapshot.step == 0 and not sim.paused
+                log.info(STARTING if starting else status_line(sim))
     except OSError as error:  # the Foxglove port is taken, say
         log.error(f"cannot start: {error}")
         return 2

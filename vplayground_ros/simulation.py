@@ -125,7 +125,7 @@ class Simulation:
             self._apply_commands()
             if self.world is not world or world.time < origin_sim:
                 # Started, or a command loaded another scene or reset the time.
-                world = self.world
+                world, first_batch = self.world, True
                 origin_wall, origin_sim = time.perf_counter(), world.time
                 rtf_wall, rtf_sim = origin_wall, world.time
             rate = world.settings["steps_per_second"]
@@ -157,6 +157,12 @@ class Simulation:
                     self.paused, self._pending_steps = True, 0  # not the same failure 100 times a second
                     self._fault("step", error)
                 self.step_seconds += time.perf_counter() - started
+                if first_batch:
+                    # A world's first batch loads its kernels from Numba's cache, or compiles them
+                    # (a minute on a first run): real time starts after it, not as late ticks.
+                    first_batch = False
+                    origin_wall, origin_sim = time.perf_counter(), world.time
+                    rtf_wall, rtf_sim = origin_wall, world.time
                 self.removed += world.remove_escaped()
                 self._publish()
             if self.duration is not None and world.time >= self.duration - 0.5 / rate:
