@@ -172,6 +172,7 @@ class Timing:
         timed = len(self.cpu_ms[rtf_from:]) / RATE
         return {"scene": scene, "bodies": bodies, "engine": engine.name,
                 "simulated_s": round(simulated, 2), "complete": complete,
+                "max_ms": round(max(self.cpu_ms), 2),  # the longest single step of the whole run
                 "rtf": significant(timed / (sum(self.cpu_ms[rtf_from:]) / 1e3)),
                 "rtf_wall": significant(timed / (sum(self.wall_ms[rtf_from:]) / 1e3)),
                 "note": "" if complete else f"CPU budget spent at {simulated:.1f} of {seconds:g} s"}
@@ -306,15 +307,15 @@ def stability(row):
 
 
 def print_table(rows):
-    print("ms/step are this thread's CPU time (median/p95); RTF = simulated s per CPU s, 'wall' per "
-          "wall-clock s; 'ours x' = our RTF / the engine's (CPU)")
+    print("ms/step are this thread's CPU time (median/p95; max: the run's longest step); RTF = simulated s "
+          "per CPU s, 'wall' per wall-clock s; 'ours x' = our RTF / the engine's (CPU)")
     print(f"{'scene':<28} {'bodies':>6} {'engine':<14} {'sim s':>5} {'falling ms':>13} {'resting ms':>13} "
-          f"{'RTF':>7} {'wall':>7} {'ours x':>7}  stability")
+          f"{'max ms':>7} {'RTF':>7} {'wall':>7} {'ours x':>7}  stability")
     for row in rows:
         ratio = f"{row['ours_x']:.{2 if row['ours_x'] < 100 else 0}f}" if "ours_x" in row else ""
         print(f"{row['scene']:<28} {row['bodies']:>6} {row['engine']:<14} {row['simulated_s']:>5.1f} "
-              f"{medians(row.get('falling')):>13} {medians(row.get('resting')):>13} {row['rtf']:>7.2f} "
-              f"{row['rtf_wall']:>7.2f} {ratio:>7}  {stability(row)}")
+              f"{medians(row.get('falling')):>13} {medians(row.get('resting')):>13} {row['max_ms']:>7.4g} "
+              f"{row['rtf']:>7.2f} {row['rtf_wall']:>7.2f} {ratio:>7}  {stability(row)}")
 
 
 def medians(phase_figures):

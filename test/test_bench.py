@@ -18,6 +18,7 @@ def test_quick_benchmark_reports_finite_figures(tmp_path):
     assert {row["scene"] for row in ours} == {"pile of 150", "300 at rest", "10-box tower"}
     for row in report["rows"]:
         assert math.isfinite(row["rtf"]) and row["rtf"] > 0
+        assert math.isfinite(row["max_ms"]) and row["max_ms"] > 0
         for phase in ("falling", "resting"):
             if row.get(phase):
                 assert all(math.isfinite(v) and v >= 0 for v in row[phase].values())
