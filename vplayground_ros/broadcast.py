@@ -75,6 +75,7 @@ class Broadcaster:
         self.frames = tuple(parameters[p] for p in ("world_frame", "odom_frame", "base_frame"))
         self.marker_ids = {}
         self._next_marker_id = 0
+        self._ids_of = ([], np.zeros(0, np.int32))  # the last names and their marker ids
         self.marker_encoder = cdr.BodyMarkerEncoder()
         self.tf_encoder = cdr.TransformEncoder()
         self._last_clock = -math.inf
@@ -134,6 +135,7 @@ class Broadcaster:
         """A new scene (or a new sink): latched topics at once, marker ids restart."""
         self.resend_latched()
         self.marker_ids.clear()
+        self._ids_of = ([], np.zeros(0, np.int32))
 
     # ------------------------------------------------------------------ topics
     def car(self, snapshot):
@@ -202,6 +204,13 @@ class Broadcaster:
             self._next_marker_id += 1
         return self.marker_ids[name]
 
+    def marker_ids_of(self, names):
+        """The marker ids of `names`, an array; looked up again only when the names changed."""
+        if names != self._ids_of[0]:
+            self.forget_removed(names)
+            self._ids_of = (list(names), np.array([self.marker_id(name) for name in names], np.int32))
+        return self._ids_of[1]
+
     def forget_removed(self, names):
         """Drops the ids of bodies that are gone, so spawning and removing for hours never
         grows the table."""
@@ -213,8 +222,7 @@ class Broadcaster:
         snap = self.sim.snapshot
         world_frame = self.frames[0]
         if self.wanted("body_markers"):
-            self.forget_removed(snap.names)
-            self.send("body_markers", messages.body_markers(snap, world_frame, self.marker_id,
+            self.send("body_markers", messages.body_markers(snap, world_frame, self.marker_ids_of(snap.names),
                                                             self.marker_encoder), snap.time)
         car = self.car(snap)
         if car is not None and self.wanted("car_markers"):

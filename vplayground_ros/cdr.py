@@ -111,7 +111,8 @@ class Writer:
 
 def split_stamp(seconds):
     sec = int(np.floor(seconds))
-    return sec, int(round((seconds - sec) * 1e9)) % 1_000_000_000
+    nanosec = int(round((seconds - sec) * 1e9))
+    return (sec + 1, 0) if nanosec == 1_000_000_000 else (sec, nanosec)
 
 
 class TemplateEncoder:
@@ -131,12 +132,16 @@ class TemplateEncoder:
             self._templates[(key, alignment)] = (bytes(w.data), {k: v - alignment for k, v in offsets.items()})
         return self._templates[(key, alignment)]
 
-    def layout(self, keys, alignment):
+    def layout(self, keys, alignment, identity=None):
         """The elements of `keys` laid end to end from a payload position ≡ alignment (mod 8):
-        (bytes as a uint8 array, stamp offsets (N,), {field: offsets (N,)}). An element's
-        alignment depends on what came before it, so the layout is a whole; the last one is
-        kept, since the keys (the bodies' names) rarely change between messages."""
-        cache_key = (tuple(keys), alignment)
+        (bytes as a uint8 array, flat byte indices of the stamps, {field: start offsets (N,)},
+        {(field, width): flat byte indices}, filled as asked). An element's alignment depends
+        on what came before it, so the layout is a whole; the last one is kept, since the keys
+        (the bodies' names) rarely change between messages. `identity` stands for the keys when
+        comparing with the last layout (cheaper than the keys: they are then only read on a
+        change); by default the keys themselves."""
+        keys = keys if identity is not None else tuple(keys)
+        cache_key = (keys if identity is None else identity, alignment)
         if self._last_layout is not None and self._last_layout[0] == cache_key:
             return self._last_layout[1]
         chunks, stamps, fields = [], [], {}
@@ -153,26 +158,34 @@ class TemplateEncoder:
             for field, at in offsets.items():
                 fields.setdefault(field, []).append(position - alignment + at)
             position += len(template)
-        layout = (np.frombuffer(b"".join(chunks), np.uint8), np.array(stamps),
-                  {field: np.array(at) for field, at in fields.items()})
+        layout = (np.frombuffer(b"".join(chunks), np.uint8), spread(np.array(stamps, np.intp), 8),
+                  {field: np.array(at, np.intp) for field, at in fields.items()}, {})
         self._templates = used
         self._last_layout = (cache_key, layout)
         return layout
 
-    def append_all(self, w, stamp_bytes, keys, numbers):
+    def append_all(self, w, stamp_bytes, keys, numbers, identity=None):
         """Appends one element per key; numbers: {field: array (N, k) of the field's values,
         its dtype the wire type ('<f8', '<f4', '<i4')}: the stamp and every field are written
-        into a copy of the layout at once with numpy."""
-        count = len(keys)
+        into a copy of the layout at once with numpy. `identity`: see layout."""
+        count = next(iter(numbers.values())).shape[0]
         if count == 0:
             return
-        template, stamps, fields = self.layout(keys, w.position % 8)
+        template, stamp_indices, starts, indices = self.layout(keys, w.position % 8, identity)
         buffer = template.copy()
-        buffer[stamps[:, None] + np.arange(8)] = np.frombuffer(stamp_bytes, np.uint8)
+        buffer[stamp_indices] = np.tile(np.frombuffer(stamp_bytes, np.uint8), count)
         for field, values in numbers.items():
             raw = np.ascontiguousarray(values).view(np.uint8).reshape(count, -1)
-            buffer[fields[field][:, None] + np.arange(raw.shape[1])] = raw
+            width = raw.shape[1]
+            if (field, width) not in indices:
+                indices[(field, width)] = spread(starts[field], width)
+            buffer[indices[(field, width)]] = raw.ravel()
         w.data += buffer.tobytes()
+
+
+def spread(starts, width):
+    """The flat byte indices of `width` bytes from each of `starts`."""
+    return (starts[:, None] + np.arange(width)).ravel()
 
 
 class BodyMarkerEncoder:
@@ -190,9 +203,11 @@ class BodyMarkerEncoder:
         w.u32(len(ids) + 1)
         w.marker(stamp, frame, "", 0, 0, DELETEALL, [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0], [1.0] * 3,
                  [0.0] * 4, False)
-        self._elements.append_all(w, struct.pack("<iI", *stamp), [(frame, ns) for ns in namespaces], {
+        namespaces = np.asarray(namespaces, str)
+        identity = (frame, namespaces.dtype.str, len(namespaces), namespaces.tobytes())  # no loop per body
+        self._elements.append_all(w, struct.pack("<iI", *stamp), ((frame, str(ns)) for ns in namespaces), {
             "id": np.asarray(ids, "<i4").reshape(-1, 1), "pose": np.asarray(poses, "<f8"),
-            "scale": np.asarray(sizes, "<f8"), "color": np.asarray(colours, "<f4")})
+            "scale": np.asarray(sizes, "<f8"), "color": np.asarray(colours, "<f4")}, identity)
         return ENCAPSULATION + bytes(w.data)
 
 

@@ -75,23 +75,29 @@ def pose_array(snapshot, frame):
     return cdr.pose_array(snapshot.time, frame, snapshot.state["positions"], snapshot.state["quaternions"])
 
 
-def category(snapshot, row):
-    name = snapshot.names[row]
-    if name in snapshot.vehicles:
-        return "vehicle"
-    return "immovable" if snapshot.state["immovable"][row] else "box"
+# Body categories (marker namespaces), and their colours with frozen grey last.
+CATEGORIES = np.array(["box", "immovable", "vehicle"])
+BOX, IMMOVABLE, VEHICLE, FROZEN = range(4)
+CATEGORY_COLOURS = np.array([COLOURS[c] for c in CATEGORIES] + [COLOURS["frozen"]], np.float32)
 
 
-def body_markers(snapshot, frame, marker_ids, encoder):
-    """~/bodies/markers: DELETEALL, then one CUBE per body (ns = category, id stable per name,
-    frozen grey)."""
+def categories(snapshot):
+    """Each body's category (an index into CATEGORIES), without a Python loop over the bodies:
+    this runs at marker_rate over thousands of them."""
+    kinds = np.where(snapshot.state["immovable"], IMMOVABLE, BOX)
+    if snapshot.vehicles:
+        kinds[np.isin(np.asarray(snapshot.names, object), list(snapshot.vehicles))] = VEHICLE
+    return kinds
+
+
+def body_markers(snapshot, frame, ids, encoder):
+    """~/bodies/markers: DELETEALL, then one CUBE per body (ns = category, ids (N,) stable per
+    name, frozen grey)."""
     s = snapshot.state
-    namespaces = [category(snapshot, row) for row in range(len(snapshot.names))]
-    colours = np.array([COLOURS["frozen" if frozen else kind] for kind, frozen in zip(namespaces, s["frozen"])],
-                       dtype=np.float32).reshape(-1, 4)
-    ids = [marker_ids(name) for name in snapshot.names]
+    kinds = categories(snapshot)
+    colours = CATEGORY_COLOURS[np.where(s["frozen"], FROZEN, kinds)]
     poses = np.concatenate([s["positions"], s["quaternions"]], axis=1)
-    return encoder.encode(snapshot.time, frame, namespaces, ids, poses, s["sizes"], colours)
+    return encoder.encode(snapshot.time, frame, CATEGORIES[kinds], ids, poses, s["sizes"], colours)
 
 
 def scene_markers(seconds, frame, ground, triangles, octree_cells=()):
