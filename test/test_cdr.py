@@ -80,3 +80,9 @@ def test_templates_of_removed_names_are_not_kept():
         names = [f"crate_{k}_{j}" for j in range(5)]
         encoder.encode(float(k), ["world"] * 5, names, np.zeros((5, 7)))
     assert len(encoder._elements._templates) <= 2 * 5  # this layout's names, at most two alignments each
+
+
+def test_a_stamp_just_under_a_second_rounds_up_not_back():
+    assert cdr.split_stamp(0.9999999999) == (1, 0)
+    assert cdr.split_stamp(2.5) == (2, 500_000_000)
+    assert cdr.split_stamp(3.0) == (3, 0)
