@@ -22,7 +22,7 @@ from nav_msgs.msg import Odometry  # noqa: E402
 from nav_msgs.srv import LoadMap  # noqa: E402
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue  # noqa: E402
 from rcl_interfaces.srv import SetParameters  # noqa: E402
-from rclpy.executors import MultiThreadedExecutor  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from std_msgs.msg import UInt8  # noqa: E402
@@ -63,12 +63,16 @@ class Harness:
         self.foxglove = FoxgloveServer(self.runtime, port=0)  # both live: the ROS graph and the server
         self.node.attach(self.runtime)
         self.client = rclpy.create_node("vplayground_test_client")
-        self.executor = MultiThreadedExecutor(num_threads=4)
-        self.executor.add_node(self.node)
-        self.executor.add_node(self.client)
+        # Each node on its own executor, the node's single-threaded as under `vplayground`: on
+        # a shared one the client's /clock and pose callbacks (100+ a second) held the node's
+        # service callbacks back for seconds.
+        self.executors = [SingleThreadedExecutor(), SingleThreadedExecutor()]
+        self.executors[0].add_node(self.node)
+        self.executors[1].add_node(self.client)
         self.runtime.start()
-        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
-        self.thread.start()
+        self.threads = [threading.Thread(target=e.spin, daemon=True) for e in self.executors]
+        for thread in self.threads:
+            thread.start()
         self.latest = {}
         self.clients = {}
 
@@ -100,8 +104,9 @@ class Harness:
     def close(self):
         self.runtime.stop()
         self.foxglove.stop()
-        self.executor.shutdown()
-        self.thread.join(10)
+        for executor, thread in zip(self.executors, self.threads):
+            executor.shutdown()
+            thread.join(10)
         self.node.destroy_node()
         self.client.destroy_node()
         rclpy.try_shutdown()
