@@ -2,7 +2,8 @@
 # make test : set up .venv and run the whole test suite
 # make bench: this engine against PyBullet and MuJoCo, and the node's overhead (minutes; not in make test)
 # make fuzz : the hostile-input tests with FUZZ_EXAMPLES (default 5000) per property, randomised
-# make soak : the node under steady traffic for DURATION seconds (default 1200); memory, RTF, late ticks
+# make soak : the node under steady traffic for DURATION seconds (default 1200), a Foxglove client
+#             subscribed to everything (SOAK_ARGS= drops it); memory, RTF, late ticks
 PYTHON ?= python3.11
 VENV   ?= .venv
 PY      = $(VENV)/bin/python
@@ -10,6 +11,7 @@ STAMP   = $(VENV)/.installed
 
 FUZZ_EXAMPLES ?= 5000
 DURATION      ?= 1200
+SOAK_ARGS     ?= --foxglove
 
 .PHONY: run test bench fuzz soak setup clean
 
@@ -39,7 +41,7 @@ fuzz: $(STAMP)
 
 soak: $(STAMP)
 	mkdir -p bench/results
-	$(PY) bench/soak.py --duration $(DURATION) --output bench/results/soak_$$(date +%Y%m%d_%H%M%S).txt
+	$(PY) bench/soak.py --duration $(DURATION) $(SOAK_ARGS) --output bench/results/soak_$$(date +%Y%m%d_%H%M%S).txt
 
 bench: $(STAMP)
 	$(PY) -m pip install --quiet -e ".[bench]"

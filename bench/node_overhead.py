@@ -92,7 +92,7 @@ def main():
             client.create_subscription(message, name, lambda m: None, qos)
     foxglove = None
     if args.foxglove:
-        foxglove = FoxgloveClient(urls[0])
+        foxglove = FoxgloveClient(urls[0], keep=4)
         assert foxglove.wait(lambda: len(foxglove.channels) >= 17)
         foxglove.subscribe(*foxglove.channels)
     end = time.perf_counter() + 3.0
@@ -111,7 +111,7 @@ def main():
     for _ in range(30):
         rclpy.spin_once(client, timeout_sec=0.05)
     wall1, cpu1, sim1, rtf = sample()
-    foxglove_frames = sum(len(f) for f in foxglove.frames.values()) if foxglove else None
+    foxglove_frames = foxglove.received if foxglove else None
     if foxglove:
         foxglove.close()
     node.terminate()

@@ -8,9 +8,10 @@ temporary directory) as a subprocess on a private ROS domain and drives it with 
 It samples the simulator's RSS (/proc/<pid>/status), simulated time (/clock) and its
 /diagnostics (late ticks, bodies, recorder), and reports per minute: achieved RTF, RSS, late
 ticks, bodies and requests; at the end RSS after warm-up vs at the end (growth in %), RTF, late
-ticks, requests done and refused, and the bag (finished, message count).
+ticks, requests done and refused, and the bag (finished, message count). With --foxglove the
+node serves Foxglove too and a WebSocket client stays subscribed to every channel all along.
 
-    python bench/soak.py --duration 1200 [--output bench/results/soak.txt]
+    python bench/soak.py --duration 1200 [--foxglove] [--output bench/results/soak.txt]
 
 Not part of `make test`: `make soak DURATION=<seconds>`.
 """
@@ -19,6 +20,7 @@ import json
 import math
 import os
 import random
+import re
 import signal
 import subprocess
 import sys
@@ -134,6 +136,23 @@ class Soak:
         self.pending = still
 
 
+def watch_in_foxglove(log_path, timeout=30.0):
+    """A Foxglove client on the node's server (its URL read from the node's log), subscribed to
+    every channel, keeping only its last few frames."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "test"))
+    from foxglove_client import FoxgloveClient
+    deadline = time.monotonic() + timeout
+    while not (urls := re.findall(r"open connection to (ws://\S+)", Path(log_path).read_text())):
+        if time.monotonic() > deadline:
+            raise RuntimeError("the node did not print its Foxglove URL")
+        time.sleep(0.2)
+    client = FoxgloveClient(urls[0], keep=4)
+    if not client.wait(lambda: len(client.channels) >= 17, timeout):
+        raise RuntimeError("the Foxglove server did not advertise every topic")
+    client.subscribe(*client.channels)
+    return client
+
+
 STOP = []  # set by SIGINT/SIGTERM: the soak ends early and still reports what it measured
 
 
@@ -152,7 +171,8 @@ def run(args):
     bag = bag_dir / "soak.mcap"
     env = dict(os.environ, ROS_DOMAIN_ID=str(random.randint(120, 200)), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     os.environ.update(ROS_DOMAIN_ID=env["ROS_DOMAIN_ID"], ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-    command = [args.vplayground, "--real-time-factor", "1", "--record", str(bag), "--no-foxglove"]
+    command = [args.vplayground, "--real-time-factor", "1", "--record", str(bag),
+               *(["--foxglove", "0"] if args.foxglove else ["--no-foxglove"])]
     log_path = Path(args.output).with_suffix(".node.log") if args.output else bag_dir / "node.log"
     node_log = open(log_path, "w")
     process = subprocess.Popen(command, stdout=node_log, stderr=subprocess.STDOUT, env=env)
@@ -163,14 +183,17 @@ def run(args):
     node = rclpy.create_node("vplayground_soak")
     soak = Soak(args, node, process.pid)
     minutes = []
+    foxglove = foxglove_report = None
     try:
         soak.wait_ready()
+        if args.foxglove:
+            foxglove = watch_in_foxglove(log_path)
         started = time.monotonic()
         next_drive = next_traffic = next_sample = started
         rss_start, late_start = None, 0
         samples = []  # (wall s since start, sim s, rss bytes)
         sim_start = soak.sim_time
-        minute_start = (started, soak.sim_time, 0)
+        minute_start = (started, soak.sim_time, 0, 0)
         while time.monotonic() - started < args.duration and not interrupted(started):
             if process.poll() is not None:
                 raise RuntimeError(f"the node exited with {process.returncode}")
@@ -201,14 +224,20 @@ def run(args):
                        "bodies": int(bodies.get("active", 0)) + int(bodies.get("frozen", 0)),
                        "removed_by_simulator": int(bodies.get("removed", 0)),
                        "requests": requests - minute_start[2]}
+                if foxglove is not None:
+                    row["foxglove_frames"] = foxglove.received - minute_start[3]
                 minutes.append(row)
                 print("soak: " + "  ".join(f"{k}={v}" for k, v in row.items()), flush=True)
-                minute_start = (now, soak.sim_time, requests)
+                minute_start = (now, soak.sim_time, requests, foxglove.received if foxglove else 0)
         end = time.monotonic() - started
         rss_end = rss_bytes(process.pid)
         diagnostics = soak.diagnostics
         sim_end = soak.sim_time
+        foxglove_report = None if foxglove is None else {
+            "frames_received": foxglove.received, "still_connected": foxglove.connected}
     finally:
+        if foxglove is not None:
+            foxglove.close()
         process.send_signal(signal.SIGINT)  # Ctrl-C: a clean stop that finishes the bag
         try:
             process.wait(120)
@@ -245,6 +274,8 @@ def run(args):
         "bodies_removed_by_simulator": int(diagnostics.get("vplayground: bodies", {}).get("removed", 0)),
         "recorder": recorder, "bag": bag_report, "rss_samples": len(samples),
     }
+    if foxglove_report is not None:
+        report["foxglove"] = foxglove_report
     print("soak result: " + json.dumps(report, indent=1), flush=True)
     if args.output:
         Path(args.output).with_suffix(".json").write_text(json.dumps({"report": report, "minutes": minutes,
@@ -265,6 +296,8 @@ def main(argv=None):
                         help="seconds before the start RSS is taken (default: a tenth of the run, 30-120 s)")
     parser.add_argument("--output", default=None, help="also write <output>.json and <output>.node.log")
     parser.add_argument("--keep-bag", action="store_true")
+    parser.add_argument("--foxglove", action="store_true",
+                        help="serve Foxglove too, with a WebSocket client subscribed to every channel")
     parser.add_argument("--names", choices=("unique", "pool"), default="unique",
                         help="spawn a new name each time (default) or reuse a pool of 2 x KEEP names")
     parser.add_argument("--vplayground", default=str(Path(sys.executable).parent / "vplayground"),

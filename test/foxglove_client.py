@@ -5,7 +5,7 @@ import json
 import struct
 import threading
 import time
-from collections import defaultdict
+from collections import defaultdict, deque
 
 from mcap_ros2._dynamic import generate_dynamic, serialize_dynamic
 from websockets.sync.client import connect
@@ -20,14 +20,16 @@ def codec(make, name, schema_text):
 
 
 class FoxgloveClient:
-    def __init__(self, url, timeout=10.0):
+    def __init__(self, url, timeout=10.0, keep=None):
+        """keep: frames and times kept per topic (None: all; a long run keeps a few)."""
         self.ws = connect(url, subprotocols=[SUBPROTOCOL], max_size=None, open_timeout=timeout, legacy=True)
         self.timeout = timeout
         self.server_info = None
         self.channels = {}        # topic -> advertised channel
         self.services = {}        # name -> advertised service
-        self.frames = defaultdict(list)   # topic -> [(log time ns, payload)]
-        self.times = []           # server time messages, ns
+        self.frames = defaultdict(lambda: deque(maxlen=keep))  # topic -> [(log time ns, payload)]
+        self.received = 0         # frames received in all
+        self.times = deque(maxlen=keep)  # server time messages, ns
         self.statuses = []
         self.parameter_values = {}  # request id -> [parameters]
         self.parameter_updates = []
@@ -38,6 +40,11 @@ class FoxgloveClient:
         self._closed = False
         self._thread = threading.Thread(target=self._read, daemon=True)
         self._thread.start()
+
+    @property
+    def connected(self):
+        """The server has not closed the connection (the reader stops when it does)."""
+        return self._thread.is_alive()
 
     def close(self):
         self._closed = True
@@ -61,6 +68,7 @@ class FoxgloveClient:
         if data[0] == MESSAGE_DATA:
             subscription, stamp = struct.unpack_from("<IQ", data, 1)
             self.frames[self._subscriptions[subscription]].append((stamp, data[13:]))
+            self.received += 1
         elif data[0] == TIME:
             self.times.append(struct.unpack_from("<Q", data, 1)[0])
         elif data[0] == SERVICE_CALL_RESPONSE:
