@@ -86,3 +86,13 @@ def test_a_stamp_just_under_a_second_rounds_up_not_back():
     assert cdr.split_stamp(0.9999999999) == (1, 0)
     assert cdr.split_stamp(2.5) == (2, 500_000_000)
     assert cdr.split_stamp(3.0) == (3, 0)
+
+
+def test_a_marker_encoder_reused_follows_changed_namespaces():
+    # The encoder keeps its last layout: a change of categories in a same-length list (a body
+    # made immovable, say) must not reuse it.
+    encoder = cdr.BodyMarkerEncoder()
+    poses, sizes, colours = np.zeros((3, 7)), np.ones((3, 3)), np.ones((3, 4), np.float32)
+    for namespaces in (["box", "box", "vehicle"], ["box", "immovable", "vehicle"], ["box", "box", "vehicle"]):
+        msg = deserialize_message(encoder.encode(1.0, "world", namespaces, [1, 2, 3], poses, sizes, colours), MarkerArray)
+        assert [m.ns for m in msg.markers[1:]] == namespaces

@@ -140,8 +140,9 @@ class TemplateEncoder:
         (the bodies' names) rarely change between messages. `identity` stands for the keys when
         comparing with the last layout (cheaper than the keys: they are then only read on a
         change); by default the keys themselves."""
-        keys = keys if identity is not None else tuple(keys)
-        cache_key = (keys if identity is None else identity, alignment)
+        if identity is None:
+            keys = identity = tuple(keys)
+        cache_key = (identity, alignment)
         if self._last_layout is not None and self._last_layout[0] == cache_key:
             return self._last_layout[1]
         chunks, stamps, fields = [], [], {}
