@@ -174,8 +174,9 @@ def test_a_slow_first_batch_is_start_up_not_late_ticks():
         time.sleep(1.0)  # the third stall ends and the loop counts it
     finally:
         sim.stop()
-    # Only the third stall (0.6 s = 77 steps at 128/s, less the batch that runs) is late.
-    assert 50 <= sim.late_ticks <= 80, sim.late_ticks
+    # Only the third stall (0.6 s = 77 steps at 128/s, less the batch that runs) is late; the
+    # first one too would make it ~150. The margin is for a loaded machine's own hiccups.
+    assert 50 <= sim.late_ticks <= 120, sim.late_ticks
 
 
 def test_a_full_world_is_served_in_linear_time():
