@@ -12,7 +12,6 @@ import json
 import os
 import subprocess
 import sys
-import re
 import tempfile
 import threading
 import time
@@ -25,9 +24,10 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 sys.path.insert(0, str(Path(__file__).parent))
 sys.path.insert(0, str(Path(__file__).parent.parent / "test"))
-from foxglove_client import FoxgloveClient  # noqa: E402
+from foxglove_client import URL_IN_LOG, watching_everything  # noqa: E402
 from pile import build_pile  # noqa: E402
 
+from vplayground_ros.broadcast import TOPICS  # noqa: E402
 from vplayground_ros.scene import save_world  # noqa: E402
 
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
@@ -72,7 +72,7 @@ def main():
 
     def drain():  # the node's log, read so its pipe never fills; the Foxglove URL noted
         for line in node.stdout:
-            urls.extend(re.findall(r"open connection to (ws://\S+)", line))
+            urls.extend(URL_IN_LOG.findall(line))
     threading.Thread(target=drain, daemon=True).start()
     first_pose = []
     client.create_subscription(PoseArray, "/vplayground/bodies/poses",
@@ -92,9 +92,7 @@ def main():
             client.create_subscription(message, name, lambda m: None, qos)
     foxglove = None
     if args.foxglove:
-        foxglove = FoxgloveClient(urls[0], keep=4)
-        assert foxglove.wait(lambda: len(foxglove.channels) >= 17)
-        foxglove.subscribe(*foxglove.channels)
+        foxglove = watching_everything(urls[0], len(TOPICS))
     end = time.perf_counter() + 3.0
     while time.perf_counter() < end:  # let discovery settle
         rclpy.spin_once(client, timeout_sec=0.05)

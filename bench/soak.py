@@ -20,7 +20,6 @@ import json
 import math
 import os
 import random
-import re
 import signal
 import subprocess
 import sys
@@ -140,17 +139,15 @@ def watch_in_foxglove(log_path, timeout=30.0):
     """A Foxglove client on the node's server (its URL read from the node's log), subscribed to
     every channel, keeping only its last few frames."""
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "test"))
-    from foxglove_client import FoxgloveClient
+    from foxglove_client import URL_IN_LOG, watching_everything
+
+    from vplayground_ros.broadcast import TOPICS
     deadline = time.monotonic() + timeout
-    while not (urls := re.findall(r"open connection to (ws://\S+)", Path(log_path).read_text())):
+    while not (urls := URL_IN_LOG.findall(Path(log_path).read_text())):
         if time.monotonic() > deadline:
             raise RuntimeError("the node did not print its Foxglove URL")
         time.sleep(0.2)
-    client = FoxgloveClient(urls[0], keep=4)
-    if not client.wait(lambda: len(client.channels) >= 17, timeout):
-        raise RuntimeError("the Foxglove server did not advertise every topic")
-    client.subscribe(*client.channels)
-    return client
+    return watching_everything(urls[0], len(TOPICS), timeout=timeout)
 
 
 STOP = []  # set by SIGINT/SIGTERM: the soak ends early and still reports what it measured

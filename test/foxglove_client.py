@@ -2,6 +2,7 @@
 the protocol's spec for the tests: it knows nothing of the simulator's code. Messages are
 decoded and encoded with mcap_ros2 from the schemas the server advertises."""
 import json
+import re
 import struct
 import threading
 import time
@@ -13,6 +14,8 @@ from websockets.sync.client import connect
 SUBPROTOCOL = "foxglove.sdk.v1"
 MESSAGE_DATA, TIME, SERVICE_CALL_RESPONSE = 1, 2, 3          # server binary opcodes
 CLIENT_MESSAGE_DATA, SERVICE_CALL_REQUEST = 1, 2             # client binary opcodes
+# Where a server's URL is found: the line the simulator logs when it starts serving.
+URL_IN_LOG = re.compile(r"open connection to (ws://\S+)")
 
 
 def codec(make, name, schema_text):
@@ -165,3 +168,13 @@ class FoxgloveClient:
                                  "parameters": [{"name": k, "value": v} for k, v in values.items()]}))
         assert self.wait(lambda: rid in self.parameter_values)
         return {p["name"]: p.get("value") for p in self.parameter_values.pop(rid)}
+
+
+def watching_everything(url, channels, keep=4, timeout=30.0):
+    """A client subscribed to every channel once `channels` of them are advertised, keeping its
+    last `keep` frames per topic (for long runs, where only the count matters)."""
+    client = FoxgloveClient(url, timeout, keep)
+    if not client.wait(lambda: len(client.channels) >= channels, timeout):
+        raise RuntimeError(f"the server advertised {len(client.channels)} channels, not {channels}")
+    client.subscribe(*client.channels)
+    return client

@@ -4,7 +4,6 @@ window must work without a ROS install."""
 import json
 import math
 import random
-import re
 import struct
 import subprocess
 import sys
@@ -14,7 +13,7 @@ import time
 import pytest
 from mcap_ros2._dynamic import serialize_dynamic
 
-from foxglove_client import FoxgloveClient
+from foxglove_client import URL_IN_LOG, FoxgloveClient
 from foxglove_js import needs_node, run_script
 
 NS = "/vplayground"
@@ -50,7 +49,7 @@ def server():
         if not line:
             break
         output.append(line)
-        found = re.search(r"open connection to (ws://\S+)", line)
+        found = URL_IN_LOG.search(line)
         url = found.group(1) if found else None
     assert url, "".join(output)
     threading.Thread(target=lambda: output.extend(process.stdout), daemon=True).start()  # keep the pipe drained
