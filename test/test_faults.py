@@ -223,6 +223,19 @@ def test_the_node_refuses_a_hostile_corpus_keeps_stepping_and_finishes_its_bag(t
         ("save_scene", "/etc/vplayground.yaml", "RESULT_OPERATION_FAILED: save_scene.path"),
         ("save_scene", f"../../../../../../tmp/escape_{os.getpid()}.yaml", "RESULT_OPERATION_FAILED: save_scene.path"),
     ]
+    broken_meshes = {  # playground mesh -> the problem the node's answer must name (issue 16)
+        "flat.obj": (b"v 0 0\nv 1 0\nv 0 1\nf 1 2 3\n", "line 1: a vertex has 2 numbers"),
+        "comma.obj": (b"v 0 0 0\nv 1,5 0 0\nv 0 1 0\nf 1 2 3\n", "line 2: '1,5' is not a number"),
+        "missing.obj": (b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n",
+                        "line 4: the face refers to vertex 4, but the file has only 3 vertices"),
+        "flat.off": (b"OFF\n3 1 0\n0 0\n1 0\n0 1\n3 0 1 2\n", "not a readable OFF file"),
+    }
+    for mesh, (data, _) in broken_meshes.items():
+        (tmp_path / mesh).write_bytes(data)
+        (tmp_path / f"{mesh}.yaml").write_text(f"version: 1\nplayground: {{mesh: {mesh}}}\n")
+    # Names in a legacy encoding are no problem: trimesh would have wanted charset_normalizer.
+    (tmp_path / "latin.obj").write_bytes("o Büro\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n".encode("latin-1"))
+    (tmp_path / "latin.yaml").write_text("version: 1\nplayground: {mesh: latin.obj}\n")
     try:
         assert all(s.wait_for_service(timeout_sec=60.0) for s in (*services.values(), load))
         for service, payload, prefix in corpus:
@@ -230,6 +243,9 @@ def test_the_node_refuses_a_hostile_corpus_keeps_stepping_and_finishes_its_bag(t
             assert not response.success and response.message.startswith(prefix), (service, response.message[:200])
         for path in ("/etc/passwd", "../../../../etc/hosts.yaml", str(tmp_path / "missing.yaml")):
             assert call(load, LoadMap.Request(map_url=path)).result == LoadMap.Response.RESULT_MAP_DOES_NOT_EXIST
+        for mesh in broken_meshes:
+            assert call(load, LoadMap.Request(map_url=f"{mesh}.yaml")).result == LoadMap.Response.RESULT_INVALID_MAP_DATA
+        assert call(load, LoadMap.Request(map_url="latin.yaml")).result == LoadMap.Response.RESULT_SUCCESS
         executor.spin_once(timeout_sec=0.5)
         before = clock[-1]
         end = time.monotonic() + 10.0
@@ -245,5 +261,9 @@ def test_the_node_refuses_a_hostile_corpus_keeps_stepping_and_finishes_its_bag(t
         node_process.send_signal(signal.SIGINT)
         output, _ = node_process.communicate(timeout=60)
     assert node_process.returncode == 0, output[-2000:]
+    for mesh, (_, problem) in broken_meshes.items():
+        assert f"~/load_scene: RESULT_OPERATION_FAILED: {tmp_path / mesh}.yaml: playground.mesh: mesh " \
+               f"{tmp_path / mesh}: {problem}" in output, output[-3000:]
+    assert "Traceback" not in output, output[-3000:]
     counts = summary(bag)  # a summary: the bag was finished
     assert counts["/clock"] > 10 and not Path(f"/tmp/escape_{os.getpid()}.yaml").exists()

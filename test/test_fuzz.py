@@ -673,57 +673,134 @@ def test_load_world_refuses_malformed_scene_dicts_and_files(tmp_path_factory, da
 
 
 # -------------------------------------------------------------------------- corrupt meshes
-# Faults a reader must refuse; the others (junk lines, index 0) some readers skip or wrap.
-MESH_MUST_FAIL = {"nan_vertex", "index_high", "no_faces", "huge_vertex"}
+# Legal .obj variations that must load, and faults that must be refused with these words, on
+# the line they are on (1-based) where a line is meant.
+OBJ_BAD_NUMBERS = ["1,5", "1.2.3", "0x1p3", "1d3", "--1", "1e", ".", "1/2", "\u00bd", "\u0661", "1\u00a0"]
+OBJ_GOOD_NUMBERS = ["1e-3", "+1.5", ".5", "5.", "-0", "1E2", "0000.25", "-7e+0"]
+OBJ_NAMES = [("latin-1", "Büro"), ("cp1252", "naïve “quotes”"), ("shift_jis", "名前"), ("utf-8", "🚗 ä"),
+             ("koi8-r", "Привет")]
+OBJ_SKIPPED_LINES = [b"vt 0.5 0.5", b"vn 0 0 1", b"vp 0.1", b"o thing", b"g a b", b"s off", b"usemtl steel",
+                     b"mtllib /etc/passwd", b"l 1 2", b"p 1", b"# a comment", b"", b"   \t"]
+
+
+OBJ_CASES = ["nan_vertex", "far_vertex", "vertex_dimension", "bad_number", "good_number", "extra_numbers",
+             "index_high", "index_negative_beyond", "index_zero", "negative_ok", "faces_first", "corner_forms",
+             "polygon", "short_face", "bad_corner", "unknown_statement", "skipped", "inline_comment",
+             "name_encoding", "utf16_bom", "utf16_no_bom", "utf8_bom", "line_ends", "no_faces", "junk"]
+ANY = object()  # random bytes: refused, or by chance a mesh
 
 
 @st.composite
-def obj_text(draw):
-    """(.obj bytes, must it be refused): a Wavefront .obj with one fault, or binary junk."""
-    vertices = draw(st.lists(st.tuples(st.floats(-50, 50), st.floats(-50, 50), st.floats(-5, 5)), min_size=3, max_size=30))
-    faces = draw(st.lists(st.tuples(*[st.integers(1, len(vertices))] * 3), min_size=1, max_size=30))
-    fault = draw(st.sampled_from(["nan_vertex", "index_high", "index_zero", "no_faces", "junk", "bad_token",
-                                  "short_face", "huge_vertex"]))
-    lines = [f"v {x} {y} {z}" for x, y, z in vertices]
+def obj_text(draw, fault):
+    """(.obj bytes, what loading it must give: None = a world, ANY = either, else a piece of
+    the error): a Wavefront .obj with the fault or legal variation named (OBJ_CASES), or
+    binary junk. A proper triangle comes first, so no legal variation leaves only degenerate
+    ones."""
+    vertices = [(0, 0, 0), (1, 0, 0), (0, 1, 0)] + draw(st.lists(
+        st.tuples(st.floats(-50, 50), st.floats(-50, 50), st.floats(-5, 5)), max_size=30))
+    count = len(vertices)
+    faces = [(1, 2, 3)] + draw(st.lists(st.tuples(*[st.integers(1, count)] * 3), max_size=30))
+    lines = [f"v {x} {y} {z}".encode() for x, y, z in vertices]
+    k = draw(st.integers(0, count - 1))  # the vertex a vertex fault is put on
+    expected = None
+    face_lines = [f"f {a} {b} {c}".encode() for a, b, c in faces]
+    last = count + len(faces) + 1  # the line a face appended at the end is on
     if fault == "nan_vertex":
-        k = draw(st.integers(0, len(lines) - 1))
-        lines[k] = f"v {draw(st.sampled_from(['nan', 'inf', '-inf', 'NaN']))} 0 0"
-        faces.append((k + 1, 1, 2))
+        token = draw(st.sampled_from(["nan", "inf", "-inf", "NaN", "infinity", "1e400", "-1e309"]))
+        lines[k] = f"v 0 {token} 0".encode()
+        expected = f"line {k + 1}: {token!r} is not a finite number"
+    elif fault == "far_vertex":
+        lines[k] = f"v {draw(st.sampled_from(['1e308', '-2e6', '1e7']))} 0 0".encode()
+        expected = f"vertex {k} is at"  # finite, but beyond the world's bounds
+    elif fault == "vertex_dimension":
+        numbers = draw(st.sampled_from([0, 1, 2, 5, 7, 9]))
+        lines[k] = b" ".join([b"v"] + [b"0.5"] * numbers)
+        expected = f"line {k + 1}: a vertex has {numbers} numbers"
+    elif fault == "bad_number":
+        token = draw(st.sampled_from(OBJ_BAD_NUMBERS))
+        lines[k] = f"v 0 {token} 0".encode()
+        expected = f"line {k + 1}: {token!r} is not a number"
+    elif fault == "good_number":
+        lines[k] = f"v {draw(st.sampled_from(OBJ_GOOD_NUMBERS))} {vertices[k][1]} {vertices[k][2]}".encode()
+    elif fault == "extra_numbers":  # w, or an r g b colour
+        lines[k] += draw(st.sampled_from([b" 1.0", b" 0.2 0.4 0.6"]))
     elif fault == "index_high":
-        faces.append((1, 2, len(vertices) + draw(st.integers(1, 10 ** 9))))
+        index = count + draw(st.integers(1, 10 ** 9))
+        face_lines.append(f"f 1 2 {index}".encode())
+        expected = f"line {last}: the face refers to vertex {index}, but the file has only {count} vertices"
+    elif fault == "index_negative_beyond":
+        index = -count - draw(st.integers(1, 10 ** 9))
+        face_lines.append(f"f 1 2 {index}".encode())
+        expected = f"line {last}: the face refers to vertex {index}, but only {count} vertices come before it"
     elif fault == "index_zero":
-        faces.append((0, 1, 2))
-    elif fault == "huge_vertex":
-        lines[0] = f"v {draw(st.sampled_from(['1e400', '-1e309', '1e308']))} 0 0"
-        faces.append((1, 2, 3))
+        face_lines.append(b"f 0 1 2")
+        expected = f"line {last}: face corner '0': vertex numbers start at 1"
+    elif fault == "negative_ok":
+        face_lines.append(b"f -3 -2 -1")
+    elif fault == "faces_first":  # positive numbers may refer to vertices further down
+        lines, face_lines = face_lines, lines
+    elif fault == "corner_forms":
+        form = draw(st.sampled_from(["{}/{}", "{}//{}", "{}/{}/{}", "{}/{}/"]))
+        face_lines = [b"f " + " ".join(form.format(*[i] * form.count("{}")) for i in face).encode()
+                      for face in faces]
+    elif fault == "polygon":
+        corners = draw(st.lists(st.integers(1, count), min_size=4, max_size=12))
+        face_lines.append(("f " + " ".join(map(str, corners))).encode())
+    elif fault == "short_face":
+        corners = draw(st.sampled_from(["", "1", "1 2"]))
+        face_lines.append(f"f {corners}".encode())
+        expected = f"line {last}: a face needs at least 3 corners, this one has {len(corners.split())}"
+    elif fault == "bad_corner":
+        corner = draw(st.sampled_from(["a", "/1", "1.5", "x/1/1", "--2", "1e3"]))
+        face_lines.append(f"f 1 2 {corner}".encode())
+        expected = f"line {last}: face corner {corner!r} does not start with a vertex number"
+    elif fault == "unknown_statement":
+        keyword = draw(st.sampled_from(["curv", "surf", "vertex", "F", "V", "x"]))
+        face_lines.append(f"{keyword} 1 2 3".encode())
+        expected = f"line {last}: unknown statement {keyword!r}"
+    elif fault == "skipped":
+        face_lines.insert(draw(st.integers(0, len(face_lines))), draw(st.sampled_from(OBJ_SKIPPED_LINES)))
+    elif fault == "inline_comment":
+        lines[k] += b" # a remark: 1,5 nan f 0"
+    elif fault == "name_encoding":  # bytes of any encoding in names and comments
+        encoding, name = draw(st.sampled_from(OBJ_NAMES))
+        lines.insert(0, b"o " + name.encode(encoding))
+        face_lines.append(b"# " + name.encode(encoding))
     if fault == "no_faces":
-        faces = []
-    lines += [f"f {a} {b} {c}" for a, b, c in faces]
-    if fault == "bad_token":
-        lines.insert(draw(st.integers(0, len(lines))), draw(st.sampled_from(["f a b c", "v x y z", "f 1//", "f 1 2 3 -99999"])))
-    if fault == "short_face":
-        lines.append("f 1 2")
-        lines = [line for line in lines if not line.startswith("f ") or line == "f 1 2"]
-    text = "\n".join(lines).encode()
-    if fault == "junk":
-        text = draw(st.binary(min_size=0, max_size=2000))
-    return text, fault in MESH_MUST_FAIL
+        face_lines = []
+        expected = "has no triangles"
+    text = b"\n".join(lines + face_lines) + b"\n"
+    if fault == "utf16_bom":
+        text = text.decode().encode("utf-16")
+    elif fault == "utf16_no_bom":
+        text = text.decode().encode("utf-16-le")
+        expected = "line 1: a NUL byte"
+    elif fault == "utf8_bom":
+        text = b"\xef\xbb\xbf" + text
+    elif fault == "line_ends":
+        text = text.replace(b"\n", draw(st.sampled_from([b"\r\n", b"\r"])))
+    elif fault == "junk":
+        text, expected = draw(st.binary(max_size=2000)), ANY
+    return text, expected
 
 
-@FUZZ
-@given(case=obj_text())
-@example(case=(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nmtllib /etc/passwd\nf 1 2 3\n", False))
-def test_corrupt_meshes_are_refused(tmp_path_factory, case):
-    data, must_fail = case
+@pytest.mark.parametrize("fault", OBJ_CASES)
+@settings(FUZZ, max_examples=max(4, FUZZ_EXAMPLES // 20))  # each case, so none is left to chance
+@given(draw=st.data())
+def test_meshes_load_or_are_refused_naming_the_file_and_the_problem(tmp_path_factory, fault, draw):
+    data, expected = draw.draw(obj_text(fault))
     TRIED["mesh"] += 1
     mesh = tmp_path_factory.getbasetemp() / "fuzzed.obj"
     mesh.write_bytes(data)
     try:
         world = load_world({"version": 1, "playground": {"mesh": str(mesh)}})
     except SceneError as error:
-        assert "playground.mesh" in str(error) and len(str(error)) <= MAX_MESSAGE
+        message = str(error)
+        assert expected is not None, f"a legal .obj was refused: {message}"
+        assert message.startswith(f"<scene>: playground.mesh: mesh {mesh}") and len(message) <= MAX_MESSAGE, message
+        assert expected is ANY or expected in message, message
         return
-    assert not must_fail, "a corrupt mesh was taken"
+    assert expected is None or expected is ANY, f"taken, but should be refused with {expected!r}"
     ACCEPTED["mesh"] += 1
     triangles = world.playground_triangles
     assert len(triangles) and np.all(np.abs(triangles) <= specs.MAX_COORDINATE)

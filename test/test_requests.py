@@ -1,14 +1,17 @@
 """The SPEC 6.3 request handlers, ROS-free (the node and the Foxglove server share them)."""
 import json
+import re
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
 
 from vplayground_ros.api import (INVALID_MAP_DATA, MAP_DOES_NOT_EXIST, MAP_SUCCESS, Requests)
+from vplayground_ros.broadcast import TOPICS
 from vplayground_ros.scene import load_world
-from vplayground_ros.simulation import Simulation
+from vplayground_ros.simulation import PAUSED, PLAYING, Simulation
 
 SCENE = {"version": 1, "bodies": [{"name": "a", "position": [0, 0, 0.5]},
                                   {"name": "b", "position": [3, 0, 0.5]}]}
@@ -140,8 +143,52 @@ def test_get_entity_and_features(requests):
     entity = yaml.safe_load(text)
     assert ok and entity["frame"] == "world" and entity["pose"]["position"] == [3.0, 0.0, 0.5]
     assert requests.get_entity("{entity: zz}")[1].startswith("RESULT_NOT_FOUND:")
+
+
+def msg_constants(path):
+    """name -> value of the integer constants (`uint8 NAME = 3`) of a .msg file."""
+    return {match["name"]: int(match["value"]) for match in
+            re.finditer(r"^u?int\d+\s+(?P<name>[A-Z0-9_]+)\s*=\s*(?P<value>\d+)", path.read_text(), re.MULTILINE)}
+
+
+def pose_and_twist(requests, name):
+    entity = yaml.safe_load(requests.get_entity(f"{{entity: {name}}}")[1])
+    return entity["pose"]["position"], entity["twist"]["linear"]
+
+
+# What shows each feature honoured, through the handlers (SPEC 6.3): in order, on one world.
+HONOURED = {
+    "SPAWNING": lambda r: r.spawn("{name: c, position: [0, 3, 0.5]}")[0] and "c" in r.sim.world.body_names(),
+    "DELETING": lambda r: r.remove("{entity: c}")[0] and "c" not in r.sim.world.body_names(),
+    "ENTITY_STATE_GETTING": lambda r: pose_and_twist(r, "b") == ([3.0, 0.0, 0.5], [0.0, 0.0, 0.0]),
+    "ENTITY_STATE_SETTING": lambda r: (r.edit("{entity: b, state: {pose: {position: [3, 1, 2]}, twist: {linear: [0, 0, 4]}}}")[0]
+                                       and pose_and_twist(r, "b") == ([3.0, 1.0, 2.0], [0.0, 0.0, 4.0])),
+    "SIMULATION_STATE_GETTING": lambda r: ("~/state", "std_msgs/msg/UInt8") in {(t.name, t.type) for t in TOPICS}
+                                          and r.sim.state == PLAYING,
+    "SIMULATION_STATE_PAUSE": lambda r: r.pause(True)[0] and r.sim.state == PAUSED,
+    "STEP_SIMULATION_SINGLE": lambda r: r.step(1)[0] and r.sim.pending_steps == 1,
+    "STEP_SIMULATION_MULTIPLE": lambda r: r.step(5)[0] and r.sim.pending_steps == 6,
+    "SIMULATION_STATE_SETTING": lambda r: r.pause(False)[0] and r.sim.state == PLAYING,
+    "SIMULATION_RESET_STATE": lambda r: r.reset(2)[0] and pose_and_twist(r, "b") == ([3.0, 0.0, 0.5], [0.0, 0.0, 0.0]),
+    "SIMULATION_RESET_SPAWNED": lambda r: (r.spawn("{name: d}")[0] and r.reset(4)[0]
+                                           and "d" not in r.sim.world.body_names()),
+    "SIMULATION_RESET_TIME": lambda r: (r.sim.world.step(3) or True) and r.reset(1)[0] and r.sim.world.time == 0.0,
+    "SIMULATION_RESET": lambda r: r.remove("{entity: a}")[0] and r.reset(255)[0] and r.sim.world.body_names() == ["a", "b"],
+}
+
+
+def test_features_are_listed_by_their_simulation_interfaces_numbers_and_honoured(requests):
+    """The numbers ~/get_simulator_features lists are the simulation_interfaces 2.1.0 ones (its
+    SimulatorFeatures.msg, copied in test/) of exactly the features the handlers honour."""
+    constants = msg_constants(Path(__file__).parent / "simulation_interfaces-2.1.0" / "msg" / "SimulatorFeatures.msg")
+    assert len(constants) == 32 and constants["SPAWNING_RESOURCE_STRING"] == 9  # the whole table was read
+    names = {number: name for name, number in constants.items()}
     ok, text = requests.features()
-    assert ok and 0 in yaml.safe_load(text)["features"]
+    listed = yaml.safe_load(text)["features"]
+    assert ok and listed == sorted(set(listed)) and set(listed) <= set(names), listed
+    assert {names[number] for number in listed} == set(HONOURED), sorted(names[number] for number in listed)
+    for name, honoured in HONOURED.items():
+        assert honoured(requests), name
 
 
 def test_runner_steps_in_real_time_and_applies_commands_between_batches():

@@ -99,9 +99,9 @@ def test_playground_and_vehicle_errors_name_the_key(mutate, fragment):
 
 
 @pytest.mark.parametrize("text, fragment", [
-    ("this is not a mesh\n", "no triangles"),
+    ("this is not a mesh\n", "line 1: unknown statement 'this'"),
     ("v 0 0 0\nv 1 0 0\n", "no triangles"),
-    ("v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n", "not finite"),
+    ("v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n", "line 2: 'nan' is not a finite number"),
 ])
 def test_bad_mesh_files_are_refused_with_the_file_named(tmp_path, text, fragment):
     mesh = write_obj(tmp_path / "bad.obj", text)

@@ -41,13 +41,24 @@ ALREADY = "ALREADY_IN_TARGET_STATE"
 MAP_SUCCESS, MAP_DOES_NOT_EXIST, INVALID_MAP_DATA, UNDEFINED_FAILURE = 0, 1, 2, 255
 # Reset scopes (simulation_interfaces ResetSimulation).
 SCOPE_TIME, SCOPE_STATE, SCOPE_SPAWNED, SCOPE_ALL = 1, 2, 4, 255
-# simulation_interfaces SimulatorFeatures numbers this simulator honours.
-FEATURES = {"SPAWNING": 0, "DELETING": 1, "NAMED_POSES": None, "ENTITY_STATE_GETTING": 9,
-            "ENTITY_STATE_SETTING": 10, "SIMULATION_RESET": 20, "SIMULATION_RESET_TIME": 21,
-            "SIMULATION_RESET_STATE": 22, "SIMULATION_RESET_SPAWNED": 23,
-            "SIMULATION_STATE_GETTING": 24, "SIMULATION_STATE_SETTING": 25,
-            "SIMULATION_STATE_PAUSE": 26, "STEP_SIMULATION_SINGLE": 31,
-            "STEP_SIMULATION_MULTIPLE": 32}
+# The features this simulator honours, as ~/get_simulator_features lists them: names and
+# numbers copied from simulation_interfaces 2.1.0 msg/SimulatorFeatures.msg (the tests check
+# them against the copy in test/simulation_interfaces-2.1.0/), each with what honours it.
+SIMULATOR_FEATURES = {
+    "SPAWNING": 0,                   # ~/spawn
+    "DELETING": 1,                   # ~/remove
+    "ENTITY_STATE_GETTING": 10,      # ~/get_entity: pose and twist
+    "ENTITY_STATE_SETTING": 11,      # ~/edit: state.pose, state.twist
+    "SIMULATION_RESET": 20,          # ~/reset
+    "SIMULATION_RESET_TIME": 21,     # reset_scope 1
+    "SIMULATION_RESET_STATE": 22,    # reset_scope 2
+    "SIMULATION_RESET_SPAWNED": 23,  # reset_scope 4
+    "SIMULATION_STATE_GETTING": 24,  # ~/state
+    "SIMULATION_STATE_SETTING": 25,  # ~/pause false: playing
+    "SIMULATION_STATE_PAUSE": 26,    # ~/pause true: paused
+    "STEP_SIMULATION_SINGLE": 31,    # ~/step with step_count 1
+    "STEP_SIMULATION_MULTIPLE": 32,  # ~/step with step_count n
+}
 MAX_PAYLOAD = 1 << 20  # bytes of YAML a request may carry
 DEFAULT_MAX_BODIES = 10_000  # bodies (vehicles included) the world may hold; ~real time at 128 Hz
 MAX_STEPS = 1_000_000  # steps one ~/step may queue (~2 h of simulated time at 128 Hz)
@@ -407,8 +418,8 @@ class Requests:
         return self.sim.call(lambda world: (world.wake_all(), reply(OK, "every body awake"))[1])
 
     def features(self):
-        honoured = sorted(v for v in FEATURES.values() if v is not None)
-        return True, yaml.safe_dump({"features": honoured, "spawn_formats": ["vplayground_yaml"]},
+        return True, yaml.safe_dump({"features": sorted(SIMULATOR_FEATURES.values()),
+                                     "spawn_formats": ["vplayground_yaml"]},
                                     default_flow_style=True).strip()
 
     # ------------------------------------------------------------------ scene files

@@ -4,7 +4,6 @@
 and the playground mesh read, before the World is built: an error names the file, the key path
 and the problem, and nothing is half-loaded.
 """
-import io
 import logging
 import re
 import stat
@@ -13,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from .mesh_files import MeshError, read_obj, read_with_trimesh
 from .physics import World
 from .physics import specs
 from .physics.math3d import rpy_to_quat
@@ -109,7 +109,7 @@ def inside(path, directories):
 
 def count_obj_triangles(data, path):
     """Triangles an .obj's faces make once fanned (a face of n corners is n - 2), counted from
-    the raw bytes so a file of millions is refused before trimesh builds arrays for them."""
+    the raw bytes so a file of millions is refused before they are parsed one by one."""
     if data.count(b"\nf ") + data.count(b"\nf\t") > MAX_PLAYGROUND_TRIANGLES:
         raise specs.SpecError("playground.mesh", f"mesh {path} has more than the "
                                                  f"{MAX_PLAYGROUND_TRIANGLES} triangles allowed")
@@ -124,8 +124,6 @@ def count_obj_triangles(data, path):
 
 def read_mesh(path):
     """(vertices (V, 3), faces (T, 3)) of a Wavefront .obj (or .stl, .ply, .off)."""
-    import trimesh  # only scenes with a playground need it
-
     file_type = MESH_TYPES.get(Path(path).suffix.lower())
     if file_type is None:
         raise specs.SpecError("playground.mesh", f"mesh {path}: unsupported file type (supported: "
@@ -137,13 +135,9 @@ def read_mesh(path):
     if file_type == "obj":
         count_obj_triangles(data, path)
     try:
-        # From memory, not the path: an .obj's `mtllib` cannot make trimesh open other files.
-        mesh = trimesh.load(io.BytesIO(data), file_type=file_type, force="mesh", process=False)
-    except Exception as error:  # trimesh raises many kinds for broken files
-        raise specs.SpecError("playground.mesh", f"cannot read mesh {path}: {type(error).__name__}: "
-                                                 f"{str(error)[:200]}") from None
-    vertices = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), dtype=np.float64)
-    faces = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), dtype=np.int64)
+        vertices, faces = read_obj(data) if file_type == "obj" else read_with_trimesh(data, file_type)
+    except MeshError as error:
+        raise specs.SpecError("playground.mesh", f"mesh {path}: {error}") from None
     if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
         raise specs.SpecError("playground.mesh", f"mesh {path} has no triangles")
     if len(faces) > MAX_PLAYGROUND_TRIANGLES:
