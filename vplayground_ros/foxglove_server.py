@@ -66,7 +66,7 @@ class FoxgloveServer:
         return self.channels[topic.key].has_sinks()
 
     def statuses(self):
-        return [("vplayground: foxglove", 0, self.url, {"subscriptions": self.subscriptions,
+        return [("foxglove", 0, self.url, {"subscriptions": self.subscriptions,
                                                         "client_channels": len(self.client_channels)})]
 
     # ------------------------------------------------------------- services
