@@ -116,8 +116,9 @@ class Broadcaster:
     While paused, simulated time stands still: state and markers go out on the wall clock at
     their rates when the snapshot changed (an edit, a ~/step), diagnostics once a second of
     wall time; so a live view answers edits and a paused stretch of a bag holds no copies.
-    The scenery goes out on change (a new scene, a new sink, show_octree) and every
-    static_republish_period simulated seconds."""
+    The scenery goes out on change (a new scene, show_octree) and every
+    static_republish_period simulated seconds; a new sink, or a client subscribing, gets the
+    latched topics as last sent."""
 
     def __init__(self, sim, parameters, log, resolve_name=resolve):
         self.sim = sim
@@ -133,6 +134,7 @@ class Broadcaster:
         self.tf_encoder = cdr.TransformEncoder()
         self._last_clock = -math.inf
         self._last_state = None
+        self._latched = {}  # key -> (data, seconds) last sent
         self._removed_reported = 0
         self._jobs = {
             "state": Job("state", 1.0 / parameters["publish_rate"], self.publish_state),
@@ -143,6 +145,7 @@ class Broadcaster:
         self._scenery = Job("scenery", self._scenery_period(), self.publish_scenery)
         self._scenery_pending = False  # handed over and not yet taken: a new request adds nothing
         self._schedule_time = -math.inf  # the time of the last snapshot the listener saw
+        self._scheduled_world = None     # and its world
         self._pending = deque()  # (snapshot, due jobs, octree cells or None for no scenery)
         self._ready = threading.Condition()
         self.skipped = 0  # snapshots the publisher fell too far behind to publish
@@ -151,12 +154,20 @@ class Broadcaster:
 
     def add_sink(self, sink):
         self.sinks.append(sink)
-        self.scene_changed()  # the newcomer gets the scenery at once
+        self.resend_latched(sink)
 
     def send(self, key, data, seconds):
         topic = self.topics[key]
+        if topic.qos == "latched":
+            self._latched[key] = (data, seconds)
         for sink in self.sinks:
             sink.publish(topic, data, seconds)
+
+    def resend_latched(self, sink):
+        """The latched topics (scenery, state, /tf_static) as last sent, to a newcomer (a new
+        sink, a client subscribing) only: the others, the bag above all, have them."""
+        for key, (data, seconds) in list(self._latched.items()):
+            sink.publish(self.topics[key], data, seconds)
 
     def wanted(self, key):
         topic = self.topics[key]
@@ -188,16 +199,15 @@ class Broadcaster:
                 self._scenery.due = -math.inf
         self.sim.submit(due_now)
 
-    def resend_latched(self):
-        """The latched topics (scenery, state, /tf_static) go out again at once."""
-        self._last_state = None
-        self.request_scenery()
-
     def scene_changed(self):
-        """A new scene (or a new sink): latched topics at once, marker ids restart."""
-        self.resend_latched()
+        """A new scene (which the schedule itself publishes at once): marker ids restart."""
         self.marker_ids.clear()
         self._ids_of = ([], np.zeros(0, np.int32))
+
+    def publish_loaded(self):
+        """The world as loaded, at its time (before the simulation thread starts): every job
+        is due, so any speed starts with the same messages."""
+        self._after_batch(self.sim.snapshot)
 
     def _after_batch(self, snapshot):
         """On the simulation thread after each batch (and each command): warnings for bodies
@@ -212,10 +222,11 @@ class Broadcaster:
         if seconds != self._last_clock and (rate <= 0.0 or seconds - self._last_clock >= 1.0 / rate - 1e-9):
             self._last_clock = seconds
             self.send("clock", messages.clock(seconds), seconds)
-        if seconds < self._schedule_time:  # a reset or a new scene: the schedule starts again
+        if seconds < self._schedule_time or self.sim.world is not self._scheduled_world:
+            # A new scene or a reset of the time: every job at once, the schedule from here.
             for job in (*self._jobs.values(), self._scenery):
                 job.due = seconds
-        self._schedule_time = seconds
+        self._schedule_time, self._scheduled_world = seconds, self.sim.world
         due = [job for job in self._jobs.values() if job.is_due(seconds)]
         for job in due:
             job.advance(seconds)
@@ -230,7 +241,7 @@ class Broadcaster:
             self._hand_over((snapshot, due, cells))
 
     def _send_state(self, seconds):
-        """~/state and /tf_static, latched: when the state changes (or is to be re-sent)."""
+        """~/state and /tf_static, latched: when the state changes."""
         state = self.sim.state
         if state != self._last_state:
             self._last_state = state

@@ -87,7 +87,7 @@ class FoxgloveServer:
     def on_subscribe(self, client, channel):
         self.subscriptions += 1
         if any(self.channels[key].id() == channel.id for key in self.latched):
-            self.runtime.broadcaster.resend_latched()
+            self.runtime.broadcaster.resend_latched(self)
 
     def on_unsubscribe(self, client, channel):
         self.subscriptions -= 1

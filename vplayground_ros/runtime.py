@@ -35,6 +35,7 @@ class Runtime:
 
     def start(self):
         """Starts the physics thread and the publishing thread."""
+        self.broadcaster.publish_loaded()
         self.sim.start()
         self._thread.start()
 
