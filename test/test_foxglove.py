@@ -263,5 +263,6 @@ def test_hostile_client_changes_nothing_and_the_server_keeps_serving(client):
     assert client.get_parameters() == parameters
     assert sorted(m.name for m in client.call(f"{NS}/get_entities", {}).markers) == before
     assert client.call(f"{NS}/pause", {"data": False}).success
+    assert client.wait(lambda: client.times)  # /clock goes out as time advances: none while paused
     stamp = client.times[-1]
     assert client.wait(lambda: client.times[-1] > stamp)  # still stepping
