@@ -209,12 +209,12 @@ def run(args):
                 samples.append((now - started, soak.sim_time, rss))
                 if rss_start is None and now - started >= args.warmup:
                     rss_start = (now - started, rss)
-                    late_start = int(soak.diagnostics.get("vplayground: simulation", {}).get("late_ticks", 0))
+                    late_start = int(soak.diagnostics.get("simulation", {}).get("late_ticks", 0))
             if now - minute_start[0] >= 60.0:
                 wall = now - minute_start[0]
                 rtf = (soak.sim_time - minute_start[1]) / wall
-                sim = soak.diagnostics.get("vplayground: simulation", {})
-                bodies = soak.diagnostics.get("vplayground: bodies", {})
+                sim = soak.diagnostics.get("simulation", {})
+                bodies = soak.diagnostics.get("bodies", {})
                 requests = soak.done["spawn"] + soak.done["remove"] + soak.done["refused_bad"]
                 row = {"minute": len(minutes) + 1, "rtf": round(rtf, 4), "rss_mb": round(rss_bytes(process.pid) / 2**20, 1),
                        "late_ticks": int(sim.get("late_ticks", -1)), "step_ms": float(sim.get("step_ms", "nan")),
@@ -252,7 +252,7 @@ def run(args):
     except Exception as error:  # an unfinished bag is a finding, not a crash of the report
         bag_report = {"finished": False, "error": f"{type(error).__name__}: {error}"}
     rtf_values = [m["rtf"] for m in minutes]
-    sim = diagnostics.get("vplayground: simulation", {})
+    sim = diagnostics.get("simulation", {})
     recorder = {k: v for k, v in diagnostics.items() if "recorder" in k}
     report = {
         "duration_s": round(end, 1), "warmup_s": args.warmup, "exit_code": process.returncode,
@@ -268,7 +268,7 @@ def run(args):
         "requests": dict(soak.done),
         "request_latency_ms_p50": round(1e3 * sorted(soak.latencies)[len(soak.latencies) // 2], 2) if soak.latencies else None,
         "request_latency_ms_max": round(1e3 * max(soak.latencies), 2) if soak.latencies else None,
-        "bodies_removed_by_simulator": int(diagnostics.get("vplayground: bodies", {}).get("removed", 0)),
+        "bodies_removed_by_simulator": int(diagnostics.get("bodies", {}).get("removed", 0)),
         "recorder": recorder, "bag": bag_report, "rss_samples": len(samples),
     }
     if foxglove_report is not None:

@@ -6,6 +6,7 @@ import subprocess
 import sys
 import time
 
+import numpy as np
 import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
@@ -73,6 +74,49 @@ def test_bag_opens_with_an_independent_reader_and_every_message_decodes(bag):
         if stamped is not None and topic != "/diagnostics":
             assert stamped == log_time, topic  # log time = simulation time
     assert max(last.values()) <= 3 * 10**9
+
+
+@pytest.fixture(scope="module")
+def bags_at_two_speeds(tmp_path_factory):
+    """The default scene for 2 s, in real time and as fast as possible."""
+    directory = tmp_path_factory.mktemp("speeds")
+    paths = {rtf: directory / f"rtf_{rtf}.mcap" for rtf in ("1", "0")}
+    for rtf, path in paths.items():
+        run("--duration", "2", "--real-time-factor", rtf, "--record", str(path))
+    return {rtf: read_all(path)[2] for rtf, path in paths.items()}
+
+
+def log_times(messages):
+    """{topic: [log time, ns]}; ~/transforms per child frame (one message per frame and time)."""
+    times = {}
+    for topic, log_time, _, msg in messages:
+        key = f"{topic} {msg.child_frame_id}" if topic == "/vplayground/transforms" else topic
+        times.setdefault(key, []).append(log_time)
+    return times
+
+
+def test_a_bag_has_the_same_message_times_at_any_speed(bags_at_two_speeds):
+    real_time, fast = (log_times(bags_at_two_speeds[rtf]) for rtf in ("1", "0"))
+    step = 10**9 / 128
+    assert set(real_time) == set(fast)
+    for topic in set(real_time) - {"/clock"}:  # /clock: every batch, and batches follow the speed
+        assert len(real_time[topic]) == len(fast[topic]), topic
+        assert max(abs(a - b) for a, b in zip(sorted(real_time[topic]), sorted(fast[topic]))) < step, topic
+    # 30 Hz of simulated time: the first step at or after each 1/30 s.
+    poses = np.array(sorted(fast["/vplayground/bodies/poses"])) / step
+    assert np.allclose(poses, np.ceil(np.arange(61) * 128 / 30 - 1e-6))
+    assert sorted(fast["/diagnostics"]) == [0, 10**9, 2 * 10**9]  # spread over the run, not all at 0
+    rtf = {speed: [msg.data for topic, _, _, msg in bags_at_two_speeds[speed]
+                   if topic == "/vplayground/real_time_factor"] for speed in ("1", "0")}
+    assert all(value > 0.0 for value in rtf["0"][1:] + rtf["1"][1:]), rtf  # after t = 0 nothing was measured
+
+
+def test_no_topic_repeats_a_log_time(bags_at_two_speeds):
+    """The first batch (Numba loading the engine) once filled a bag's start with 30-40 copies
+    of each state topic at t = 0."""
+    for speed, messages in bags_at_two_speeds.items():
+        for topic, times in log_times(messages).items():
+            assert len(times) == len(set(times)), (speed, topic, sorted(times)[:5])
 
 
 def test_tf_has_a_transform_for_every_body(bag):

@@ -10,8 +10,9 @@ class Parameters(dict):
 
 
 def test_marker_ids_stay_stable_and_bounded():
-    parameters = Parameters({"publish_rate": 30.0, "marker_rate": 30.0, "world_frame": "world",
-                             "odom_frame": "odom", "base_frame": "base_link"})
+    parameters = Parameters({"publish_rate": 30.0, "marker_rate": 30.0, "static_republish_period": 5.0,
+                             "show_octree": False, "world_frame": "world", "odom_frame": "odom",
+                             "base_frame": "base_link"})
     broadcaster = Broadcaster(MagicMock(), parameters, MagicMock())
     keeper = broadcaster.marker_id("keeper")
     for k in range(1000):  # a body spawned and removed every time, under a new name
@@ -21,3 +22,192 @@ def test_marker_ids_stay_stable_and_bounded():
     assert broadcaster.marker_id("keeper") == keeper
     assert len(broadcaster.marker_ids) <= 2 * 2 + 64 + 1
     assert len(set(broadcaster.marker_ids.values())) == len(broadcaster.marker_ids)  # ids never reused
+
+
+# ---------------------------------------------------------------- through a running Runtime
+import logging  # noqa: E402
+import re  # noqa: E402
+import time  # noqa: E402
+from types import SimpleNamespace  # noqa: E402
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+import yaml  # noqa: E402
+
+from vplayground_ros.cli import parse_args  # noqa: E402
+from vplayground_ros.interfaces import decoder  # noqa: E402
+from vplayground_ros.runtime import Runtime  # noqa: E402
+from vplayground_ros.scene import load_world  # noqa: E402
+from vplayground_ros.simulation import Simulation  # noqa: E402
+
+MARKERS = decoder("visualization_msgs/msg/MarkerArray")
+POSES = decoder("geometry_msgs/msg/PoseArray")
+DIAGNOSTICS = decoder("diagnostic_msgs/msg/DiagnosticArray")
+SPHERE_LIST, LINE_LIST, CUBE_LIST = 7, 5, 6
+CAR = {"name": "car", "position": [0, 0, 1.6], "chassis": {"size": [4.0, 1.8, 0.6], "mass": 1200},
+       "engine_power": 6000, "brake_power": 9000, "max_steer": 0.6,
+       "wheels": [{"mount": [x, y, -0.3], "radius": 0.35, "mass": 20, "power_gain": 0.5, "steered": x > 0,
+                   "spring_stiffness": 40000, "damper": 4000, "spring_length": 0.5,
+                   "static_friction": 1.0, "dynamic_friction": 0.8}
+                  for x, y in ((1.3, 0.8), (1.3, -0.8), (-1.3, 0.8), (-1.3, -0.8))]}
+# A car dropped from just above the ground (its wheels touch it after 0.3 s) and a box far from it.
+SCENE = {"version": 1, "bodies": [{"name": "crate", "position": [10, 0, 0.5]}], "vehicles": [CAR]}
+
+
+class Collector:
+    """A sink that keeps everything: (topic key, simulated s, CDR bytes)."""
+
+    def __init__(self, fail_on=None):
+        self.messages = []
+        self.fail_on = fail_on
+
+    def publish(self, topic, data, seconds):
+        if topic.key == self.fail_on:
+            raise RuntimeError(f"sink bug on {topic.key}")
+        self.messages.append((topic.key, seconds, data))
+
+    def subscribed(self, topic):
+        return True
+
+    def statuses(self):
+        return []
+
+    def of(self, key, decode=None):
+        return [(t, decode(d) if decode else d) for k, t, d in list(self.messages) if k == key]
+
+
+def wait_for(condition, timeout=30.0):
+    deadline = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.01)
+
+
+@pytest.fixture
+def running():
+    """start(scene, *cli options, sink=...) -> (runtime, sink): a Runtime with a Collector,
+    stepping; stopped after the test."""
+    started = []
+
+    def start(scene=SCENE, *args, sink=None, log=None):
+        options = parse_args(["--no-record", *args])
+        sim = Simulation(load_world(scene), real_time_factor=options.real_time_factor,
+                         start_paused=options.start_paused, duration=options.duration)
+        runtime = Runtime(sim, options, log or logging.getLogger("test_broadcast"))
+        sink = sink or Collector()
+        runtime.broadcaster.add_sink(sink)
+        runtime.start()
+        started.append(runtime)
+        return runtime, sink
+    yield start
+    for runtime in started:
+        runtime.stop()
+
+
+def test_the_car_is_drawn_once_and_no_list_marker_is_empty(running):
+    runtime, sink = running(SCENE, "--real-time-factor", "0", "--duration", "0.5")
+    runtime.sim.wait(60)
+    runtime.stop()
+    first_time, first = sink.of("car_markers", MARKERS)[0]
+    assert first_time == 0.0  # in the air: no ray hits, no contacts
+    bodies = sink.of("body_markers", MARKERS)
+    for _, array in bodies:
+        assert array.markers[0].action == 3 and [m.ns for m in array.markers[1:]] == ["box"]  # the crate only
+    for key in ("car_markers", "contact_markers", "scene_markers"):
+        for _, array in sink.of(key, MARKERS):
+            assert array.markers[0].action == 3, key  # DELETEALL: a marker left out disappears
+            lists = [m for m in array.markers if m.type in (SPHERE_LIST, LINE_LIST, CUBE_LIST)]
+            assert all(len(m.points) > 0 for m in lists), key
+    assert "ray_hits" not in {m.ns for m in first.markers}
+    assert {"chassis", "wheels", "springs"} <= {m.ns for m in first.markers}
+    assert not sink.of("contact_markers", MARKERS)[0][1].markers[1:]  # nothing touches yet
+    landed = sink.of("car_markers", MARKERS)[-1][1]
+    assert "ray_hits" in {m.ns for m in landed.markers}  # on the ground by 0.5 s
+
+
+def test_diagnostics_name_each_status_once_and_summarise_the_figures(running):
+    runtime, sink = running(SCENE, "--real-time-factor", "0", "--duration", "1.1")
+    runtime.sim.wait(60)
+    runtime.stop()
+    _, last = sink.of("diagnostics", DIAGNOSTICS)[-1]
+    status = {s.name: s for s in last.status}
+    assert set(status) == {"simulation", "bodies", "car", "publisher"}
+    assert {s.hardware_id for s in last.status} == {"vplayground"}  # a viewer shows "vplayground: simulation"
+    assert re.fullmatch(r"(playing|stopped), RTF \d+\.\d\d/max, step \d+\.\d\d ms, 0 late ticks",
+                        status["simulation"].message), status["simulation"].message
+    assert re.fullmatch(r"2 bodies: \d active, \d frozen, 0 removed", status["bodies"].message)
+    assert re.fullmatch(r"car: last command 1\.\d s ago", status["car"].message)
+    assert status["publisher"].level == 0
+
+
+def test_a_failing_job_is_logged_once_counted_and_the_others_go_on(running):
+    log = logging.getLogger("test_broadcast.failing")
+    records = []
+    handler = logging.Handler()
+    handler.emit = records.append
+    log.addHandler(handler)
+    try:
+        runtime, sink = running(SCENE, "--real-time-factor", "0", "--duration", "3",
+                                sink=Collector(fail_on="body_markers"), log=log)
+        runtime.sim.wait(60)
+        runtime.stop()
+    finally:
+        log.removeHandler(handler)
+    errors = [r for r in records if r.levelno == logging.ERROR]
+    assert len(errors) == 1 and "publishing markers failed" in errors[0].getMessage()
+    assert "Traceback" in errors[0].getMessage() and "sink bug on body_markers" in errors[0].getMessage()
+    assert sink.of("poses")[-1][0] == pytest.approx(3.0)  # state went on to the end
+    diagnostics = sink.of("diagnostics", DIAGNOSTICS)
+    assert [t for t, _ in diagnostics] == [0.0, 1.0, 2.0, 3.0]
+    publisher = next(s for s in diagnostics[-1][1].status if s.name == "publisher")
+    assert publisher.level == 2 and publisher.message.startswith("markers failed 91 times: RuntimeError: sink bug")
+
+
+def test_the_scenery_follows_show_octree_at_once_even_paused(running):
+    runtime, sink = running(SCENE, "--real-time-factor", "1", "--start-paused")
+    octree = lambda array: any(m.ns == "octree" for m in array.markers)  # noqa: E731
+    assert runtime.requests.step(1)[0]  # the octree is fitted at the first step
+    wait_for(lambda: runtime.sim.snapshot.step == 1 and sink.of("scene_markers"))
+    assert not octree(sink.of("scene_markers", MARKERS)[-1][1])
+    for shown in (True, False, True):
+        count = len(sink.of("scene_markers"))
+        assert runtime.parameters.set({"show_octree": shown})[0]
+        wait_for(lambda: len(sink.of("scene_markers")) > count)
+        assert octree(sink.of("scene_markers", MARKERS)[-1][1]) == shown
+    assert runtime.sim.snapshot.step == 1  # paused all along: sent on the change, not on a timer
+
+
+def test_a_loaded_scene_is_drawn_at_once_even_paused(running, tmp_path):
+    runtime, sink = running(SCENE, "--real-time-factor", "1", "--start-paused")
+    wait_for(lambda: sink.of("scene_markers"))
+    (tmp_path / "raised.yaml").write_text(yaml.safe_dump({**SCENE, "ground": {"height": 1.0}}))
+    runtime.requests.scene_directories = [tmp_path]
+    load = next(s.handler for s in runtime.services if s.name == "~/load_scene")
+    assert load(SimpleNamespace(map_url=str(tmp_path / "raised.yaml"))) == {"result": 0}
+    ground = lambda: [m.pose.position.z for m in sink.of("scene_markers", MARKERS)[-1][1].markers  # noqa: E731
+                      if m.ns == "ground"]
+    wait_for(lambda: ground() == [pytest.approx(1.0 - 0.005)])
+
+
+def test_a_paused_world_answers_edits_and_repeats_nothing(running):
+    runtime, sink = running(SCENE, "--real-time-factor", "1", "--start-paused")
+    wait_for(lambda: len(sink.of("diagnostics")) >= 2)  # diagnostics go on by the wall clock
+    assert len(sink.of("poses")) == 1  # the start, and no copies of it
+    ok, message = runtime.requests.edit("{entity: crate, state: {pose: {position: [12, 3, 0.5]}}}")
+    assert ok, message
+    row = runtime.sim.snapshot.names.index("crate")
+    wait_for(lambda: len(sink.of("poses")) == 2)
+    seconds, poses = sink.of("poses", POSES)[-1]
+    assert seconds == 0.0 and (poses.poses[row].position.x, poses.poses[row].position.y) == (12.0, 3.0)
+
+
+def test_as_fast_as_possible_publishes_at_the_simulated_rates(running):
+    runtime, sink = running(SCENE, "--real-time-factor", "0", "--duration", "2")
+    runtime.sim.wait(60)
+    runtime.stop()
+    steps = np.array([t for t, _ in sink.of("poses")]) * 128
+    # The first step at or after each 1/30 s: what the same scene gives at any speed.
+    assert np.allclose(steps, np.ceil(np.arange(61) * 128 / 30 - 1e-6))
+    assert [t for t, _ in sink.of("diagnostics")] == [0.0, 1.0, 2.0]
+    assert [t for t, _ in sink.of("rtf")] == [0.0, 0.5, 1.0, 1.5, 2.0]
+    assert all(decoder("std_msgs/msg/Float64")(d).data > 0.0 for _, d in sink.of("rtf")[1:])

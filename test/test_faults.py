@@ -175,6 +175,51 @@ def test_the_node_runs_to_its_duration_on_a_full_disk():
     assert "No space left on device" in output
 
 
+def test_an_unwritable_record_path_leaves_every_topic_publishing(tmp_path):
+    """Issue 16.1: the recorder's status once assumed a file, and its IndexError ended the
+    publisher thread: no poses, markers or diagnostics after the first /diagnostics."""
+    rclpy = pytest.importorskip("rclpy")
+    from diagnostic_msgs.msg import DiagnosticArray
+    from geometry_msgs.msg import PoseArray
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+
+    (tmp_path / "a_file").write_text("")
+    path = tmp_path / "a_file" / "run.mcap"
+    node_process = subprocess.Popen([sys.executable, "-m", "vplayground_ros.cli", "--real-time-factor", "1",
+                                     "--no-foxglove", "--record", str(path)],
+                                    stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    context = Context()
+    rclpy.init(context=context)
+    client = rclpy.create_node("record_path_client", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(client)
+    poses, diagnostics = [], []
+    client.create_subscription(PoseArray, "/vplayground/bodies/poses", poses.append, 10)
+    client.create_subscription(DiagnosticArray, "/diagnostics", diagnostics.append, 10)
+    try:
+        end = time.monotonic() + 90.0
+        # Two diagnostics, and poses after the second: the publisher outlived its first ticks.
+        while time.monotonic() < end and not (len(diagnostics) >= 2 and poses and
+                                              stamp(poses[-1]) > stamp(diagnostics[1])):
+            executor.spin_once(timeout_sec=0.1)
+    finally:
+        executor.shutdown()
+        client.destroy_node()
+        rclpy.try_shutdown(context=context)
+        node_process.send_signal(signal.SIGINT)
+        output, _ = node_process.communicate(timeout=60)
+    assert node_process.returncode == 0, output[-2000:]
+    assert len(diagnostics) >= 2 and stamp(poses[-1]) > stamp(diagnostics[1]), output[-2000:]
+    recorder = next(s for s in diagnostics[-1].status if s.name == "recorder")  # level: a byte in rclpy
+    assert recorder.level == b"\x02" and str(path) in recorder.message and "not recording" in recorder.message
+    assert "Traceback" not in output
+
+
+def stamp(msg):
+    return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+
+
 def test_the_node_refuses_a_hostile_corpus_keeps_stepping_and_finishes_its_bag(tmp_path):
     """End to end through ROS: the services' replies are coded, /clock goes on, the bag is whole."""
     rclpy = pytest.importorskip("rclpy")

@@ -354,7 +354,8 @@ def test_marker_and_contact_topics_carry_the_bodies(ros):
     topics = (f"{NS}/bodies/markers", f"{NS}/scene/markers", f"{NS}/car/markers", f"{NS}/contacts/points", "/joint_states")
     assert wait_for(lambda: all(t in ros.latest for t in topics))
     bodies = ros.latest[f"{NS}/bodies/markers"].markers
-    assert bodies[0].action == 3 and len(bodies) - 1 == len(ros.latest[f"{NS}/bodies/poses"].poses)
+    # DELETEALL, then every body but the car, which ~/car/markers draws.
+    assert bodies[0].action == 3 and len(bodies) - 1 == len(ros.latest[f"{NS}/bodies/poses"].poses) - 1
     assert {m.ns for m in bodies[1:]} <= {"box", "immovable", "vehicle"}
     scene = ros.latest[f"{NS}/scene/markers"].markers
     playground = [m for m in scene if m.ns == "playground"]

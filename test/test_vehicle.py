@@ -128,6 +128,23 @@ def test_brakes_stop_it_and_it_does_not_creep():
     assert np.linalg.norm(world.state()["positions"][row(world)] - stopped) < 0.01
 
 
+def test_a_hard_stop_never_rolls_it_backwards():
+    """Issue 17.14: odom read -0.20 m/s after a stop from 3 m/s, the body swinging back on its
+    springs around tyres the brakes held."""
+    world = car_world(freezing=False)
+    world.drive("car", 3.0, 0.0, timeout=100)
+    world.step(4 * 128)
+    assert forward_speed(world) == pytest.approx(3.0, abs=0.1)
+    world.drive("car", 0.0, 0.0, timeout=100)
+    speeds = []
+    for _ in range(3 * 128):
+        world.step(1)
+        speeds.append(forward_speed(world))
+    assert min(speeds) > -0.01
+    assert abs(speeds[-1]) < 0.01
+    assert np.all(world.vehicle_state("car")["spin_rate"] > -0.01 / 0.35)  # nor its wheels
+
+
 def test_command_timeout_brings_it_to_rest():
     world = car_world(freezing=False)
     world.drive("car", 4.0, 0.2, timeout=0.5)

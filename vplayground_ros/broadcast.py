@@ -8,8 +8,10 @@ A sink has `publish(topic, data, seconds)`, `subscribed(topic)` and `statuses()`
 does).
 """
 import math
+import threading
 import time
-from collections import namedtuple
+import traceback
+from collections import deque, namedtuple
 
 import numpy as np
 
@@ -37,6 +39,16 @@ TOPICS = [
     Topic("diagnostics", "/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", "reliable_10"),
 ]
 NODE_NAME = "vplayground"
+OK, WARN, ERROR = 0, 1, 2  # diagnostic_msgs/DiagnosticStatus levels
+RTF_PERIOD = 0.5           # simulated s between ~/real_time_factor messages
+DIAGNOSTICS_PERIOD = 1.0   # simulated s between /diagnostics messages
+TIME_TOLERANCE = 1e-9      # s: a snapshot this close before a due time is at it
+# Snapshots handed to the publisher thread and not yet published; beyond it the simulation
+# waits (as fast as possible, at most HAND_OVER_TIMEOUT s) or the oldest is skipped (real time).
+PENDING_LIMIT = 8
+HAND_OVER_TIMEOUT = 1.0
+PAUSED_JOBS = ("state", "markers", "diagnostics")  # what goes out while paused, by the wall clock
+PAUSED_ON_CHANGE = ("state", "markers")            # ... and only when the snapshot changed
 
 
 def resolve(name, node_name=NODE_NAME):
@@ -60,12 +72,54 @@ class BagSink:
 
     def statuses(self):
         r = self.recorder
-        level = 2 if r.error else (1 if r.dropped else 0)
-        return [("vplayground: recorder", level, r.error or str(r.files[-1]),
-                 {"path": r.files[-1], "files": len(r.files), "bytes": r.bytes_written, "dropped": r.dropped})]
+        path = r.files[-1] if r.files else r.path  # no file when the path could not be opened
+        values = {"path": path, "files": len(r.files), "bytes": r.bytes_written, "dropped": r.dropped}
+        if r.error:
+            return [("recorder", ERROR, f"not recording: {r.error}", values)]
+        message = f"recording {path}, {r.bytes_written / 1e6:.1f} MB"
+        if r.dropped:
+            return [("recorder", WARN, f"{message}, {r.dropped} messages dropped", values)]
+        return [("recorder", OK, message, values)]
+
+
+class Job:
+    """A group of topics published every `period` simulated seconds: on the snapshot of the
+    first step at or after each multiple of the period, so a bag carries the same times at any
+    real-time factor."""
+
+    def __init__(self, name, period, publish):
+        self.name, self.period, self.publish = name, period, publish
+        self.due = 0.0           # simulated s
+        self.wall_due = 0.0      # time.monotonic() s, while paused
+        self.published = None    # the snapshot it last went out with
+        self.errors = 0
+        self.last_error = ""
+
+    def is_due(self, seconds):
+        return seconds >= self.due - TIME_TOLERANCE
+
+    def advance(self, seconds):
+        """The next multiple of the period after `seconds`."""
+        self.due = (math.floor(seconds / self.period + 1e-9) + 1) * self.period
 
 
 class Broadcaster:
+    """Publishing is scheduled on simulated time. After each batch the simulation thread's
+    listener (_after_batch) sends /clock, picks the jobs due at the snapshot's time and hands
+    them to the publisher thread (publish_next), which builds and sends the messages; the
+    simulation ends its batches at the next due time (Simulation.next_publish_time), so a
+    30 Hz topic lands on the step at or after every 1/30 s whatever the speed. Running as
+    fast as possible the simulation waits for the publisher (every due time is published);
+    in real time it never waits, and a publisher that falls behind skips the oldest snapshots
+    (counted on /diagnostics).
+
+    While paused, simulated time stands still: state and markers go out on the wall clock at
+    their rates when the snapshot changed (an edit, a ~/step), diagnostics once a second of
+    wall time; so a live view answers edits and a paused stretch of a bag holds no copies.
+    The scenery goes out on change (a new scene, show_octree) and every
+    static_republish_period simulated seconds; a new sink, or a client subscribing, gets the
+    latched topics as last sent."""
+
     def __init__(self, sim, parameters, log, resolve_name=resolve):
         self.sim = sim
         self.parameters = parameters
@@ -79,63 +133,189 @@ class Broadcaster:
         self.marker_encoder = cdr.BodyMarkerEncoder()
         self.tf_encoder = cdr.TransformEncoder()
         self._last_clock = -math.inf
-        self._last_static = -math.inf
         self._last_state = None
+        self._latched = {}  # key -> (data, seconds) last sent
         self._removed_reported = 0
-        self._jobs = {}  # name -> [period (wall s), next due, fn]
-        self._add_jobs()
+        self._jobs = {
+            "state": Job("state", 1.0 / parameters["publish_rate"], self.publish_state),
+            "markers": Job("markers", 1.0 / parameters["marker_rate"], self.publish_markers),
+            "rtf": Job("rtf", RTF_PERIOD, self.publish_rtf),
+            "diagnostics": Job("diagnostics", DIAGNOSTICS_PERIOD, self.publish_diagnostics),
+        }
+        self._scenery = Job("scenery", self._scenery_period(), self.publish_scenery)
+        self._scenery_pending = False  # handed over and not yet taken: a new request adds nothing
+        self._schedule_time = -math.inf  # the time of the last snapshot the listener saw
+        self._scheduled_world = None     # and its world
+        self._pending = deque()  # (snapshot, due jobs, octree cells or None for no scenery)
+        self._ready = threading.Condition()
+        self.skipped = 0  # snapshots the publisher fell too far behind to publish
         parameters.listen(self._on_parameters)
         sim.add_listener(self._after_batch)
 
     def add_sink(self, sink):
         self.sinks.append(sink)
-        self.scene_changed()  # the newcomer gets the scenery at once
+        self.resend_latched(sink)
 
     def send(self, key, data, seconds):
         topic = self.topics[key]
+        if topic.qos == "latched":
+            self._latched[key] = (data, seconds)
         for sink in self.sinks:
             sink.publish(topic, data, seconds)
+
+    def resend_latched(self, sink):
+        """The latched topics (scenery, state, /tf_static) as last sent, to a newcomer (a new
+        sink, a client subscribing) only: the others, the bag above all, have them."""
+        for key, (data, seconds) in list(self._latched.items()):
+            sink.publish(self.topics[key], data, seconds)
 
     def wanted(self, key):
         topic = self.topics[key]
         return any(sink.subscribed(topic) for sink in self.sinks)
 
     # ------------------------------------------------------------------ schedule
-    def _add_jobs(self):
-        self._jobs = {
-            "state": [1.0 / self.parameters["publish_rate"], 0.0, self.publish_state],
-            "markers": [1.0 / self.parameters["marker_rate"], 0.0, self.publish_markers],
-            "static": [0.1, 0.0, self.publish_static],
-            "rtf": [0.5, 0.0, self.publish_rtf],
-            "diagnostics": [1.0, 0.0, self.publish_diagnostics],
-        }
+    def _scenery_period(self):
+        """The octree cells move with the bodies: while shown, the scenery follows marker_rate."""
+        period = self.parameters["static_republish_period"]
+        if self.parameters["show_octree"]:
+            period = min(period, 1.0 / self.parameters["marker_rate"])
+        return period
 
     def _on_parameters(self, changed):
         if "publish_rate" in changed:
-            self._jobs["state"][0] = 1.0 / changed["publish_rate"]
+            self._jobs["state"].period = 1.0 / changed["publish_rate"]
         if "marker_rate" in changed:
-            self._jobs["markers"][0] = 1.0 / changed["marker_rate"]
+            self._jobs["markers"].period = 1.0 / changed["marker_rate"]
+        if {"show_octree", "static_republish_period", "marker_rate"} & set(changed):
+            self._scenery.period = self._scenery_period()
+        if "show_octree" in changed:
+            self.request_scenery()
 
-    def tick(self, now=None):
-        """Runs the jobs that are due (wall clock); returns the seconds until the next one."""
-        now = time.monotonic() if now is None else now
-        for job in self._jobs.values():
-            period, due, fn = job
-            if now >= due:
-                job[1] = max(due + period, now)  # keep the rate; never burst to catch up
-                fn()
-        return max(0.0, min(job[1] for job in self._jobs.values()) - time.monotonic())
-
-    def resend_latched(self):
-        """The latched topics (scenery, state, /tf_static) go out again at the next tick."""
-        self._last_static = -math.inf
-        self._last_state = None
+    def request_scenery(self):
+        """The scenery goes out at the next snapshot, which the command itself brings about
+        (paused too): it runs on the simulation thread, where the octree can be read."""
+        def due_now(_world):
+            if not self._scenery_pending:
+                self._scenery.due = -math.inf
+        self.sim.submit(due_now)
 
     def scene_changed(self):
-        """A new scene (or a new sink): latched topics at once, marker ids restart."""
-        self.resend_latched()
+        """A new scene (which the schedule itself publishes at once): marker ids restart."""
         self.marker_ids.clear()
         self._ids_of = ([], np.zeros(0, np.int32))
+
+    def publish_loaded(self):
+        """The world as loaded, at its time (before the simulation thread starts): every job
+        is due, so any speed starts with the same messages."""
+        self._after_batch(self.sim.snapshot)
+
+    def _after_batch(self, snapshot):
+        """On the simulation thread after each batch (and each command): warnings for bodies
+        the world removed, /clock (capped by clock_rate), and the jobs due at this time handed
+        to the publisher thread."""
+        while self._removed_reported < len(self.sim.removed):
+            name = self.sim.removed[self._removed_reported]
+            self._removed_reported += 1
+            self.log.warning(f"removed {name}: its state went non-finite or it left the world")
+        seconds = snapshot.time
+        rate = self.parameters["clock_rate"]
+        if seconds != self._last_clock and (rate <= 0.0 or seconds - self._last_clock >= 1.0 / rate - 1e-9):
+            self._last_clock = seconds
+            self.send("clock", messages.clock(seconds), seconds)
+        if seconds < self._schedule_time or self.sim.world is not self._scheduled_world:
+            # A new scene or a reset of the time: every job at once, the schedule from here.
+            for job in (*self._jobs.values(), self._scenery):
+                job.due = seconds
+        self._schedule_time, self._scheduled_world = seconds, self.sim.world
+        due = [job for job in self._jobs.values() if job.is_due(seconds)]
+        for job in due:
+            job.advance(seconds)
+        cells = None
+        if self._scenery.is_due(seconds):
+            self._scenery.advance(seconds)
+            cells = self.sim.world.octree_cells() if self.parameters["show_octree"] else ()
+            self._scenery_pending = True
+        self._send_state(seconds)
+        self.sim.next_publish_time = min(job.due for job in (*self._jobs.values(), self._scenery))
+        if due or cells is not None:
+            self._hand_over((snapshot, due, cells))
+
+    def _send_state(self, seconds):
+        """~/state and /tf_static, latched: when the state changes."""
+        state = self.sim.state
+        if state != self._last_state:
+            self._last_state = state
+            world_frame, odom_frame, _ = self.frames
+            self.send("state", messages.uint8(state), seconds)
+            self.send("tf_static", self.tf_encoder.encode(seconds, [world_frame], [odom_frame],
+                                                          [messages.IDENTITY]), seconds)
+
+    def _hand_over(self, item):
+        with self._ready:
+            if self.sim.real_time_factor <= 0.0:  # as fast as possible: wait for the publisher
+                self._ready.wait_for(lambda: len(self._pending) < PENDING_LIMIT, HAND_OVER_TIMEOUT)
+            if len(self._pending) >= PENDING_LIMIT:
+                self._pending.popleft()
+                self.skipped += 1
+            self._pending.append(item)
+            self._ready.notify_all()
+
+    def publish_next(self, timeout=0.1):
+        """The publisher thread's round: publishes the next snapshot handed over, waiting up
+        to `timeout` s for one; while paused, what the wall clock makes due."""
+        with self._ready:
+            if not self._pending:
+                self._ready.wait(self._paused_wait(timeout))
+            item = self._pending.popleft() if self._pending else None
+            self._ready.notify_all()
+        if item is not None:
+            snapshot, jobs, cells = item
+            for job in jobs:
+                self._run(job, snapshot)
+            if cells is not None:
+                self._scenery_pending = False
+                self._run(self._scenery, snapshot, cells)
+        elif self.sim.paused:
+            self._publish_paused()
+
+    def _paused_wait(self, timeout):
+        if not self.sim.paused:
+            return timeout
+        return max(0.0, min(timeout, *(self._jobs[name].wall_due - time.monotonic() for name in PAUSED_JOBS)))
+
+    def _publish_paused(self):
+        now, snapshot = time.monotonic(), self.sim.snapshot
+        for name in PAUSED_JOBS:
+            job = self._jobs[name]
+            if now < job.wall_due:
+                continue
+            job.wall_due = now + job.period
+            if name in PAUSED_ON_CHANGE and snapshot is job.published:
+                continue
+            self._run(job, snapshot)
+
+    def flush(self):
+        """After both threads stopped: what is still handed over, then the last state (the
+        simulation's too: stopped)."""
+        while self._pending:
+            self.publish_next(0.0)
+        snapshot, state = self.sim.snapshot, self._jobs["state"]
+        if state.published is None or state.published.time != snapshot.time:
+            self._run(state, snapshot)
+        self._send_state(snapshot.time)
+
+    def _run(self, job, snapshot, *args):
+        """One job; its failure is logged once with its traceback and counted on /diagnostics,
+        and the other jobs go on."""
+        try:
+            job.publish(snapshot, *args)
+        except Exception as error:
+            job.errors += 1
+            job.last_error = f"{type(error).__name__}: {error}"
+            if job.errors == 1:
+                self.log.error(f"publishing {job.name} failed (logged once, counted on /diagnostics):\n"
+                               f"{traceback.format_exc()}")
+        job.published = snapshot
 
     # ------------------------------------------------------------------ topics
     def car(self, snapshot):
@@ -149,29 +329,9 @@ class Broadcaster:
         except KeyError:
             return None
 
-    def _after_batch(self, snapshot):
-        """On the simulation thread after each batch: warnings for bodies the world removed,
-        and /clock, capped by clock_rate."""
-        while self._removed_reported < len(self.sim.removed):
-            name = self.sim.removed[self._removed_reported]
-            self._removed_reported += 1
-            self.log.warning(f"removed {name}: its state went non-finite or it left the world")
-        rate = self.parameters["clock_rate"]
-        if rate > 0.0 and snapshot.time - self._last_clock < 1.0 / rate - 1e-9:
-            return
-        self._last_clock = snapshot.time
-        self.send("clock", messages.clock(snapshot.time), snapshot.time)
-
-    def publish_state(self):
-        snap = self.sim.snapshot
+    def publish_state(self, snap):
         world_frame, odom_frame, base_frame = self.frames
         self.send("poses", messages.pose_array(snap, world_frame), snap.time)
-        state = self.sim.state
-        if state != self._last_state:
-            self._last_state = state
-            self.send("state", messages.uint8(state), snap.time)
-            self.send("tf_static", self.tf_encoder.encode(snap.time, [world_frame], [odom_frame],
-                                                          [messages.IDENTITY]), snap.time)
         car = self.car(snap)
         wheels = self.car_wheels(car) if car is not None else None
         car_frames = []
@@ -218,13 +378,12 @@ class Broadcaster:
             present = set(names)
             self.marker_ids = {n: i for n, i in self.marker_ids.items() if n in present}
 
-    def publish_markers(self):
-        snap = self.sim.snapshot
+    def publish_markers(self, snap):
         world_frame = self.frames[0]
+        car = self.car(snap)
         if self.wanted("body_markers"):
             self.send("body_markers", messages.body_markers(snap, world_frame, self.marker_ids_of(snap.names),
-                                                            self.marker_encoder), snap.time)
-        car = self.car(snap)
+                                                            self.marker_encoder, car), snap.time)
         if car is not None and self.wanted("car_markers"):
             wheels = self.car_wheels(car)
             if wheels is not None:
@@ -236,43 +395,44 @@ class Broadcaster:
             if self.wanted("contact_markers"):
                 self.send("contact_markers", messages.contact_markers(snap, world_frame, limit), snap.time)
 
-    def publish_static(self):
-        """The scenery, latched: at start, after a scene load, every static_republish_period
-        (so a bag seeks into a full scene), and at marker_rate while the octree is shown."""
-        snap = self.sim.snapshot
-        period = self.parameters["static_republish_period"]
-        show_octree = self.parameters["show_octree"]
-        if show_octree:
-            period = min(period, 1.0 / self.parameters["marker_rate"])
-        if 0 <= snap.time - self._last_static < period:
-            return
-        self._last_static = snap.time
-        cells = self.sim.call(lambda world: world.octree_cells()) if show_octree else ()
+    def publish_scenery(self, snap, octree_cells):
+        """The scenery, latched (octree_cells read on the simulation thread at this snapshot)."""
         world = self.sim.world
         self.send("scene_markers", messages.scene_markers(snap.time, self.frames[0], world.ground,
-                                                          world.playground_triangles, cells), snap.time)
+                                                          world.playground_triangles, octree_cells), snap.time)
 
-    def publish_rtf(self):
-        self.send("rtf", messages.float64(self.sim.achieved_rtf), self.sim.snapshot.time)
+    def publish_rtf(self, snap):
+        self.send("rtf", messages.float64(self.sim.achieved_rtf), snap.time)
 
-    def publish_diagnostics(self):
-        snap, sim = self.sim.snapshot, self.sim
-        steps = max(snap.step, 1)
+    def publish_diagnostics(self, snap):
+        sim = self.sim
         frozen = int(np.count_nonzero(snap.state["frozen"]))
+        active, removed = len(snap.names) - frozen, len(sim.removed)
+        target = f"{sim.real_time_factor:.2f}" if sim.real_time_factor > 0.0 else "max"
+        step_ms = 1e3 * sim.step_seconds / max(snap.step, 1)
+        summary = (f"{['stopped', 'playing', 'paused'][sim.state]}, RTF {sim.achieved_rtf:.2f}/{target}, "
+                   f"step {step_ms:.2f} ms, {sim.late_ticks} late ticks")
+        if sim.fault_count:
+            summary += f", {sim.fault_count} errors survived (first: {sim.faults[0]})"
         statuses = [
-            ("vplayground: simulation", 0, ["stopped", "playing", "paused"][sim.state],
+            ("simulation", ERROR if sim.fault_count else OK, summary,
              {"target_real_time_factor": sim.real_time_factor, "achieved_real_time_factor": round(sim.achieved_rtf, 3),
-              "step_ms": round(1e3 * sim.step_seconds / steps, 4), "late_ticks": sim.late_ticks,
-              "simulation_thread_cpu_s": round(sim.thread_cpu_seconds, 3),
-              "time": round(snap.time, 4)}),
-            ("vplayground: bodies", 1 if sim.removed else 0, f"{len(snap.names)} bodies",
-             {"active": len(snap.names) - frozen, "frozen": frozen, "removed": len(sim.removed),
+              "step_ms": round(step_ms, 4), "late_ticks": sim.late_ticks, "errors": sim.fault_count,
+              "simulation_thread_cpu_s": round(sim.thread_cpu_seconds, 3), "time": round(snap.time, 4)}),
+            ("bodies", WARN if removed else OK,
+             f"{len(snap.names)} bodies: {active} active, {frozen} frozen, {removed} removed",
+             {"active": active, "frozen": frozen, "removed": removed,
               "last_removed": sim.removed[-1] if sim.removed else ""}),
         ]
-        for sink in self.sinks:
-            statuses.extend(sink.statuses())
         car = self.car(snap)
         if car is not None:
             age = snap.vehicles[car]["command_age"]
-            statuses.append(("vplayground: car", 0, car, {"command_age": round(age, 3)}))
+            statuses.append(("car", OK, f"{car}: last command {age:.1f} s ago", {"command_age": round(age, 3)}))
+        failed = [job for job in (*self._jobs.values(), self._scenery) if job.errors]
+        statuses.append(("publisher", ERROR if failed else (WARN if self.skipped else OK),
+                         "; ".join(f"{job.name} failed {job.errors} times: {job.last_error}" for job in failed)
+                         or f"publishing, {self.skipped} snapshots skipped",
+                         {**{f"{job.name}_errors": job.errors for job in failed}, "skipped": self.skipped}))
+        for sink in self.sinks:
+            statuses.extend(sink.statuses())
         self.send("diagnostics", messages.diagnostics(snap.time, statuses), snap.time)

@@ -66,7 +66,7 @@ class FoxgloveServer:
         return self.channels[topic.key].has_sinks()
 
     def statuses(self):
-        return [("vplayground: foxglove", 0, self.url, {"subscriptions": self.subscriptions,
+        return [("foxglove", 0, self.url, {"subscriptions": self.subscriptions,
                                                         "client_channels": len(self.client_channels)})]
 
     # ------------------------------------------------------------- services
@@ -87,7 +87,7 @@ class FoxgloveServer:
     def on_subscribe(self, client, channel):
         self.subscriptions += 1
         if any(self.channels[key].id() == channel.id for key in self.latched):
-            self.runtime.broadcaster.resend_latched()
+            self.runtime.broadcaster.resend_latched(self)
 
     def on_unsubscribe(self, client, channel):
         self.subscriptions -= 1

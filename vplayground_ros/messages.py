@@ -90,14 +90,25 @@ def categories(snapshot):
     return kinds
 
 
-def body_markers(snapshot, frame, ids, encoder):
+def body_markers(snapshot, frame, ids, encoder, car=None):
     """~/bodies/markers: DELETEALL, then one CUBE per body (ns = category, ids (N,) stable per
-    name, frozen grey)."""
+    name, frozen grey), but for the driven `car`: ~/car/markers draws it with its wheels, and
+    two markers at one place would show whichever colour the viewer draws last."""
     s = snapshot.state
     kinds = categories(snapshot)
     colours = CATEGORY_COLOURS[np.where(s["frozen"], FROZEN, kinds)]
     poses = np.concatenate([s["positions"], s["quaternions"]], axis=1)
-    return encoder.encode(snapshot.time, frame, CATEGORIES[kinds], ids, poses, s["sizes"], colours)
+    sizes = s["sizes"]
+    if car is not None:
+        drawn = np.arange(len(kinds)) != snapshot.names.index(car)
+        kinds, ids, colours, poses, sizes = kinds[drawn], ids[drawn], colours[drawn], poses[drawn], sizes[drawn]
+    return encoder.encode(snapshot.time, frame, CATEGORIES[kinds], ids, poses, sizes, colours)
+
+
+def marker_array(seconds, frame, markers):
+    """The MarkerArray of `markers` less the list markers without points (Foxglove warns "has
+    no points" for each); the DELETEALL they follow clears what such a marker drew before."""
+    return cdr.marker_array(seconds, frame, [m for m in markers if m["points"] is None or len(m["points"])])
 
 
 def scene_markers(seconds, frame, ground, triangles, octree_cells=()):
@@ -113,7 +124,7 @@ def scene_markers(seconds, frame, ground, triangles, octree_cells=()):
     for level, centres, edge in octree_cells:
         markers.append(marker("octree", int(level), CUBE_LIST, scale=(edge, edge, edge),
                               rgba=(0.2, 0.6, 1.0, 0.12), points=np.asarray(centres).reshape(-1, 3)))
-    return cdr.marker_array(seconds, frame, markers)
+    return marker_array(seconds, frame, markers)
 
 
 CONTACT_DTYPE = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("nx", "<f4"), ("ny", "<f4"),
@@ -143,7 +154,7 @@ def contact_markers(snapshot, frame, max_points):
     points = c["points"][:n]
     tips = points - 0.3 * c["normals"][:n]  # normals point from A into B: draw them out of B
     segments = np.stack([points, tips], axis=1).reshape(-1, 3)
-    return cdr.marker_array(snapshot.time, frame, [
+    return marker_array(snapshot.time, frame, [
         DELETE_ALL,
         marker("contact_points", 0, SPHERE_LIST, scale=(0.05, 0.05, 0.05), rgba=COLOURS["contact"], points=points),
         marker("contact_normals", 1, LINE_LIST, scale=(0.01, 0.01, 0.01), rgba=COLOURS["contact"], points=segments)])
@@ -227,7 +238,7 @@ def car_markers(snapshot, name, frame, wheels):
                           points=np.array(springs).reshape(-1, 3)))
     markers.append(marker("ray_hits", 0, SPHERE_LIST, scale=(0.08, 0.08, 0.08), rgba=COLOURS["contact"],
                           points=np.array(hits).reshape(-1, 3)))
-    return cdr.marker_array(snapshot.time, frame, markers)
+    return marker_array(snapshot.time, frame, markers)
 
 
 def quaternion_multiply(a, b):

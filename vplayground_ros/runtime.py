@@ -35,20 +35,21 @@ class Runtime:
 
     def start(self):
         """Starts the physics thread and the publishing thread."""
+        self.broadcaster.publish_loaded()
         self.sim.start()
         self._thread.start()
 
     def stop(self):
-        """Stops both; the last state goes out."""
+        """Stops both; what was due and the last state go out."""
         self.sim.stop()
         self._stop.set()
         if self._thread.is_alive():
             self._thread.join(5.0)
-        self.broadcaster.publish_state()
+        self.broadcaster.flush()
 
     def _publish(self):
         while not self._stop.is_set():
-            self._stop.wait(self.broadcaster.tick())
+            self.broadcaster.publish_next()
 
     def sync_parameters(self):
         """After a service changed the world's settings (a scene load, a reset, ~/set_freezing):

@@ -44,7 +44,7 @@ def service_table(runtime):
     def load_scene(request):
         result, message = requests.load_scene(str(request.map_url))
         if result == MAP_SUCCESS:
-            runtime.broadcaster.scene_changed()  # the new scenery goes out at once
+            runtime.broadcaster.scene_changed()  # marker ids restart with the new bodies
             runtime.log.info(f"~/load_scene: {message}")
         else:
             runtime.log.warning(f"~/load_scene: {message}")

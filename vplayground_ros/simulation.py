@@ -6,6 +6,7 @@ released) -> a snapshot is taken -> listeners read the snapshot. Nothing outside
 touches the World while it steps.
 """
 import logging
+import math
 import queue
 import threading
 import time
@@ -19,6 +20,8 @@ FAST_BATCH_STEPS = 16
 # Falling further behind than this many batches is not caught up on: the loop drops the debt
 # (counted as late ticks) instead of spiralling into ever longer catch-up batches.
 MAX_DEBT_BATCHES = 5
+# The achieved real-time factor is measured over this much wall time.
+RTF_WINDOW = 0.5
 
 STOPPED, PLAYING, PAUSED = 0, 1, 2  # simulation_interfaces SimulationState
 
@@ -48,6 +51,9 @@ class Simulation:
         self.step_seconds = 0.0     # wall time spent inside world.step, for diagnostics
         self.thread_cpu_seconds = 0.0  # CPU time of the simulation thread (physics, snapshots)
         self.achieved_rtf = 0.0
+        # The next simulated time a listener publishes at: a batch ends at the first step at or
+        # after it, so what is published carries the same times at any real-time factor.
+        self.next_publish_time = math.inf
         self.removed = []          # names of bodies removed for going non-finite or away
         self.faults = []           # texts of the first exceptions the loop survived (listeners, steps)
         self.fault_count = 0       # all of them
@@ -127,7 +133,7 @@ class Simulation:
                 # Started, or a command loaded another scene or reset the time.
                 world, first_batch = self.world, True
                 origin_wall, origin_sim = time.perf_counter(), world.time
-                rtf_wall, rtf_sim = origin_wall, world.time
+                rtf_wall, rtf_sim, rtf_measured = origin_wall, world.time, False
             rate = world.settings["steps_per_second"]
             steps = 0
             if not self.paused:
@@ -135,7 +141,6 @@ class Simulation:
             if self.paused:
                 # ~/step requests run a batch at a time, so commands between them stay prompt.
                 steps = min(self._pending_steps, FAST_BATCH_STEPS)
-                self._pending_steps -= steps
                 origin_wall, origin_sim = time.perf_counter(), world.time
             elif self.real_time_factor <= 0.0:
                 steps = FAST_BATCH_STEPS
@@ -149,6 +154,11 @@ class Simulation:
                     origin_wall, origin_sim = time.perf_counter(), world.time
             if self.duration is not None:
                 steps = min(steps, max(0, int(round((self.duration - world.time) * rate))))
+            to_publish = (self.next_publish_time - world.time) * rate
+            if 0.0 < to_publish < steps:
+                steps = max(1, math.ceil(to_publish - 1e-6))
+            if self.paused:
+                self._pending_steps -= steps
             if steps > 0:
                 started = time.perf_counter()
                 try:
@@ -162,15 +172,18 @@ class Simulation:
                     # (a minute on a first run): real time starts after it, not as late ticks.
                     first_batch = False
                     origin_wall, origin_sim = time.perf_counter(), world.time
-                    rtf_wall, rtf_sim = origin_wall, world.time
+                    rtf_wall, rtf_sim, rtf_measured = origin_wall, world.time, False
                 self.removed += world.remove_escaped()
                 self._publish()
             if self.duration is not None and world.time >= self.duration - 0.5 / rate:
                 break
             now = time.perf_counter()
-            if now - rtf_wall >= 0.5:
+            # Over the last window; until a first one is complete (a run as fast as possible may
+            # be over sooner), over what has run so far.
+            if now - rtf_wall >= RTF_WINDOW or (not rtf_measured and world.time > rtf_sim):
                 self.achieved_rtf = (world.time - rtf_sim) / (now - rtf_wall)
-                rtf_wall, rtf_sim = now, world.time
+                if now - rtf_wall >= RTF_WINDOW:
+                    rtf_wall, rtf_sim, rtf_measured = now, world.time, True
             self.thread_cpu_seconds = time.thread_time()
             if steps == 0:
                 self._wait_for_work()
@@ -212,9 +225,12 @@ class Simulation:
 
     def _fault(self, where, error):
         self.fault_count += 1
-        if len(self.faults) < 100:  # the first ones say what went wrong; the rest would only flood
-            self.faults.append(f"{where}: {type(error).__name__}: {error}")
-            log.exception("simulation loop survived an error in %s", where)
+        text = f"{where}: {type(error).__name__}: {error}"
+        if len(self.faults) < 100 and text not in self.faults:
+            # Each distinct error once, with its traceback: a listener failing every batch
+            # would flood the log.
+            self.faults.append(text)
+            log.exception("simulation loop survived an error in %s (logged once, counted on /diagnostics)", where)
 
     def _take_snapshot(self):
         world = self.world

@@ -126,6 +126,10 @@ def quaternion(value, path):
     length = math.sqrt(sum(v * v for v in q))
     if length < 1e-6:
         raise SpecError(path, "quaternion has zero length")
+    if abs(length - 1.0) < 1e-12:
+        # Already unit (a saved world's): dividing by a length an ulp off 1 would change its
+        # last digits, and the world would not reload the same.
+        return q
     return [v / length for v in q]
 
 
