@@ -264,6 +264,7 @@ class Broadcaster:
              {"target_real_time_factor": sim.real_time_factor, "achieved_real_time_factor": round(sim.achieved_rtf, 3),
               "step_ms": round(1e3 * sim.step_seconds / steps, 4), "late_ticks": sim.late_ticks,
               "simulation_thread_cpu_s": round(sim.thread_cpu_seconds, 3),
+              "engine_cpu_s": round(sim.engine_cpu_seconds, 3),
               "time": round(snap.time, 4)}),
             ("vplayground: bodies", 1 if sim.removed else 0, f"{len(snap.names)} bodies",
              {"active": len(snap.names) - frozen, "frozen": frozen, "removed": len(sim.removed),
