@@ -222,8 +222,11 @@ class TransformEncoder:
         stamp = split_stamp(seconds)
         w = Writer()
         w.u32(len(children))
-        self._elements.append_all(w, struct.pack("<iI", *stamp), list(zip(parents, children)),
-                                  {"pose": np.asarray(poses, "<f8").reshape(-1, 7)})
+        # The frames, not a pair per transform, tell a changed layout: two flat tuples compare
+        # at C speed (the same string objects every message), and pairs are made only then.
+        parents, children = tuple(parents), tuple(children)
+        self._elements.append_all(w, struct.pack("<iI", *stamp), zip(parents, children),
+                                  {"pose": np.asarray(poses, "<f8").reshape(-1, 7)}, (parents, children))
         return ENCAPSULATION + bytes(w.data)
 
 
