@@ -370,13 +370,16 @@ class World:
         self._unchecked |= ~(b.frozen | b.immovable)  # moving now (woken between steps, say)
         slots = np.nonzero(b.active & self._unchecked)[0]
         self._unchecked[:] = False
-        state = np.concatenate([b.position[slots], b.orientation[slots], b.velocity[slots]], axis=1)
+        if len(slots) == 0:
+            return []
+        position = b.position.take(slots, axis=0)
+        state = np.concatenate([position, b.orientation.take(slots, axis=0), b.velocity.take(slots, axis=0)], axis=1)
         bad = ~np.all(np.isfinite(state), axis=1)
         centre = self.world_centre()
         with np.errstate(over="ignore"):  # an infinite coordinate is just "far", and bad already
-            bad |= np.linalg.norm(np.nan_to_num(b.position[slots] - centre), axis=1) > WORLD_RADIUS
+            bad |= np.linalg.norm(np.nan_to_num(position - centre), axis=1) > WORLD_RADIUS
         if self.ground is not None:
-            bad |= b.position[slots, 2] < self.ground["height"] - WORLD_RADIUS
+            bad |= position[:, 2] < self.ground["height"] - WORLD_RADIUS
         names = [self._names[slot] for slot in slots[bad]]
         self.remove_bodies(names)
         return names
