@@ -1,11 +1,15 @@
-"""Node overhead (SPEC 8): the ROS node with N boxes (default 1,000, a settled pile) in real
-time, recording its bag, a subscriber on every topic it publishes, for a few seconds. Reports the
-node process's CPU use beyond its simulation thread (messages, bag, ROS, callbacks) as % of one
-core, the time from starting the process to the first ~/bodies/poses message (warm Numba
-cache), and the bag's bytes per simulated second. With --foxglove the built-in Foxglove server
-runs too, with a WebSocket client subscribed to every channel.
+"""Node overhead (SPEC 8): the ROS node with N boxes (default 1,000, a pile settled until every
+box is frozen) in real time, recording its bag, a subscriber on every topic it publishes, for a
+few seconds. The overhead is everything the node process does beyond the engine's compiled step
+(snapshots, messages, bag, ROS, callbacks): the process's CPU time minus the CPU time its
+simulation thread spent inside the compiled step over the same interval (/diagnostics
+`engine_cpu_s`), as % of one core. Also per thread (the node runs under named_node.py, which
+gives the Python threads' names to the OS), the time from starting the process to the first
+~/bodies/poses message (warm Numba cache), and the bag's bytes per simulated second. With
+--foxglove the built-in Foxglove server runs too, with a WebSocket client subscribed to every
+channel.
 
-    python bench/node_overhead.py [--boxes 1000] [--seconds 20] [--foxglove]
+    python bench/node_overhead.py [--boxes 1000] [--seconds 20] [--foxglove] [--scene PATH]
 """
 import argparse
 import json
@@ -33,20 +37,43 @@ from vplayground_ros.scene import save_world  # noqa: E402
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
 
 
-def process_cpu_seconds(pid):
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / CLOCK_TICKS  # utime + stime
+# The pile settles for at most this long (simulated s) before the measurement anyway.
+MAX_SETTLING_SECONDS = 40
 
 
-def latest_time(latest):
-    values = {kv.key: kv.value for s in latest["diag"].status for kv in s.values}
-    return values["time"]
+def cpu_seconds(stat_path):
+    """utime + stime of a process or thread from its /proc stat file."""
+    fields = Path(stat_path).read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / CLOCK_TICKS
+
+
+def thread_cpu_seconds(pid):
+    """{thread name: CPU seconds of the threads of that name}; threads that end meanwhile are
+    skipped (their time stays in the process's)."""
+    seconds = {}
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            name = (task / "comm").read_text().strip()
+            seconds[name] = seconds.get(name, 0.0) + cpu_seconds(task / "stat")
+        except (FileNotFoundError, ProcessLookupError):
+            continue
+    return seconds
 
 
 def settled_scene(boxes, path):
+    """A pile of `boxes` that has fallen and frozen (as far as MAX_SETTLING_SECONDS allow),
+    saved to `path`; returns how many boxes froze."""
     world = build_pile(boxes)
-    world.step(6 * 128)  # fall and freeze: the overhead is measured on a live, settled scene
+    for _ in range(MAX_SETTLING_SECONDS):
+        world.step(128)
+        if world.state()["frozen"].all():
+            break
     save_world(world, path)
+    return int(world.state()["frozen"].sum())
+
+
+def diagnostic_values(message):
+    return {kv.key: kv.value for s in message.status for kv in s.values}
 
 
 def main():
@@ -54,18 +81,24 @@ def main():
     parser.add_argument("--boxes", type=int, default=1000)
     parser.add_argument("--seconds", type=float, default=20.0)
     parser.add_argument("--foxglove", action="store_true", help="also serve Foxglove, a client subscribed to all")
+    parser.add_argument("--scene", type=Path, help="run this scene instead of building a settled pile (--boxes unused)")
     args = parser.parse_args()
     os.environ.setdefault("ROS_DOMAIN_ID", str(150 + os.getpid() % 50))
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    scene = Path(tempfile.mkdtemp()) / "pile.yaml"
-    settled_scene(args.boxes, scene)
+    workspace = Path(tempfile.mkdtemp())
+    if args.scene is None:
+        scene = workspace / "pile.yaml"
+        frozen_at_start = settled_scene(args.boxes, scene)
+    else:
+        scene, frozen_at_start = args.scene, None
 
     rclpy.init()
     client = rclpy.create_node("overhead_bench")
     latest = {}
     started = time.perf_counter()
-    bag = scene.with_name("overhead.mcap")
-    node = subprocess.Popen([sys.executable, "-m", "vplayground_ros.cli", "--scene", str(scene), "--record", str(bag),
+    bag = workspace / "overhead.mcap"
+    node = subprocess.Popen([sys.executable, str(Path(__file__).with_name("named_node.py")),
+                             "--scene", str(scene), "--record", str(bag),
                              *(["--foxglove", "0"] if args.foxglove else [])],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     urls = []
@@ -77,7 +110,11 @@ def main():
     first_pose = []
     client.create_subscription(PoseArray, "/vplayground/bodies/poses",
                                lambda m: first_pose or first_pose.append(time.perf_counter() - started), 1)
-    client.create_subscription(DiagnosticArray, "/diagnostics", lambda m: latest.__setitem__("diag", m), 10)
+
+    def on_diagnostics(message):  # only our node's: another one may share the ROS domain
+        if diagnostic_values(message).get("path") == str(bag):
+            latest["diag"] = message
+    client.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 10)
     deadline = time.perf_counter() + 60
     while not first_pose and time.perf_counter() < deadline:
         rclpy.spin_once(client, timeout_sec=0.05)
@@ -98,29 +135,45 @@ def main():
         rclpy.spin_once(client, timeout_sec=0.05)
 
     def sample():
-        rclpy.spin_once(client, timeout_sec=0.05)
-        values = {kv.key: kv.value for s in latest["diag"].status for kv in s.values}
-        return time.perf_counter(), process_cpu_seconds(node.pid), float(values["simulation_thread_cpu_s"]), float(values["achieved_real_time_factor"])
-    wall0, cpu0, sim0, _ = sample()
+        """At the arrival of a fresh /diagnostics: wall time, the process's and its threads' CPU
+        seconds, and the node's own figures (read as it sent them, so both cover one interval)."""
+        previous, deadline = latest.get("diag"), time.perf_counter() + 10
+        while latest.get("diag") is previous:
+            if time.perf_counter() > deadline:
+                raise RuntimeError(f"no /diagnostics from the node for 10 s (exit code {node.poll()})")
+            rclpy.spin_once(client, timeout_sec=0.05)
+        values = diagnostic_values(latest["diag"])
+        return (time.perf_counter(), cpu_seconds(f"/proc/{node.pid}/stat"), thread_cpu_seconds(node.pid),
+                {key: float(values[key]) for key in ("simulation_thread_cpu_s", "engine_cpu_s", "time")},
+                float(values["achieved_real_time_factor"]), values)
+    wall0, cpu0, threads0, node0, _, _ = sample()
     end = time.perf_counter() + args.seconds
     while time.perf_counter() < end:
         rclpy.spin_once(client, timeout_sec=0.05)
-    time.sleep(1.1)  # one more diagnostics message
-    for _ in range(30):
-        rclpy.spin_once(client, timeout_sec=0.05)
-    wall1, cpu1, sim1, rtf = sample()
+    wall1, cpu1, threads1, node1, rtf, values = sample()
     foxglove_frames = foxglove.received if foxglove else None
     if foxglove:
         foxglove.close()
     node.terminate()
     node.wait(30)
     wall = wall1 - wall0
-    total, physics = (cpu1 - cpu0) / wall, (sim1 - sim0) / wall
-    result = {"boxes": args.boxes, "seconds": round(wall, 1), "process_cpu_percent": round(100 * total, 1),
-              "simulation_thread_percent": round(100 * physics, 1),
-              "overhead_percent": round(100 * (total - physics), 1), "achieved_rtf": rtf,
+
+    def percent(seconds):
+        return round(100 * seconds / wall, 1)
+    process = cpu1 - cpu0
+    engine = node1["engine_cpu_s"] - node0["engine_cpu_s"]
+    simulation_thread = node1["simulation_thread_cpu_s"] - node0["simulation_thread_cpu_s"]
+    threads = {name: percent(seconds - threads0.get(name, 0.0)) for name, seconds in threads1.items()}
+    result = {"boxes": int(values["frozen"]) + int(values["active"]), "frozen_at_start": frozen_at_start,
+              "frozen_at_end": int(values["frozen"]), "foxglove": args.foxglove, "seconds": round(wall, 1),
+              "process_cpu_percent": percent(process), "engine_cpu_percent": percent(engine),
+              "overhead_percent": percent(process - engine),
+              "simulation_thread_percent": percent(simulation_thread),
+              "simulation_thread_beyond_engine_percent": percent(simulation_thread - engine),
+              "threads_percent": dict(sorted(threads.items(), key=lambda item: -item[1])),
+              "achieved_rtf": rtf, "simulated_seconds": round(node1["time"] - node0["time"], 2),
               "start_to_first_pose_s": round(first_pose[0], 2) if first_pose else None,
-              "bag_bytes_per_sim_second": round(bag.stat().st_size / max(float(latest_time(latest)), 1e-9)),
+              "bag_bytes_per_sim_second": round(bag.stat().st_size / max(node1["time"], 1e-9)),
               "foxglove_frames_received": foxglove_frames, "exit_code": node.returncode}
     print(json.dumps(result))
     client.destroy_node()

@@ -247,3 +247,23 @@ def test_profiling_times_every_stage():
     seconds = world.stage_seconds()
     assert set(seconds) >= {"detection", "contact pass", "collision pass", "freezing"}
     assert all(v >= 0.0 for v in seconds.values()) and seconds["detection"] > 0.0
+
+
+def test_resting_bodies_are_still_checked_for_escaping():
+    """remove_escaped looks only at bodies that may have moved, plus every body once a simulated
+    second (a state the engine should never write in a frozen body) and when the world's
+    bounds move (an immovable body now outside)."""
+    world = World()
+    world.add_body({"name": "rests", "size": [0.5, 0.5, 0.5], "position": [0, 0, 0.25]})
+    world.add_body({"name": "wall", "size": [1, 10, 2], "position": [1500, 0, 1], "immovable": True})
+    world.step(256)
+    assert world.state()["frozen"].tolist() == [True, False] and world.remove_escaped() == []
+    world._bodies.position[world._slots["rests"], 2] = float("nan")  # injected fault
+    removed = []
+    for _ in range(128):  # a batch at a time, as the node steps
+        world.step(1)
+        removed += world.remove_escaped()
+    assert removed == ["rests"]
+    # A playground 1,000 m the other way moves the world's centre: the wall is 2,500 m from it.
+    world.set_playground(np.array([[-1001.0, 0, 0], [-999.0, 0, 0], [-1000.0, 1, 0]]), np.array([[0, 1, 2]]))
+    assert world.remove_escaped() == ["wall"]

@@ -82,6 +82,13 @@ def test_templates_of_removed_names_are_not_kept():
     assert len(encoder._elements._templates) <= 2 * 5  # this layout's names, at most two alignments each
 
 
+@pytest.mark.parametrize("seconds", [0.0, 7.125, 0.9999999999, 86400.5])
+def test_clock_round_trip(seconds):
+    from rosgraph_msgs.msg import Clock
+    msg = deserialize_message(cdr.clock(seconds), Clock)
+    assert (msg.clock.sec, msg.clock.nanosec) == cdr.split_stamp(seconds)
+
+
 def test_a_stamp_just_under_a_second_rounds_up_not_back():
     assert cdr.split_stamp(0.9999999999) == (1, 0)
     assert cdr.split_stamp(2.5) == (2, 500_000_000)

@@ -264,3 +264,45 @@ def test_renaming_keeps_names_valid_and_stays_linear(requests):
     started = time.perf_counter()
     ok, message = requests.spawn(json.dumps([{"name": "a", "allow_renaming": True}] * 5000))
     assert ok and message.endswith("a_5001") and time.perf_counter() - started < 5.0
+
+
+def test_snapshots_follow_every_change_of_the_bodies(requests, tmp_path):
+    """Names, vehicles and sizes, masses and flags are taken once per layout, not every batch:
+    each spawn, edit, removal (slots reused out of order) and scene load shows in the snapshot
+    that follows it, every row still the named body's."""
+    sim = requests.sim
+
+    def rows(key):
+        return dict(zip(sim.snapshot.names, sim.snapshot.state[key].tolist()))
+
+    def rows_are_the_bodies():
+        world = sim.world
+        assert sim.snapshot.names == world.body_names()
+        assert rows("positions") == {name: world.body(name)["position"] for name in world.body_names()}
+        assert list(sim.snapshot.vehicles) == world.vehicle_names()
+
+    assert rows("sizes") == {"a": [1.0, 1.0, 1.0], "b": [1.0, 1.0, 1.0]}
+    assert requests.spawn("{name: c, size: [1, 2, 3], position: [6, 0, 2]}")[0]
+    assert rows("sizes")["c"] == [1.0, 2.0, 3.0]
+    assert requests.edit("{entity: b, size: [2, 2, 2], mass: 9, immovable: true}")[0]
+    assert rows("sizes")["b"] == [2.0, 2.0, 2.0] and rows("masses")["b"] == 9.0 and rows("immovable")["b"]
+    assert requests.remove("{entity: a}")[0]
+    rows_are_the_bodies()
+    assert requests.spawn("{name: d, position: [-6, 0, 2]}")[0]  # takes a's slot: rows out of slot order
+    assert sim.snapshot.names == ["d", "b", "c"]
+    rows_are_the_bodies()
+    car = load_world("config/default_scene.yaml").vehicle("car")
+    assert requests.spawn(json.dumps({**car, "position": [0, 12, 1]}))[0]
+    assert list(sim.snapshot.vehicles) == ["car"]
+    rows_are_the_bodies()
+    with pytest.raises(ValueError):
+        sim.snapshot.state["sizes"][0] = 5.0  # shared by the snapshots of this layout
+    # Another world whose layout_version is this one's (one per body added): its own names.
+    requests.scene_directories = [tmp_path]
+    others = [f"other_{k}" for k in range(sim.world.layout_version)]
+    scene = {"version": 1, "bodies": [{"name": name, "position": [2.0 * k, 0, 0.5]} for k, name in enumerate(others)]}
+    (tmp_path / "other.yaml").write_text(yaml.safe_dump(scene))
+    versions = sim.world.layout_version
+    assert requests.load_scene(str(tmp_path / "other.yaml"))[0] == MAP_SUCCESS
+    assert sim.world.layout_version == versions and sim.snapshot.names == others
+    rows_are_the_bodies()

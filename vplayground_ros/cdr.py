@@ -134,8 +134,9 @@ class TemplateEncoder:
 
     def layout(self, keys, alignment, identity=None):
         """The elements of `keys` laid end to end from a payload position ≡ alignment (mod 8):
-        (bytes as a uint8 array, flat byte indices of the stamps, {field: start offsets (N,)},
-        {(field, width): flat byte indices}, filled as asked). An element's alignment depends
+        (bytes as a uint8 array, (N, 2) indices of the stamps' two 32-bit words counted from
+        `alignment` bytes before the first element, {field: start offsets (N,)},
+        {(field, type, count): indices, filled as asked}). An element's alignment depends
         on what came before it, so the layout is a whole; the last one is kept, since the keys
         (the bodies' names) rarely change between messages. `identity` stands for the keys when
         comparing with the last layout (cheaper than the keys: they are then only read on a
@@ -159,7 +160,7 @@ class TemplateEncoder:
             for field, at in offsets.items():
                 fields.setdefault(field, []).append(position - alignment + at)
             position += len(template)
-        layout = (np.frombuffer(b"".join(chunks), np.uint8), spread(np.array(stamps, np.intp), 8),
+        layout = (np.frombuffer(b"".join(chunks), np.uint8), spread((np.array(stamps, np.intp) + alignment) // 4, 2),
                   {field: np.array(at, np.intp) for field, at in fields.items()}, {})
         self._templates = used
         self._last_layout = (cache_key, layout)
@@ -172,21 +173,26 @@ class TemplateEncoder:
         count = next(iter(numbers.values())).shape[0]
         if count == 0:
             return
-        template, stamp_indices, starts, indices = self.layout(keys, w.position % 8, identity)
-        buffer = template.copy()
-        buffer[stamp_indices] = np.tile(np.frombuffer(stamp_bytes, np.uint8), count)
+        alignment = w.position % 8
+        template, stamp_words, starts, indices = self.layout(keys, alignment, identity)
+        # The buffer starts `alignment` bytes before the elements, so every number sits at a
+        # multiple of its size in it, as CDR aligns it in the payload: each field is written
+        # through a view of its own type, one index per number rather than per byte.
+        end = alignment + len(template)
+        buffer = np.empty(-(-end // 8) * 8, np.uint8)
+        buffer[alignment:end] = template
+        buffer.view("<u4")[stamp_words] = np.frombuffer(stamp_bytes, "<u4")
         for field, values in numbers.items():
-            raw = np.ascontiguousarray(values).view(np.uint8).reshape(count, -1)
-            width = raw.shape[1]
-            if (field, width) not in indices:
-                indices[(field, width)] = spread(starts[field], width)
-            buffer[indices[(field, width)]] = raw.ravel()
-        w.data += buffer.tobytes()
+            key = (field, values.dtype.str, values.shape[1])
+            if key not in indices:
+                indices[key] = spread((starts[field] + alignment) // values.dtype.itemsize, values.shape[1])
+            buffer.view(values.dtype)[indices[key]] = values
+        w.data += buffer[alignment:end].data
 
 
-def spread(starts, width):
-    """The flat byte indices of `width` bytes from each of `starts`."""
-    return (starts[:, None] + np.arange(width)).ravel()
+def spread(starts, count):
+    """(N, count) indices: `count` consecutive ones from each of `starts`."""
+    return starts[:, None] + np.arange(count)
 
 
 class BodyMarkerEncoder:
@@ -222,9 +228,18 @@ class TransformEncoder:
         stamp = split_stamp(seconds)
         w = Writer()
         w.u32(len(children))
-        self._elements.append_all(w, struct.pack("<iI", *stamp), list(zip(parents, children)),
-                                  {"pose": np.asarray(poses, "<f8").reshape(-1, 7)})
+        # The frames, not a pair per transform, tell a changed layout: two flat tuples compare
+        # at C speed (the same string objects every message), and pairs are made only then.
+        parents, children = tuple(parents), tuple(children)
+        self._elements.append_all(w, struct.pack("<iI", *stamp), zip(parents, children),
+                                  {"pose": np.asarray(poses, "<f8").reshape(-1, 7)}, (parents, children))
         return ENCAPSULATION + bytes(w.data)
+
+
+def clock(seconds):
+    """rosgraph_msgs/Clock, one builtin_interfaces/Time: sent after every batch, so written
+    directly rather than through the generic encoder (five times faster)."""
+    return ENCAPSULATION + struct.pack("<iI", *split_stamp(seconds))
 
 
 def marker_array(seconds, frame, markers):

@@ -49,7 +49,7 @@ def xyzw(values):
 
 
 def clock(seconds):
-    return encode("rosgraph_msgs/msg/Clock", {"clock": stamp(seconds)})
+    return cdr.clock(seconds)
 
 
 def uint8(value):

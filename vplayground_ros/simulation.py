@@ -10,6 +10,7 @@ import math
 import queue
 import threading
 import time
+from collections import namedtuple
 from concurrent.futures import Future
 from dataclasses import dataclass, field
 
@@ -30,13 +31,20 @@ log = logging.getLogger(__name__)
 
 @dataclass
 class Snapshot:
-    """What the world looked like after a batch (copies, safe to read from any thread)."""
+    """What the world looked like after a batch (copies, safe to read from any thread). The
+    names and the property columns of `state` (sizes, masses, immovable) are shared by the
+    snapshots of one layout (World.layout_version): read them, never change them (the arrays
+    are read-only)."""
     time: float
     step: int
     names: list
     state: dict
     vehicles: dict = field(default_factory=dict)  # name -> vehicle_state()
     contacts: dict = None
+
+
+# What the snapshots of one world's layout share, taken once per layout rather than per batch.
+SharedLayout = namedtuple("SharedLayout", "world version names vehicle_names properties")
 
 
 class Simulation:
@@ -50,6 +58,7 @@ class Simulation:
         self.late_ticks = 0
         self.step_seconds = 0.0     # wall time spent inside world.step, for diagnostics
         self.thread_cpu_seconds = 0.0  # CPU time of the simulation thread (physics, snapshots)
+        self.engine_cpu_seconds = 0.0  # the part of it inside the compiled step, over all worlds
         self.achieved_rtf = 0.0
         # The next simulated time a listener publishes at: a batch ends at the first step at or
         # after it, so what is published carries the same times at any real-time factor.
@@ -63,6 +72,7 @@ class Simulation:
         self._finished = threading.Event()
         self._pending_steps = 0
         self._thread = None
+        self._layout = None
         self.snapshot = self._take_snapshot()
 
     # ---------------------------------------------------------------- control (any thread)
@@ -160,13 +170,14 @@ class Simulation:
             if self.paused:
                 self._pending_steps -= steps
             if steps > 0:
-                started = time.perf_counter()
+                started, engine_before = time.perf_counter(), world.engine_cpu_seconds
                 try:
                     world.step(steps)
                 except Exception as error:  # an engine bug: keep the loop (and the node) alive
                     self.paused, self._pending_steps = True, 0  # not the same failure 100 times a second
                     self._fault("step", error)
                 self.step_seconds += time.perf_counter() - started
+                self.engine_cpu_seconds += world.engine_cpu_seconds - engine_before
                 if first_batch:
                     # A world's first batch loads its kernels from Numba's cache, or compiles them
                     # (a minute on a first run): real time starts after it, not as late ticks.
@@ -234,7 +245,20 @@ class Simulation:
 
     def _take_snapshot(self):
         world = self.world
+        layout = self._shared_layout(world)
         return Snapshot(
-            time=world.time, step=world.step_count, names=world.body_names(), state=world.state(),
-            vehicles={name: world.vehicle_state(name) for name in world.vehicle_names()},
+            time=world.time, step=world.step_count, names=layout.names,
+            state={**world.motion_state(), **layout.properties},
+            vehicles={name: world.vehicle_state(name) for name in layout.vehicle_names},
             contacts=world.contacts() if self.with_contacts else None)
+
+    def _shared_layout(self, world):
+        """Names and body properties, taken again only when the world's layout changed."""
+        layout = self._layout
+        if layout is None or layout.world is not world or layout.version != world.layout_version:
+            properties = world.body_properties()
+            for array in properties.values():
+                array.flags.writeable = False
+            layout = self._layout = SharedLayout(world, world.layout_version, world.body_names(),
+                                                 world.vehicle_names(), properties)
+        return layout

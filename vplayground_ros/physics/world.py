@@ -4,6 +4,8 @@ Everything here is Python bookkeeping between steps (adding, editing, removing b
 buffers); the physics runs inside `pipeline.step_world`, many steps per call.
 """
 import heapq
+import time
+from collections import namedtuple
 
 import numpy as np
 
@@ -51,6 +53,25 @@ def compact_bits(code):
     return code
 
 
+# Which bodies there are, in row order, and what depends only on that: rebuilt when
+# World.layout_version changes, not every batch. slots: (N,) the rows' slots; rows: what selects
+# them from a body array (a slice when they are 0..N-1, the common case, so gathers are copies);
+# names, vehicle_names: tuples; row_of_slot: (capacity,) each slot's row (-1 for free slots).
+Layout = namedtuple("Layout", "version slots rows names vehicle_names row_of_slot")
+
+# contacts() of a step without any (a world at rest: frozen bodies make none), which the node
+# asks for after every batch. Read-only, so sharing the arrays is safe.
+NO_CONTACTS = {"points": np.zeros((0, 3)), "normals": np.zeros((0, 3)), "depths": np.zeros(0),
+               "impulses": np.zeros(0), "body_a": np.zeros(0, np.int64), "body_b": np.zeros(0, np.int64)}
+for _array in NO_CONTACTS.values():
+    _array.flags.writeable = False
+
+
+def gather(array, rows):
+    """array[rows] as a new array; rows: a Layout's rows (a slice or slot indices)."""
+    return array[rows].copy() if isinstance(rows, slice) else array.take(rows, axis=0)
+
+
 def box_bounds(position, orientation, half_extents):
     """World AABBs (min, max) of boxes, (N, 3) each."""
     extent = np.einsum("nij,nj->ni", np.abs(quaternions_to_matrices(orientation)), half_extents)
@@ -70,6 +91,14 @@ class World:
         self._slots = {}
         self._free = list(range(capacity))
         self._generated = 0
+        # Bumped by every change to which bodies exist, their names, or their properties (add,
+        # remove, edit, a vehicle's registration): readers of state() rows may keep whatever
+        # depends only on those while it stays the same.
+        self.layout_version = 0
+        self._layout = None
+        # Slots whose state may have changed since remove_escaped last checked them (frozen and
+        # immovable bodies do not move).
+        self._unchecked = np.ones(capacity, dtype=bool)
         self._vehicles = {}  # name -> validated vehicle spec; the chassis is the body of that name
         self._vehicle_rows = {}  # name -> row of the vehicle arrays
         self._vehicle_arrays = allocate_vehicles(2)
@@ -82,12 +111,15 @@ class World:
         self._centre = np.zeros(3)  # world_centre(), kept with the playground
         self.stats = {"woken": 0, "frozen": 0, "pairs": 0, "points": 0, "triangles": 0}
         self.profiling = False  # time every stage of the step (bench/), at ~6 us a step
+        # CPU seconds of the calling thread inside the compiled step (Numba's argument unboxing
+        # included): what the engine itself costs, against which a host's overhead is measured.
+        self.engine_cpu_seconds = 0.0
         self._stage_ns = np.zeros(len(STAGES), np.int64)
 
     # ----------------------------------------------------------------- bodies
     def body_names(self):
         """Every body (vehicle chassis included), in the row order of state()."""
-        return [self._names[s] for s in self._active_slots()]
+        return list(self._current_layout().names)
 
     def add_body(self, spec):
         """Adds a box from a SPEC 3 body spec; returns its (given or generated) unique name."""
@@ -111,6 +143,7 @@ class World:
         self._set_fields(slot, body)
         self._names[slot] = name
         self._slots[name] = slot
+        self.layout_version += 1
         self._check_root(slot)
         return name
 
@@ -147,6 +180,7 @@ class World:
         rows.command_timeout[row] = DEFAULT_COMMAND_TIMEOUT
         self._vehicles[name] = {**vehicle, "name": name}
         self._vehicle_rows[name] = row
+        self.layout_version += 1
         return name
 
     def edit_vehicle(self, name, /, **fields):
@@ -217,7 +251,7 @@ class World:
             raise KeyError(f"no vehicle named {name!r}") from None
 
     def vehicle_names(self):
-        return [name for name in self.body_names() if name in self._vehicles]
+        return list(self._current_layout().vehicle_names)
 
     def vehicle(self, name):
         """The vehicle's spec with its chassis' current pose (what a scene file holds)."""
@@ -253,6 +287,7 @@ class World:
         elif "density" in body:
             b.mass[slot] = body["density"] * float(np.prod(size))
         self._set_fields(slot, body)
+        self.layout_version += 1  # sizes, masses, flags
         if not body.get("frozen", False):
             self._wake(slot)
         self._check_root(slot)
@@ -310,6 +345,7 @@ class World:
         if self._vehicles.pop(name, None) is not None:
             self._vehicle_arrays.active[self._vehicle_rows.pop(name)] = False
         self._names[slot] = None
+        self.layout_version += 1
         heapq.heappush(self._free, slot)
 
     def apply_impulse(self, name, impulse=(0.0, 0.0, 0.0), angular_impulse=(0.0, 0.0, 0.0)):
@@ -340,16 +376,22 @@ class World:
 
     def remove_escaped(self):
         """Removes bodies whose state is not finite or that left the world (WORLD_RADIUS from
-        world_centre(), or that far below the ground). Returns their names."""
-        slots = self._active_slots()
+        world_centre(), or that far below the ground). Returns their names. Only bodies that may
+        have moved since the last call are looked at: the others were inside then."""
         b = self._bodies
-        state = np.concatenate([b.position[slots], b.orientation[slots], b.velocity[slots]], axis=1)
+        self._unchecked |= ~(b.frozen | b.immovable)  # moving now (woken between steps, say)
+        slots = np.nonzero(b.active & self._unchecked)[0]
+        self._unchecked[:] = False
+        if len(slots) == 0:
+            return []
+        position = b.position.take(slots, axis=0)
+        state = np.concatenate([position, b.orientation.take(slots, axis=0), b.velocity.take(slots, axis=0)], axis=1)
         bad = ~np.all(np.isfinite(state), axis=1)
         centre = self.world_centre()
         with np.errstate(over="ignore"):  # an infinite coordinate is just "far", and bad already
-            bad |= np.linalg.norm(np.nan_to_num(b.position[slots] - centre), axis=1) > WORLD_RADIUS
+            bad |= np.linalg.norm(np.nan_to_num(position - centre), axis=1) > WORLD_RADIUS
         if self.ground is not None:
-            bad |= b.position[slots, 2] < self.ground["height"] - WORLD_RADIUS
+            bad |= position[:, 2] < self.ground["height"] - WORLD_RADIUS
         names = [self._names[slot] for slot in slots[bad]]
         self.remove_bodies(names)
         return names
@@ -381,6 +423,7 @@ class World:
         self._centre = (0.5 * (playground.aabb_min.min(axis=0) + playground.aabb_max.max(axis=0))
                         if len(playground.triangles) else np.zeros(3))
         self.playground_spec = spec
+        self._unchecked[:] = True  # the world's bounds moved with its centre
         self._root = None  # refit around the mesh, which indexes it
         self.wake_all()
         return dropped
@@ -397,15 +440,30 @@ class World:
             raise ValueError(f"step: n must be a non-negative integer, got {n!r}")
         if self._root is None:
             self._fit_root()
-        dt = 1.0 / self.settings["steps_per_second"]
+        rate = self.settings["steps_per_second"]
+        dt = 1.0 / rate
+        freezing = self.settings["freezing"]
+        # Long enough for a frozen body to be woken, move and freeze again unseen?
+        refreeze = freezing["enabled"] and (n + 1) * dt >= freezing["time"]
+        # Frozen bodies do not move; checking every body once a simulated second anyway bounds
+        # how long a state the engine should never write (a fault) goes unnoticed.
+        new_second = (self.step_count + n) // rate != self.step_count // rate
+        if refreeze or new_second:
+            self._unchecked[:] = True
+        else:
+            b = self._bodies
+            self._unchecked |= ~(b.frozen | b.immovable)  # the bodies this call moves
         counters = np.zeros(5, np.int64)
         done = 0
         while done < n:
             newest, scratch = self._contacts
+            settings = self._kernel_settings()
+            started = time.thread_time()
             steps, status = step_world(n - done, self._bodies, self._playground,
-                                       self._vehicle_arrays, self._kernel_settings(),
+                                       self._vehicle_arrays, settings,
                                        self._broad, newest, scratch, counters, self._stage_ns,
                                        self.profiling)
+            self.engine_cpu_seconds += time.thread_time() - started
             if steps % 2:
                 self._contacts.reverse()
             done += steps
@@ -450,27 +508,35 @@ class World:
         return cells
 
     def state(self):
-        """One row per body, in body_names() order (copies)."""
-        slots = self._active_slots()
-        b = self._bodies
-        return {
-            "positions": b.position[slots].copy(),
-            "quaternions": b.orientation[slots].copy(),
-            "linear_velocities": b.velocity[slots, :3],
-            "angular_velocities": b.velocity[slots, 3:],
-            "frozen": b.frozen[slots].copy(),
-            "sizes": 2.0 * b.half_extents[slots],
-            "masses": b.mass[slots].copy(),
-            "immovable": b.immovable[slots].copy(),
-        }
+        """One row per body, in body_names() order (copies): motion_state() and
+        body_properties() together."""
+        return {**self.motion_state(), **self.body_properties()}
+
+    def motion_state(self):
+        """What stepping changes, one row per body (copies): positions, quaternions,
+        linear_velocities, angular_velocities, frozen."""
+        b, rows = self._bodies, self._current_layout().rows
+        position, orientation, velocity, frozen = (gather(array, rows) for array in
+                                                   (b.position, b.orientation, b.velocity, b.frozen))
+        return {"positions": position, "quaternions": orientation,
+                "linear_velocities": velocity[:, :3], "angular_velocities": velocity[:, 3:], "frozen": frozen}
+
+    def body_properties(self):
+        """What only adding, removing and editing change (see layout_version), one row per
+        body (copies): sizes (full edges), masses, immovable."""
+        b, rows = self._bodies, self._current_layout().rows
+        return {"sizes": 2.0 * gather(b.half_extents, rows), "masses": gather(b.mass, rows),
+                "immovable": gather(b.immovable, rows)}
 
     def contacts(self):
         """The newest step's contact points; body_a/body_b are rows of state(), -1 the ground,
         -2 the playground. Normals point from A to B; impulses are N s (collision + contact)."""
         c = self._contacts[0]
         n = int(c.count[0])
+        if n == 0:
+            return dict(NO_CONTACTS)
         active = self._bodies.active
-        row_of_slot = np.cumsum(active) - 1
+        row_of_slot = self._current_layout().row_of_slot
         a, b = c.body_a[:n], c.body_b[:n]
         # Bodies removed since that step take their contacts with them.
         keep = np.nonzero(active[a] & ((b < 0) | active[np.maximum(b, 0)]))[0]
@@ -506,7 +572,21 @@ class World:
 
     # ------------------------------------------------------------------ internals
     def _active_slots(self):
-        return np.nonzero(self._bodies.active)[0]
+        return self._current_layout().slots
+
+    def _current_layout(self):
+        if self._layout is None or self._layout.version != self.layout_version:
+            active = self._bodies.active
+            slots = np.nonzero(active)[0]
+            rows = slice(0, len(slots)) if len(slots) == 0 or slots[-1] == len(slots) - 1 else slots
+            names = tuple(self._names[s] for s in slots.tolist())
+            row_of_slot = np.cumsum(active) - 1
+            row_of_slot[~active] = -1
+            for array in (slots, row_of_slot):
+                array.flags.writeable = False  # shared by every caller until the next change
+            self._layout = Layout(self.layout_version, slots, rows, names,
+                                  tuple(name for name in names if name in self._vehicles), row_of_slot)
+        return self._layout
 
     def _slot(self, name):
         try:
@@ -633,6 +713,8 @@ class World:
         old = len(self._names)
         self._bodies = grow_bodies(self._bodies, capacity)
         self._names.extend([None] * (capacity - old))
+        self._unchecked = np.concatenate([self._unchecked, np.ones(capacity - old, dtype=bool)])
+        self.layout_version += 1  # row_of_slot covers every slot
         for slot in range(old, capacity):
             heapq.heappush(self._free, slot)
         self._broad = allocate_broad_phase(capacity, max(len(self._broad.pair_a), 4 * capacity))
