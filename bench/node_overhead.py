@@ -164,6 +164,7 @@ def main():
     engine = node1["engine_cpu_s"] - node0["engine_cpu_s"]
     simulation_thread = node1["simulation_thread_cpu_s"] - node0["simulation_thread_cpu_s"]
     threads = {name: percent(seconds - threads0.get(name, 0.0)) for name, seconds in threads1.items()}
+    threads = {name: share for name, share in threads.items() if share > 0}  # idle middleware threads left out
     result = {"boxes": int(values["frozen"]) + int(values["active"]), "frozen_at_start": frozen_at_start,
               "frozen_at_end": int(values["frozen"]), "foxglove": args.foxglove, "seconds": round(wall, 1),
               "process_cpu_percent": percent(process), "engine_cpu_percent": percent(engine),
