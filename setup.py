@@ -22,12 +22,12 @@ setup(
     ],
     python_requires=">=3.10",
     # mcap-ros2-support: CDR from message definitions (interfaces.py); foxglove-sdk: the built-in
-    # Foxglove WebSocket server (--foxglove); websockets: its public port (foxglove_front.py).
+    # Foxglove WebSocket server (--foxglove).
     install_requires=["numpy>=1.24", "numba>=0.59", "pyyaml>=6", "trimesh>=4", "mcap>=1.1",
                       "zstandard>=0.22", "regex>=2022.1", "mcap-ros2-support>=0.5",
-                      "foxglove-sdk>=0.30,<0.31", "websockets>=13"],
+                      "foxglove-sdk>=0.30,<0.31"],
     extras_require={
-        "test": ["pytest>=7", "hypothesis>=6.80"],
+        "test": ["pytest>=7", "hypothesis>=6.80", "websockets>=13"],
         # The ROS 2 Jazzy Python wheels, for machines without a ROS install (make does this).
         "ros": ["ros-jazzy-rclpy[fastrtps]", "ros-jazzy-common-interfaces"],
         # Peers and plots for bench/compare.py only; never needed to run the simulator.

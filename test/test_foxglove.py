@@ -187,9 +187,12 @@ def test_parameter_updates_reach_the_clients_subscribed_to_them(server, client):
     try:
         client.subscribe_parameter_updates("click_spawn_size", "freezing.enabled")
         other.subscribe_parameter_updates("freezing.enabled")
+        for watcher in (client, other):  # a round trip: the server has taken the subscription
+            watcher.get_parameters("click_spawn_size")
         other.set_parameters({"click_spawn_size": 0.75})
         assert client.wait(lambda: updates(client, "click_spawn_size") == [0.75]), client.parameter_updates
         client.unsubscribe_parameter_updates("click_spawn_size")
+        client.get_parameters("click_spawn_size")
         other.set_parameters({"click_spawn_size": 0.5})
         assert client.call(f"{NS}/set_freezing", {"data": False}).success
         for watcher in (client, other):

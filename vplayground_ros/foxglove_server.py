@@ -63,7 +63,7 @@ class FoxgloveServer:
         except RuntimeError as error:  # the SDK's FoxgloveError
             raise OSError(f"the Foxglove server cannot start: {error}") from None
         try:
-            self.front = ProtocolFront(f"ws://127.0.0.1:{self.server.port}", host, port, METADATA, runtime.log)
+            self.front = ProtocolFront(self.server.port, host, port, METADATA, runtime.log)
         except OSError as error:  # the port is taken, say
             self.server.stop()
             raise OSError(f"the Foxglove server cannot listen on {host}:{port}: {error}") from None
