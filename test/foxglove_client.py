@@ -1,6 +1,7 @@
-"""A small client of Foxglove's WebSocket protocol (subprotocol `foxglove.sdk.v1`), written from
-the protocol's spec for the tests: it knows nothing of the simulator's code. Messages are
-decoded and encoded with mcap_ros2 from the schemas the server advertises."""
+"""A small client of Foxglove's WebSocket protocol (subprotocol `foxglove.sdk.v1`, or its older
+name `foxglove.websocket.v1`), written from the protocol's spec for the tests: it knows nothing
+of the simulator's code. Messages are decoded and encoded with mcap_ros2 from the schemas the
+server advertises."""
 import json
 import re
 import struct
@@ -12,6 +13,7 @@ from mcap_ros2._dynamic import generate_dynamic, serialize_dynamic
 from websockets.sync.client import connect
 
 SUBPROTOCOL = "foxglove.sdk.v1"
+OLD_SUBPROTOCOL = "foxglove.websocket.v1"  # what viewers released before December 2025 ask for
 MESSAGE_DATA, TIME, SERVICE_CALL_RESPONSE = 1, 2, 3          # server binary opcodes
 CLIENT_MESSAGE_DATA, SERVICE_CALL_REQUEST = 1, 2             # client binary opcodes
 # Where a server's URL is found: the line the simulator logs when it starts serving.
@@ -23,9 +25,9 @@ def codec(make, name, schema_text):
 
 
 class FoxgloveClient:
-    def __init__(self, url, timeout=10.0, keep=None):
+    def __init__(self, url, timeout=10.0, keep=None, subprotocol=SUBPROTOCOL):
         """keep: frames and times kept per topic (None: all; a long run keeps a few)."""
-        self.ws = connect(url, subprotocols=[SUBPROTOCOL], max_size=None, open_timeout=timeout, legacy=True)
+        self.ws = connect(url, subprotocols=[subprotocol], max_size=None, open_timeout=timeout, legacy=True)
         self.timeout = timeout
         self.server_info = None
         self.channels = {}        # topic -> advertised channel
@@ -161,6 +163,12 @@ class FoxgloveClient:
         self.ws.send(json.dumps({"op": "getParameters", "parameterNames": list(names), "id": rid}))
         assert self.wait(lambda: rid in self.parameter_values)
         return {p["name"]: p.get("value") for p in self.parameter_values.pop(rid)}
+
+    def subscribe_parameter_updates(self, *names):
+        self.ws.send(json.dumps({"op": "subscribeParameterUpdates", "parameterNames": list(names)}))
+
+    def unsubscribe_parameter_updates(self, *names):
+        self.ws.send(json.dumps({"op": "unsubscribeParameterUpdates", "parameterNames": list(names)}))
 
     def set_parameters(self, values):
         rid = f"set{self._id()}"

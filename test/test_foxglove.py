@@ -12,8 +12,10 @@ import time
 
 import pytest
 from mcap_ros2._dynamic import serialize_dynamic
+from websockets.exceptions import InvalidStatus
+from websockets.sync.client import connect
 
-from foxglove_client import URL_IN_LOG, FoxgloveClient
+from foxglove_client import OLD_SUBPROTOCOL, SUBPROTOCOL, URL_IN_LOG, FoxgloveClient
 from foxglove_js import needs_node, run_script
 
 NS = "/vplayground"
@@ -75,7 +77,32 @@ def test_runs_without_ros_and_advertises_every_topic_and_service(client, server)
     for service in client.services.values():
         assert service["request"]["encoding"] == service["response"]["encoding"] == "cdr"
         assert service["request"]["schemaName"] == service["type"] + "_Request"
-    assert {"clientPublish", "parameters", "services", "time"} <= set(client.server_info["capabilities"])
+    assert {"clientPublish", "parameters", "parametersSubscribe", "services", "time"} <= set(
+        client.server_info["capabilities"])
+
+
+@pytest.mark.parametrize("subprotocol", [SUBPROTOCOL, OLD_SUBPROTOCOL])
+def test_viewers_of_either_protocol_generation_connect_to_a_ros_source(server, subprotocol):
+    """Lichtblick <= 1.10.8 and older Foxglove ask for foxglove.websocket.v1, newer viewers for
+    foxglove.sdk.v1; both are served on the one URL. The server names its ROS distribution:
+    viewers offer the 3D panel's publish tools only to a ROS source."""
+    client = FoxgloveClient(server[0], subprotocol=subprotocol)
+    try:
+        assert client.ws.subprotocol == subprotocol
+        assert client.wait(lambda: client.server_info is not None and len(client.channels) >= len(TOPICS))
+        assert client.server_info["metadata"]["ROS_DISTRO"] == "jazzy"
+        assert client.server_info["name"] == "vplayground"
+        client.subscribe("/clock")
+        assert client.wait(lambda: len(client.frames["/clock"]) >= 1)
+        assert client.call(f"{NS}/get_simulator_features", {}).success
+    finally:
+        client.close()
+
+
+def test_a_viewer_asking_for_another_protocol_is_refused(server):
+    with pytest.raises(InvalidStatus) as refused:
+        connect(server[0], subprotocols=["foxglove.websocket.v2"], open_timeout=10)
+    assert refused.value.response.status_code == 400
 
 
 def test_a_taken_port_is_a_clear_error(server):
@@ -150,6 +177,40 @@ def test_parameters_are_validated_like_the_ros_ones(client):
     assert client.get_parameters("click_spawn_height") == {"click_spawn_height": 3.5}
 
 
+def test_parameter_updates_reach_the_clients_subscribed_to_them(server, client):
+    """The Parameters panel follows a change without polling, whether another client made it or
+    the simulator (a service changing the world's settings), once per change; a client that
+    unsubscribed, or never subscribed, gets no update; none of it logs an error."""
+    def updates(watcher, name):
+        return [p["value"] for p in watcher.parameter_updates if p["name"] == name]
+    other = FoxgloveClient(server[0])
+    try:
+        client.subscribe_parameter_updates("click_spawn_size", "freezing.enabled")
+        other.subscribe_parameter_updates("freezing.enabled")
+        for watcher in (client, other):  # a round trip: the server has taken the subscription
+            watcher.get_parameters("click_spawn_size")
+        other.set_parameters({"click_spawn_size": 0.75})
+        assert client.wait(lambda: updates(client, "click_spawn_size") == [0.75]), client.parameter_updates
+        client.unsubscribe_parameter_updates("click_spawn_size")
+        client.get_parameters("click_spawn_size")
+        other.set_parameters({"click_spawn_size": 0.5})
+        assert client.call(f"{NS}/set_freezing", {"data": False}).success
+        for watcher in (client, other):
+            assert watcher.wait(lambda w=watcher: updates(w, "freezing.enabled") == [False]), watcher.parameter_updates
+        assert client.call(f"{NS}/set_freezing", {"data": True}).success
+        assert client.wait(lambda: updates(client, "freezing.enabled") == [False, True])
+        assert updates(client, "click_spawn_size") == [0.75]  # unsubscribed before the second set
+        assert updates(other, "click_spawn_size") == []
+        port = other.ws.socket.getsockname()[1]
+    finally:
+        other.close()
+    deadline = time.monotonic() + 10  # the server has seen the client leave: it says so
+    while f"viewer 127.0.0.1:{port} left" not in "".join(server[1]) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    log = "".join(server[1])
+    assert f"viewer 127.0.0.1:{port} left" in log and "ERROR" not in log and "AttributeError" not in log, log
+
+
 def twist_publisher(client, encoding):
     if encoding == "json":
         channel = client.advertise("/cmd_vel", "json", "geometry_msgs/msg/Twist")
@@ -190,9 +251,13 @@ def test_clicked_point_from_the_3d_panel_drops_a_box(client):
     while not dropped() and time.monotonic() < deadline:
         time.sleep(0.1)
     assert len(dropped()) == 1
-    # A topic the simulator does not take is refused with a status, not an exception.
+    # A topic the simulator does not take is refused with a status, not an exception; the
+    # navigation goals of the 3D panel's pose tool are taken quietly (statuses come in order).
+    client.advertise("/goal_pose", "cdr", "geometry_msgs/msg/PoseStamped")
+    client.advertise("/move_base_simple/goal", "cdr", "geometry_msgs/PoseStamped")
     client.advertise("/not_a_simulator_topic", "json", "std_msgs/msg/String")
     assert client.wait(lambda: any("not_a_simulator_topic" in s["message"] for s in client.statuses))
+    assert not any("goal" in s["message"] for s in client.statuses), client.statuses
 
 
 ROSMSG_PARSER = r"""

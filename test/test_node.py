@@ -250,10 +250,12 @@ def test_parameters_accepted_and_rejected(ros):
 def test_foxglove_server_shares_the_ros_graph(ros):
     """With ROS present both are live: a spawn through the socket shows in the ROS
     ~/get_entities, and a parameter set through the socket goes through rclpy (refused with the
-    same validation, or seen by `ros2 param get` when accepted)."""
+    same validation, or seen by `ros2 param get` when accepted), and a client subscribed to a
+    parameter hears of each change once, whether it or `ros2 param set` made it."""
     client = FoxgloveClient(ros.foxglove.url)
     try:
         assert client.wait(lambda: f"{NS}/spawn" in client.services and "/odom" in client.channels)
+        client.subscribe_parameter_updates("click_spawn_size")
         assert client.call(f"{NS}/spawn", {"load_namespace": "{name: from_foxglove, position: [0, 9, 3]}"}).success
         entities = ros.call(GetInteractiveMarkers, f"{NS}/get_entities", GetInteractiveMarkers.Request())
         assert "from_foxglove" in [m.name for m in entities.markers]
@@ -271,6 +273,9 @@ def test_foxglove_server_shares_the_ros_graph(ros):
         assert ros.node.get_parameter("click_spawn_size").value == 0.25
         assert ros.set_parameter("click_spawn_size", 0.5, ParameterType.PARAMETER_DOUBLE).successful
         assert client.get_parameters("click_spawn_size") == {"click_spawn_size": 0.5}
+        # The refused set from the socket (the value kept), its accepted one, the ROS one: once each.
+        assert client.wait(lambda: [p["value"] for p in client.parameter_updates] == [0.5, 0.25, 0.5]), \
+            client.parameter_updates
     finally:
         client.close()
 

@@ -10,17 +10,29 @@ from the same Runtime:
 - client publish: cmd_vel, clicked_point, initialpose and ~/push (cdr or json) into the same
   handlers as the ROS subscriptions.
 A latched topic (scenery, state, /tf_static) is sent again when a client subscribes to it.
+Viewers connect to foxglove_front.py's relay, which speaks both protocol generations and names
+the ROS distribution; the sdk server itself listens on a loopback port behind it.
 """
+import logging
 import threading
 
 import foxglove
 from foxglove import Channel, Context, MessageSchema, Parameter, ParameterType, Schema, Service, ServiceSchema
 from foxglove.websocket import Capability, StatusLevel
 
+from .foxglove_front import ProtocolFront
 from .inputs import from_cdr, from_json, subscriptions
 from .interfaces import decoder, encode, schema
 
 DEFAULT_PORT = 8765
+# The message definitions every channel and service uses are Jazzy's (interfaces.py); viewers
+# take a server naming a ROS_DISTRO for a ROS 2 source and then offer the 3D publish tools.
+METADATA = {"ROS_DISTRO": "jazzy"}
+# Topics the 3D panel's pose tool publishes a navigation goal on (Nav2's goal_pose; older
+# layouts' default /move_base_simple/goal). The simulator has no planner: it takes them quietly.
+NAVIGATION_GOALS = {"/goal_pose", "/move_base_simple/goal"}
+# The sdk logs its own loopback port and the relay's connections: the relay logs the viewers.
+logging.getLogger("foxglove.websocket").setLevel(logging.WARNING)
 
 
 def ros2msg(type_name):
@@ -39,20 +51,29 @@ class FoxgloveServer:
                        for sub in subscriptions(runtime.parameters["cmd_vel_stamped"])}
         self.client_channels = {}  # (client id, channel id) -> (subscription key, decode)
         self.subscriptions = 0
+        self.watched_parameters = set()  # names some client subscribed to updates of
+        self._setting = threading.local()  # .names: a Foxglove client's set, on this thread
         self._lock = threading.Lock()
         try:
             self.server = foxglove.start_server(
-                name="vplayground", host=host, port=port, context=self.context,
+                name="vplayground", host="127.0.0.1", port=0, context=self.context,
                 capabilities=[Capability.ClientPublish, Capability.Parameters, Capability.Services, Capability.Time],
                 server_listener=self, supported_encodings=["cdr", "json"],
                 services=[self._service(s) for s in runtime.services])
-        except RuntimeError as error:  # the SDK's FoxgloveError: the port is taken, say
+        except RuntimeError as error:  # the SDK's FoxgloveError
+            raise OSError(f"the Foxglove server cannot start: {error}") from None
+        try:
+            self.front = ProtocolFront(self.server.port, host, port, METADATA, runtime.log)
+        except OSError as error:  # the port is taken, say
+            self.server.stop()
             raise OSError(f"the Foxglove server cannot listen on {host}:{port}: {error}") from None
-        self.url = f"ws://{host}:{self.server.port}"
+        self.port = self.front.port
+        self.url = f"ws://{host}:{self.port}"
         runtime.parameters.listen(self._parameters_changed)
         runtime.broadcaster.add_sink(self)
 
     def stop(self):
+        self.front.stop()
         self.server.stop()
 
     # ------------------------------------------------------------- the Broadcaster sink
@@ -95,6 +116,9 @@ class FoxgloveServer:
     def on_client_advertise(self, client, channel):
         topic = channel.topic if channel.topic.startswith("/") else f"/{channel.topic}"
         sub = self.inputs.get(topic)
+        if sub is None and topic in NAVIGATION_GOALS:
+            self.runtime.log.debug(f"foxglove: {channel.topic}: a navigation goal, ignored (no planner)")
+            return
         if sub is None:
             self._warn(f"{channel.topic}: the simulator does not subscribe to it "
                        f"(it takes {', '.join(sorted(self.inputs))})")
@@ -134,11 +158,23 @@ class FoxgloveServer:
 
     def on_set_parameters(self, client, parameters, request_id=None):
         changes = {p.name: p.get_value() for p in parameters}
-        ok, reason = self.runtime.set_parameters(changes)
+        self._setting.names = set(changes)  # the sdk sends what this returns to the subscribers itself
+        try:
+            ok, reason = self.runtime.set_parameters(changes)
+        finally:
+            self._setting.names = set()
         if not ok:
             self._warn(f"parameters refused: {reason}")
         store = self.runtime.parameters
         return [self._parameter(name) for name in changes if name in store.specs]
+
+    def on_parameters_subscribe(self, param_names):
+        with self._lock:
+            self.watched_parameters.update(param_names)
+
+    def on_parameters_unsubscribe(self, param_names):
+        with self._lock:
+            self.watched_parameters.difference_update(param_names)
 
     # ------------------------------------------------------------- helpers
     def _parameter(self, name):
@@ -151,7 +187,12 @@ class FoxgloveServer:
         return Parameter(name, value=value)
 
     def _parameters_changed(self, changed):
-        self.server.publish_parameter_values([self._parameter(name) for name in changed])
+        """Updates to the clients subscribed to them (the sdk sends each client its own names)."""
+        with self._lock:
+            watched = [name for name in changed if name in self.watched_parameters
+                       and name not in getattr(self._setting, "names", ())]
+        if watched:
+            self.server.publish_parameter_values([self._parameter(name) for name in watched])
 
     def _warn(self, text):
         self.runtime.log.warning(f"foxglove: {text}")

@@ -1,0 +1,214 @@
+"""The public port of the built-in Foxglove server: a thin TCP relay in front of foxglove-sdk.
+
+foxglove-sdk 0.30 (the newest release) accepts only the `foxglove.sdk.v1` subprotocol and sends
+no server metadata. Viewers released before December 2025 (Lichtblick up to at least 1.10.8,
+older Foxglove) ask for `foxglove.websocket.v1`, which carries the same messages, and are refused
+with HTTP 400; and viewers offer the 3D panel's publish tools (clicked_point, initialpose) only
+to a data source whose serverInfo metadata names a `ROS_DISTRO`. The relay reads a viewer's
+WebSocket handshake, accepts either subprotocol, hands the handshake to the sdk server on a
+loopback port under the sdk's name, adds the metadata to the sdk's first frame (serverInfo), and
+from then on copies bytes both ways untouched: no WebSocket framing in Python, so a client
+subscribed to everything costs next to nothing here.
+"""
+import json
+import socket
+import struct
+import threading
+
+SDK_SUBPROTOCOL = b"foxglove.sdk.v1"
+# Preferred first: a viewer offering both gets the sdk's own name.
+SUBPROTOCOLS = [SDK_SUBPROTOCOL, b"foxglove.websocket.v1"]
+HANDSHAKE_LIMIT = 64 * 1024  # bytes: an HTTP head larger than this is not a viewer's
+HANDSHAKE_TIMEOUT = 10.0  # s for a viewer (or the sdk) to send its handshake
+CHUNK = 256 * 1024  # bytes per copy: a scenery mesh message is megabytes
+
+
+class HandshakeError(Exception):
+    """A peer's handshake the relay cannot pass on; the text goes back in an HTTP 400."""
+
+
+def read_head(sock):
+    """(HTTP head up to and without its blank line, the bytes read after it)."""
+    data = b""
+    while b"\r\n\r\n" not in data:
+        if len(data) > HANDSHAKE_LIMIT:
+            raise HandshakeError("HTTP head too large")
+        chunk = sock.recv(4096)
+        if not chunk:
+            raise HandshakeError("connection closed during the handshake")
+        data += chunk
+    head, rest = data.split(b"\r\n\r\n", 1)
+    return head, rest
+
+
+def header_values(lines, name):
+    """The comma-separated values of every header line called `name` (case-insensitive)."""
+    values = []
+    for line in lines[1:]:
+        key, _, value = line.partition(b":")
+        if key.strip().lower() == name:
+            values += [v.strip() for v in value.split(b",") if v.strip()]
+    return values
+
+
+def with_header(lines, name, value):
+    """The head's lines without any `name` header, plus `name: value` (None: none)."""
+    kept = [lines[0]] + [line for line in lines[1:] if line.partition(b":")[0].strip().lower() != name]
+    return kept + ([name + b": " + value] if value is not None else [])
+
+
+def choose_subprotocol(request_lines):
+    offered = header_values(request_lines, b"sec-websocket-protocol")
+    chosen = next((s for s in SUBPROTOCOLS if s in offered), None)
+    if chosen is None:
+        raise HandshakeError(f"expected a Sec-WebSocket-Protocol of {', '.join(s.decode() for s in SUBPROTOCOLS)}")
+    return chosen
+
+
+def upstream_request(request_lines):
+    """The viewer's handshake as the sdk takes it: its subprotocol, and no extensions offered
+    (a compression the sdk accepted would hide serverInfo from the relay)."""
+    lines = with_header(request_lines, b"sec-websocket-protocol", SDK_SUBPROTOCOL)
+    return b"\r\n".join(with_header(lines, b"sec-websocket-extensions", None)) + b"\r\n\r\n"
+
+
+def read_frame(sock, data):
+    """(the first WebSocket frame a server sent, unmasked: fin, opcode, payload; bytes after it)."""
+    def need(count):
+        nonlocal data
+        while len(data) < count:
+            chunk = sock.recv(CHUNK)
+            if not chunk:
+                raise ConnectionError("the sdk server closed before its serverInfo")
+            data += chunk
+    need(2)
+    fin, opcode, length, start = data[0] & 0x80, data[0] & 0x0F, data[1] & 0x7F, 2
+    if length == 126:
+        need(4)
+        length, start = struct.unpack_from("!H", data, 2)[0], 4
+    elif length == 127:
+        need(10)
+        length, start = struct.unpack_from("!Q", data, 2)[0], 10
+    need(start + length)
+    return bool(fin), opcode, data[start:start + length], data[start + length:]
+
+
+def text_frame(payload):
+    """An unmasked, final text frame (server to client)."""
+    length = len(payload)
+    if length < 126:
+        size = struct.pack("!B", length)
+    elif length < 1 << 16:
+        size = struct.pack("!BH", 126, length)
+    else:
+        size = struct.pack("!BQ", 127, length)
+    return b"\x81" + size + payload
+
+
+def with_metadata(payload, metadata):
+    """serverInfo's JSON with `metadata` merged into the sdk's own."""
+    info = json.loads(payload)
+    info["metadata"] = {**info.get("metadata", {}), **metadata}
+    return json.dumps(info, separators=(",", ":")).encode()
+
+
+def copy(source, target):
+    """Bytes from source to target until either side closes; then both are shut."""
+    buffer = memoryview(bytearray(CHUNK))
+    try:
+        while True:
+            count = source.recv_into(buffer)
+            if not count:
+                break
+            target.sendall(buffer[:count])
+    except OSError:
+        pass
+    finally:
+        for sock in (source, target):
+            try:
+                sock.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+
+
+class ProtocolFront:
+    def __init__(self, upstream_port, host, port, metadata, log):
+        """Listens on host:port (0: any free port) at once; raises OSError if it cannot. `log`
+        (the simulator's logger) hears of each viewer coming and going."""
+        self.upstream = ("127.0.0.1", upstream_port)
+        self.metadata = dict(metadata)
+        self.log = log
+        self.listener = socket.create_server((host, port))
+        self.port = self.listener.getsockname()[1]
+        self.connections = set()
+        self._lock = threading.Lock()
+        self._thread = threading.Thread(target=self._accept, name="foxglove-front", daemon=True)
+        self._thread.start()
+
+    def stop(self):
+        self.listener.shutdown(socket.SHUT_RDWR)  # wakes accept()
+        self.listener.close()
+        self._thread.join(5.0)
+        with self._lock:
+            for sock in self.connections:
+                try:
+                    sock.shutdown(socket.SHUT_RDWR)
+                except OSError:
+                    pass
+
+    def _accept(self):
+        while True:
+            try:
+                viewer, address = self.listener.accept()
+            except OSError:  # stopped
+                return
+            threading.Thread(target=self._serve, args=(viewer, address), daemon=True).start()
+
+    def _serve(self, viewer, address):
+        peer = f"{address[0]}:{address[1]}"
+        sdk = None
+        try:
+            viewer.settimeout(HANDSHAKE_TIMEOUT)
+            head, early = read_head(viewer)
+            lines = head.split(b"\r\n")
+            subprotocol = choose_subprotocol(lines)
+            sdk = socket.create_connection(self.upstream, timeout=HANDSHAKE_TIMEOUT)
+            with self._lock:
+                self.connections.update((viewer, sdk))
+            sdk.sendall(upstream_request(lines) + early)
+            response, rest = read_head(sdk)
+            response_lines = response.split(b"\r\n")
+            upgraded = response_lines[0].split(b" ")[1:2] == [b"101"]
+            if upgraded:
+                response_lines = with_header(response_lines, b"sec-websocket-protocol", subprotocol)
+            viewer.sendall(b"\r\n".join(response_lines) + b"\r\n\r\n")
+            if upgraded:
+                fin, opcode, payload, rest = read_frame(sdk, rest)
+                if not (fin and opcode == 1):
+                    raise ValueError(f"the sdk's first frame is not serverInfo (opcode {opcode})")
+                viewer.sendall(text_frame(with_metadata(payload, self.metadata)) + rest)
+                self.log.info(f"foxglove: viewer {peer} connected ({subprotocol.decode()})")
+            for sock in (viewer, sdk):
+                sock.settimeout(None)
+                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            upstream = threading.Thread(target=copy, args=(viewer, sdk), daemon=True)
+            upstream.start()
+            copy(sdk, viewer)
+            upstream.join()  # it ends at once: copy() shut both sockets
+            if upgraded:
+                self.log.info(f"foxglove: viewer {peer} left")
+        except HandshakeError as error:
+            text = f"{error}\n".encode()
+            try:
+                viewer.sendall(b"HTTP/1.1 400 Bad Request\r\nContent-Type: text/plain\r\nConnection: close\r\n"
+                               b"Content-Length: %d\r\n\r\n" % len(text) + text)
+            except OSError:
+                pass
+        except (OSError, ValueError) as error:  # a peer gone or silent mid-handshake, serverInfo not JSON
+            self.log.warning(f"foxglove: viewer {peer}: {error}")
+        finally:
+            with self._lock:
+                self.connections.difference_update((viewer, sdk))
+            for sock in (viewer, sdk):
+                if sock is not None:
+                    sock.close()
