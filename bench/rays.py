@@ -1,0 +1,59 @@
+"""Rays per second of World.cast_rays (SPEC 8 / issue 18: >= 5 million rays/s on one core) in the
+default scene plus a pile of 1,000 boxes, measured in CPU time of the casting thread (the machine
+may be shared): rays from random points of the yard in every direction, 30 m long."""
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from vplayground_ros.resources import find_shared
+from vplayground_ros.scene import load_world
+
+sys.path.insert(0, str(Path(__file__).parent))
+from scenes import pile  # noqa: E402
+
+
+def default_world(boxes, settle_seconds):
+    world = load_world(str(find_shared("config/default_scene.yaml")))
+    for size, position, quaternion, mass in pile(boxes):
+        world.add_body({"size": size.tolist(), "position": (position + (-10.0, 8.0, 0.0)).tolist(),
+                        "quaternion": quaternion.tolist(), "mass": mass})
+    world.step(int(settle_seconds * world.settings["steps_per_second"]))
+    return world
+
+
+def random_rays(count, rng):
+    origins = rng.uniform((-24.0, -24.0, 0.3), (24.0, 24.0, 3.0), (count, 3))
+    directions = rng.normal(size=(count, 3))
+    return origins, directions / np.linalg.norm(directions, axis=1)[:, None], np.full(count, 30.0)
+
+
+def rate(world, origins, directions, ranges, repeats):
+    world.cast_rays(origins[:10], directions[:10], ranges[:10])  # compiled and warm
+    start = time.thread_time()
+    for _ in range(repeats):
+        hits = world.cast_rays(origins, directions, ranges)
+    seconds = (time.thread_time() - start) / repeats
+    return len(origins) / seconds, seconds, float(np.mean(np.isfinite(hits.distance)))
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--boxes", type=int, default=1000)
+    parser.add_argument("--rays", type=int, default=200_000)
+    parser.add_argument("--repeats", type=int, default=10)
+    parser.add_argument("--settle", type=float, default=2.0, help="seconds simulated first")
+    args = parser.parse_args()
+    world = default_world(args.boxes, args.settle)
+    print(f"{len(world.body_names())} bodies, {len(world.playground_triangles)} triangles; CPU time of this thread")
+    batches = [("random rays, 30 m", random_rays(args.rays, np.random.default_rng(1)))]
+    for label, (origins, directions, ranges) in batches:
+        per_second, seconds, hit_fraction = rate(world, origins, directions, ranges, args.repeats)
+        print(f"{label:20s} {len(origins):8d} rays  {seconds * 1e3:8.2f} ms a batch  "
+              f"{per_second / 1e6:6.2f} M rays/s  ({hit_fraction:.0%} hit)")
+
+
+if __name__ == "__main__":
+    main()
