@@ -1,6 +1,7 @@
 """Sensors (scene key `sensors`): 2D and 3D lidars, depth and colour cameras and IMUs, computed
-from the World by its ray casts. ROS-free: readings are numpy arrays; messages.py-style encoding
-lives in sensor_messages.py.
+from the World by its ray casts. ROS-free: readings are numpy arrays. Scene files take the
+`sensors` key and keep it on saving; the node does not publish the readings yet (ROS messages,
+topics and the Simulation's batches ending on due steps are the next stage of issue 18).
 
 Sampling runs on simulation time: a sensor of rate r is read after the step that first reaches
 each multiple of 1/r, from the state after that step. The Simulation ends its batches on those

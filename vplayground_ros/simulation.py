@@ -57,9 +57,6 @@ class Simulation:
         self._finished = threading.Event()
         self._pending_steps = 0
         self._thread = None
-        # Reads sensors on simulation time (sensors.Sensors): batches end on its due steps and it
-        # samples the world after each batch, before the snapshot's listeners run.
-        self.sampler = None
         self.snapshot = self._take_snapshot()
 
     # ---------------------------------------------------------------- control (any thread)
@@ -152,8 +149,6 @@ class Simulation:
                     origin_wall, origin_sim = time.perf_counter(), world.time
             if self.duration is not None:
                 steps = min(steps, max(0, int(round((self.duration - world.time) * rate))))
-            if steps > 0 and self.sampler is not None:
-                steps = min(steps, self.sampler.steps_until_due(world))
             if steps > 0:
                 started = time.perf_counter()
                 try:
@@ -169,8 +164,6 @@ class Simulation:
                     origin_wall, origin_sim = time.perf_counter(), world.time
                     rtf_wall, rtf_sim = origin_wall, world.time
                 self.removed += world.remove_escaped()
-                if self.sampler is not None:
-                    self._sample(world)
                 self._publish()
             if self.duration is not None and world.time >= self.duration - 0.5 / rate:
                 break
@@ -216,12 +209,6 @@ class Simulation:
                 listener(self.snapshot)
             except Exception as error:  # a publisher's bug must not stop the physics
                 self._fault("listener", error)
-
-    def _sample(self, world):
-        try:
-            self.sampler.sample(world)
-        except Exception as error:  # a sensor's bug must not stop the physics either
-            self._fault("sensors", error)
 
     def _fault(self, where, error):
         self.fault_count += 1
