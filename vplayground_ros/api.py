@@ -73,6 +73,15 @@ YAML_DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
 log = logging.getLogger(__name__)
 
 
+def warn_unpublished_sensors(world, scene):
+    """The node reads sensors' scene entries but does not publish them yet (issue 18): say so
+    rather than leave a user waiting for topics."""
+    if world.sensor_specs:
+        names = ", ".join(s["name"] for s in world.sensor_specs)
+        log.warning(f"{scene}: sensors ({names}) are validated and saved with the scene, but the node "
+                    "does not publish their readings yet (vplayground_ros.sensors reads them from Python)")
+
+
 class RequestError(Exception):
     def __init__(self, code, message):
         super().__init__(f"{code}: {message}")
@@ -481,6 +490,7 @@ class Requests:
             self.sim.call(install)
         except TimeoutError as error:
             return UNDEFINED_FAILURE, f"{FAILED}: {error}"
+        warn_unpublished_sensors(world, target)
         return MAP_SUCCESS, f"{OK}: loaded {target} ({len(world.body_names())} bodies)"
 
     @handled

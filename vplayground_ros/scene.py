@@ -18,9 +18,10 @@ from .physics import specs
 from .physics.math3d import rpy_to_quat
 from .physics.world import quaternions_to_matrices
 from .resources import find_shared
+from .sensors import validate_sensors
 
 SCENE_VERSION = 1
-TOP_LEVEL_KEYS = {"version", "settings", "ground", "playground", "bodies", "vehicles"}
+TOP_LEVEL_KEYS = {"version", "settings", "ground", "playground", "bodies", "vehicles", "sensors"}
 PLAYGROUND_KEYS = {"mesh", "position", "rpy", "scale"}
 MAX_PLAYGROUND_TRIANGLES = 500_000  # beyond this the octree and the viewer stop being real-time
 # Files are measured before they are read, so a hostile or mistaken path (a multi-gigabyte file)
@@ -220,6 +221,7 @@ def load_world(path_or_dict, max_bodies=None, directories=None):
     scene, label, base = read_scene(path_or_dict)
     try:
         settings, ground, playground, bodies, vehicles = validate_scene(scene, base, max_bodies, directories)
+        sensor_specs = validate_sensors(scene.get("sensors"), {e["name"] for e in bodies + vehicles if "name" in e})
     except specs.SpecError as error:
         raise SceneError(f"{label}: {error}") from None
     world = World(settings, ground, capacity=max(64, len(bodies) + len(vehicles)))
@@ -241,6 +243,7 @@ def load_world(path_or_dict, max_bodies=None, directories=None):
                 add(entry)
             except ValueError as error:  # checks that need the world (e.g. inside its bounds)
                 raise SceneError(f"{label}: {key}[{k}]: {error}") from None
+    world.sensor_specs = sensor_specs
     return world
 
 
@@ -270,4 +273,8 @@ def world_to_scene(world):
                                "mesh": packaged_mesh_name(world.playground_spec["mesh"])}
     scene["bodies"] = [world.body(name) for name in world.body_names() if name not in vehicles]
     scene["vehicles"] = [world.vehicle(name) for name in vehicles]
+    present = set(world.body_names())
+    sensors = [dict(s) for s in world.sensor_specs if s["parent"] == "world" or s["parent"] in present]
+    if sensors:
+        scene["sensors"] = sensors
     return scene

@@ -9,20 +9,25 @@ from .contact import GROUND, PLAYGROUND
 NO_HIT = np.inf
 
 
-@njit(cache=True, nogil=True)
-def ray_box(origin, direction, reach, p, r, h):
-    """Slab test in the box's frame: (distance, outward normal of the face hit), or NO_HIT for a
-    ray that misses or starts inside."""
+# Both exact tests take the arrays and an index rather than one body's rows, and are inlined
+# where they are called: a scan runs them millions of times a second, and every row view handed
+# to a call costs Numba reference counting that would outweigh the test itself.
+@njit(cache=True, nogil=True, inline="always")
+def ray_box(origin, direction, reach, position, rotation, half_extents, j):
+    """Slab test of the ray against box j in its frame: (distance, outward normal of the face
+    hit), or NO_HIT for a ray that misses or starts inside."""
+    p, r, h = position, rotation, half_extents
     t_in, t_out = 0.0, reach
     axis_in, sign_in = -1, 1.0
     for k in range(3):
-        o = (origin[0] - p[0]) * r[0, k] + (origin[1] - p[1]) * r[1, k] + (origin[2] - p[2]) * r[2, k]
-        d = direction[0] * r[0, k] + direction[1] * r[1, k] + direction[2] * r[2, k]
+        o = ((origin[0] - p[j, 0]) * r[j, 0, k] + (origin[1] - p[j, 1]) * r[j, 1, k]
+             + (origin[2] - p[j, 2]) * r[j, 2, k])
+        d = direction[0] * r[j, 0, k] + direction[1] * r[j, 1, k] + direction[2] * r[j, 2, k]
         if abs(d) < 1e-12:
-            if abs(o) > h[k]:
+            if abs(o) > h[j, k]:
                 return NO_HIT, (0.0, 0.0, 0.0)
             continue
-        t0, t1 = (-h[k] - o) / d, (h[k] - o) / d
+        t0, t1 = (-h[j, k] - o) / d, (h[j, k] - o) / d
         sign = -1.0
         if t0 > t1:
             t0, t1 = t1, t0
@@ -34,24 +39,25 @@ def ray_box(origin, direction, reach, p, r, h):
             return NO_HIT, (0.0, 0.0, 0.0)
     if axis_in < 0:
         return NO_HIT, (0.0, 0.0, 0.0)  # the origin is inside the box
-    return t_in, (r[0, axis_in] * sign_in, r[1, axis_in] * sign_in, r[2, axis_in] * sign_in)
+    return t_in, (r[j, 0, axis_in] * sign_in, r[j, 1, axis_in] * sign_in, r[j, 2, axis_in] * sign_in)
 
 
-@njit(cache=True, nogil=True)
-def ray_triangle(origin, direction, reach, tri, normal):
-    """Moeller-Trumbore against the triangle's front face only (playground triangles are
+@njit(cache=True, nogil=True, inline="always")
+def ray_triangle(origin, direction, reach, triangles, normals, j):
+    """Moeller-Trumbore against triangle j's front face only (playground triangles are
     one-sided): the distance, or NO_HIT."""
-    if direction[0] * normal[0] + direction[1] * normal[1] + direction[2] * normal[2] >= 0.0:
+    tri, normal = triangles, normals
+    if direction[0] * normal[j, 0] + direction[1] * normal[j, 1] + direction[2] * normal[j, 2] >= 0.0:
         return NO_HIT
-    e1 = (tri[1, 0] - tri[0, 0], tri[1, 1] - tri[0, 1], tri[1, 2] - tri[0, 2])
-    e2 = (tri[2, 0] - tri[0, 0], tri[2, 1] - tri[0, 1], tri[2, 2] - tri[0, 2])
+    e1 = (tri[j, 1, 0] - tri[j, 0, 0], tri[j, 1, 1] - tri[j, 0, 1], tri[j, 1, 2] - tri[j, 0, 2])
+    e2 = (tri[j, 2, 0] - tri[j, 0, 0], tri[j, 2, 1] - tri[j, 0, 1], tri[j, 2, 2] - tri[j, 0, 2])
     pv = (direction[1] * e2[2] - direction[2] * e2[1], direction[2] * e2[0] - direction[0] * e2[2],
           direction[0] * e2[1] - direction[1] * e2[0])
     det = e1[0] * pv[0] + e1[1] * pv[1] + e1[2] * pv[2]
     if abs(det) < 1e-14:
         return NO_HIT
     inv = 1.0 / det
-    s = (origin[0] - tri[0, 0], origin[1] - tri[0, 1], origin[2] - tri[0, 2])
+    s = (origin[0] - tri[j, 0, 0], origin[1] - tri[j, 0, 1], origin[2] - tri[j, 0, 2])
     u = (s[0] * pv[0] + s[1] * pv[1] + s[2] * pv[2]) * inv
     if u < 0.0 or u > 1.0:
         return NO_HIT
@@ -85,8 +91,8 @@ def cast_ray(origin, direction, reach, exclude, query_id, bodies, broad, playgro
             j = broad.scratch[m]
             if j == exclude or not bodies.active[j]:
                 continue
-            t, normal = ray_box(origin, direction, reach, bodies.position[j], bodies.rotation[j],
-                                bodies.half_extents[j])
+            t, normal = ray_box(origin, direction, reach, bodies.position, bodies.rotation,
+                                bodies.half_extents, j)
             if t < best:
                 best, hit, best_normal = t, j, normal
     if len(playground.triangles):
@@ -94,7 +100,7 @@ def cast_ray(origin, direction, reach, exclude, query_id, bodies, broad, playgro
                         playground.scratch)
         for m in range(n):
             tri = playground.scratch[m]
-            t = ray_triangle(origin, direction, reach, playground.triangles[tri], playground.normals[tri])
+            t = ray_triangle(origin, direction, reach, playground.triangles, playground.normals, tri)
             if t < best:
                 nt = playground.normals[tri]
                 best, hit, best_normal = t, PLAYGROUND, (nt[0], nt[1], nt[2])

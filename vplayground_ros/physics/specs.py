@@ -16,6 +16,7 @@ DEFAULT_SETTINGS = {
     "resolve_iterations": 5,
     "octree_depth": 5,
     "freezing": {"enabled": True, "time": 0.5, "linear_speed": 0.05, "angular_speed": 0.05},
+    "seed": 0,  # of the sensors' noise: the same scene gives bit-identical readings
 }
 DEFAULT_GROUND = {"height": 0.0, "elasticity": 0.1, "static_friction": 0.8, "dynamic_friction": 0.6}
 DEFAULT_DENSITY = 500.0
@@ -146,6 +147,8 @@ def validate_settings(raw, path="settings"):
         out["resolve_iterations"] = integer(raw["resolve_iterations"], child(path, "resolve_iterations"), 1, 100)
     if "octree_depth" in raw:
         out["octree_depth"] = integer(raw["octree_depth"], child(path, "octree_depth"), 1, 10)
+    if "seed" in raw:
+        out["seed"] = integer(raw["seed"], child(path, "seed"), 0, 2**63 - 1)
     if "freezing" in raw:
         fpath = child(path, "freezing")
         freezing = mapping(raw["freezing"], fpath, DEFAULT_SETTINGS["freezing"])

@@ -18,6 +18,7 @@ from .math3d import rpy_to_quat
 from .pipeline import (DONE, GROW_CONTACTS, GROW_INDEX, GROW_PAIRS, STAGES, STAT_FROZEN,
                        STAT_PAIRS, STAT_POINTS, STAT_TRIANGLES, STAT_WOKEN, Settings, step_world)
 from .playground import EMPTY_PLAYGROUND_ARGS, index_playground, make_playground
+from .ray_batch import RayScene
 from .vehicle import allocate_vehicles, grow_vehicles
 
 DEFAULT_COMMAND_TIMEOUT = 1.2  # s: SPEC 6.4 cmd_vel_timeout
@@ -108,6 +109,9 @@ class World:
         self._root = None  # (min corner, edge length) of the octree root cube; fitted lazily
         self._playground = make_playground(*EMPTY_PLAYGROUND_ARGS)[0]
         self.playground_spec = None  # how the scene described the playground, for saving
+        # The scene's validated `sensors` entries: not physics (vplayground_ros.sensors samples
+        # them through cast_rays), but part of the scene, kept and saved with it.
+        self.sensor_specs = []
         self._centre = np.zeros(3)  # world_centre(), kept with the playground
         self.stats = {"woken": 0, "frozen": 0, "pairs": 0, "points": 0, "triangles": 0}
         self.profiling = False  # time every stage of the step (bench/), at ~6 us a step
@@ -506,6 +510,17 @@ class World:
             edge = root_size / (1 << level)
             cells.append((level, root_min + (xyz + 0.5) * edge, edge))
         return cells
+
+    def ray_scene(self):
+        """What rays can hit now (every body, the playground, the ground), for casting any
+        number of batches at this instant: RayScene.cast(origins, directions, max_range,
+        exclude). Stale once the world steps or changes."""
+        return RayScene(self._bodies, self._playground, self.ground, dict(self._slots))
+
+    def cast_rays(self, origins, directions, max_range, exclude=()):
+        """RayHits (distance, point, normal, body row or GROUND/PLAYGROUND/NOTHING) of a batch
+        of rays, ignoring the bodies named in `exclude`. See ray_scene() for several batches."""
+        return self.ray_scene().cast(origins, directions, max_range, exclude)
 
     def state(self):
         """One row per body, in body_names() order (copies): motion_state() and

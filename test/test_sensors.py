@@ -1,0 +1,259 @@
+"""Sensors against geometry with known answers: walls, boxes, the ground, a body at rest."""
+import math
+import re
+
+import numpy as np
+import pytest
+
+from vplayground_ros.physics import World
+from vplayground_ros.scene import SceneError, load_world, world_to_scene
+from vplayground_ros.sensors import Sensors
+
+G = 9.81
+
+
+def scene(*sensors, bodies=(), vehicles=(), **settings):
+    return {"version": 1, "settings": settings, "bodies": list(bodies), "vehicles": list(vehicles),
+            "sensors": list(sensors)}
+
+
+def read_once(world, name=None):
+    """Steps to the first sample and returns {sensor name: reading}."""
+    sensors = Sensors()
+    world.step(sensors.steps_until_due(world))
+    readings = {s.name: r for s, r in sensors.sample(world)}
+    return readings if name is None else readings[name]
+
+
+WALL = {"name": "wall", "size": [0.2, 40.0, 4.0], "position": [5.1, 0.0, 2.0], "immovable": True}
+
+
+def test_lidar_2d_reads_a_wall_at_its_distance_and_inf_past_its_range():
+    lidar = {"name": "scan", "type": "lidar_2d", "parent": "world", "pose": [0, 0, 1, 0, 0, 0],
+             "samples": 360, "range_max": 20.0}
+    world = load_world(scene(lidar, bodies=[WALL]))
+    ranges = read_once(world, "scan")["ranges"]
+    angles = -math.pi + 2 * math.pi * np.arange(360) / 360
+    facing = np.abs(angles) < math.atan2(20.0, 5.0) - 0.01  # beams that meet the wall's face
+    expected = 5.0 / np.cos(angles[facing])
+    on_wall = expected <= 20.0
+    assert ranges[facing][on_wall] == pytest.approx(expected[on_wall], abs=1e-3)
+    assert np.all(np.isposinf(ranges[facing][~on_wall]))  # the wall lies past range_max
+    assert np.all(np.isposinf(ranges[np.abs(angles) > math.pi / 2]))  # nothing behind
+    assert ranges.dtype == np.float32
+
+
+def test_lidar_2d_sees_a_box_at_the_angles_and_ranges_trigonometry_gives():
+    """A 1 m box centred 6 m away at 30 degrees: its near face's corners subtend known angles."""
+    centre = 6.0 * np.array([math.cos(math.pi / 6), math.sin(math.pi / 6)])
+    box = {"name": "b", "size": [1.0, 1.0, 2.0], "position": [*centre, 1.0], "rpy": [0, 0, math.pi / 6],
+           "immovable": True}
+    lidar = {"name": "scan", "type": "lidar_2d", "parent": "world", "pose": [0, 0, 1, 0, 0, 0],
+             "samples": 720, "range_max": 20.0}
+    world = load_world(scene(lidar, bodies=[box]))
+    ranges = read_once(world, "scan")["ranges"]
+    angles = -math.pi + 2 * math.pi * np.arange(720) / 720
+    # The box faces the sensor squarely: its near face is 5.5 m away, 1 m wide.
+    edge = math.atan2(0.5, 5.5)
+    inside = np.abs(angles - math.pi / 6) < edge - 0.005
+    outside = np.abs(angles - math.pi / 6) > edge + 0.005
+    assert ranges[inside] == pytest.approx(5.5 / np.cos(angles[inside] - math.pi / 6), abs=1e-3)
+    assert np.all(np.isposinf(ranges[outside]))
+
+
+def test_lidar_2d_reads_minus_inf_nearer_than_range_min():
+    lidar = {"name": "scan", "type": "lidar_2d", "parent": "world", "pose": [4.7, 0, 1, 0, 0, 0],
+             "samples": 4, "range_min": 0.5, "range_max": 20.0}
+    world = load_world(scene(lidar, bodies=[WALL]))
+    ranges = read_once(world, "scan")["ranges"]
+    assert ranges[2] == -math.inf  # the beam along +x meets the wall 0.3 m away
+    assert np.isposinf(ranges[0])
+
+
+def test_depth_camera_over_the_ground_reads_its_height_per_pixel():
+    """Looking straight down from h, every pixel's depth along the optical axis is h; a tilted
+    camera sees h / cos of each pixel's angle from the vertical."""
+    h = 2.5
+    down = {"name": "down", "type": "depth_camera", "parent": "world", "pose": [0, 0, h, 0, math.pi / 2, 0],
+            "width": 32, "height": 24, "horizontal_fov": 1.2, "range_max": 50.0}
+    tilted = {**down, "name": "tilted", "pose": [0, 0, h, 0, 0.9, 0]}
+    world = load_world(scene(down, tilted))
+    readings = read_once(world)
+    depth = readings["down"]["depth"]
+    assert depth.shape == (24, 32) and depth.dtype == np.float32
+    assert depth == pytest.approx(np.full((24, 32), h), abs=1e-3)
+    # A pixel row v (from the centre, down positive) looks along (1, -u/f, -v/f) in the sensor
+    # frame, pitched down by p: it meets the ground when its z has dropped h, at depth (the
+    # optical-axis component, 1) h / (sin p + cos p v / f), whatever its column.
+    f, p = 0.5 * 32 / math.tan(0.6), 0.9
+    v = np.arange(24) + 0.5 - 12.0
+    expected = h / (math.sin(p) + math.cos(p) * v / f)
+    assert readings["tilted"]["depth"] == pytest.approx(np.repeat(expected[:, None], 32, axis=1), abs=1e-3)
+
+
+def test_depth_camera_gives_nan_for_no_return():
+    camera = {"name": "sky", "type": "depth_camera", "parent": "world", "pose": [0, 0, 1, 0, -1.2, 0],
+              "width": 8, "height": 6, "horizontal_fov": 1.0}
+    depth = read_once(load_world(scene(camera)), "sky")["depth"]
+    assert np.all(np.isnan(depth))
+
+
+def test_camera_paints_what_it_sees_in_the_marker_colours():
+    camera = {"name": "eye", "type": "camera", "parent": "world", "pose": [0, 0, 1, 0, 0, 0],
+              "width": 40, "height": 30, "horizontal_fov": 1.0}
+    box = {"name": "b", "size": [1.0, 6.0, 6.0], "position": [4.0, 0.0, 1.0], "immovable": True}
+    world = load_world(scene(camera, bodies=[box]))
+    rgb = read_once(world, "eye")["rgb"]
+    assert rgb.shape == (30, 40, 3) and rgb.dtype == np.uint8
+    # The box's face (normal -x, facing away from the light's x component) gets ambient plus
+    # a little Lambert; the immovable colour (0.35, 0.35, 0.45) keeps its hue.
+    centre = rgb[15, 20].astype(float)
+    assert centre[2] > centre[0] == centre[1]
+    camera2 = {**camera, "name": "sky", "pose": [0, 0, 1, 0, -1.3, 0]}
+    sky = read_once(load_world(scene(camera2)), "sky")["rgb"]
+    assert np.all(sky == sky[0, 0]) and sky[0, 0, 2] > sky[0, 0, 0]
+
+
+def test_imu_at_rest_reads_gravity_up_and_no_rotation():
+    box = {"name": "b", "size": [1.0, 1.0, 1.0], "position": [0.0, 0.0, 0.5]}
+    imu = {"name": "imu", "type": "imu", "parent": "b", "rate": 50.0}
+    world = load_world(scene(imu, bodies=[box]))
+    sensors = Sensors()
+    readings = []
+    while world.time < 2.0:
+        world.step(sensors.steps_until_due(world))
+        readings += sensors.sample(world)
+    last = readings[-1][1]
+    assert last["linear_acceleration"] == pytest.approx([0.0, 0.0, G], abs=1e-3)
+    assert last["angular_velocity"] == pytest.approx([0.0, 0.0, 0.0], abs=1e-3)
+    assert last["orientation"] == pytest.approx([0.0, 0.0, 0.0, 1.0], abs=1e-3)
+    assert len(readings) == 100 and readings[0][1]["time"] == pytest.approx(0.02, abs=1 / 128)
+
+
+def car(**overrides):
+    wheel = {"radius": 0.35, "mass": 20, "spring_stiffness": 40000, "damper": 4000,
+             "spring_length": 0.5, "static_friction": 1.0, "dynamic_friction": 0.8}
+    mounts = [[1.3, 0.8, -0.3], [1.3, -0.8, -0.3], [-1.3, 0.8, -0.3], [-1.3, -0.8, -0.3]]
+    return {"name": "car", "position": [0.0, 0.0, 1.0], "chassis": {"size": [4.0, 1.8, 0.6], "mass": 1200},
+            "engine_power": 6000, "brake_power": 9000, "max_steer": 0.6,
+            "wheels": [{**wheel, "mount": m, "steered": k < 2, "power_gain": 0.0 if k < 2 else 0.5}
+                       for k, m in enumerate(mounts)], **overrides}
+
+
+def test_imu_on_the_turning_car_reads_its_yaw_rate():
+    imu = {"name": "imu", "type": "imu", "parent": "car", "pose": [0.5, 0, 0.3, 0, 0, 0], "rate": 20.0}
+    world = load_world(scene(imu, vehicles=[car()]))
+    sensors = Sensors()
+    while world.time < 6.0:
+        world.drive("car", 3.0, 0.5)
+        world.step(sensors.steps_until_due(world))
+        readings = sensors.sample(world)
+    body = world.body("car")
+    x, y, z, w = body["quaternion"]
+    up = np.array([2 * (x * z + y * w), 2 * (y * z - x * w), 1 - 2 * (x * x + y * y)])
+    yaw_rate = float(np.dot(body["angular_velocity"], up))
+    assert abs(yaw_rate) > 0.2  # it does turn
+    assert readings[0][1]["angular_velocity"][2] == pytest.approx(yaw_rate, abs=1e-6)
+
+
+def test_lidar_3d_points_lie_only_on_surfaces():
+    boxes = [{"name": "a", "size": [1.0, 2.0, 1.5], "position": [4.0, 1.0, 0.75], "immovable": True},
+             {"name": "b", "size": [2.0, 1.0, 3.0], "position": [-3.0, -4.0, 1.5], "rpy": [0, 0, 0.7],
+              "immovable": True}]
+    lidar = {"name": "velo", "type": "lidar_3d", "parent": "world", "pose": [0, 0, 1.2, 0, 0, 0.3],
+             "horizontal_samples": 256, "channels": 16, "range_max": 30.0}
+    world = load_world(scene(lidar, bodies=boxes))
+    reading = read_once(world, "velo")
+    yaw = 0.3
+    r = np.array([[math.cos(yaw), -math.sin(yaw), 0], [math.sin(yaw), math.cos(yaw), 0], [0, 0, 1]])
+    points = reading["points"].astype(float) @ r.T + [0, 0, 1.2]
+    assert len(points) > 1000
+    distance = np.abs(points[:, 2])  # to the ground plane
+    for b in boxes:
+        c, s = math.cos(b.get("rpy", [0, 0, 0])[2]), math.sin(b.get("rpy", [0, 0, 0])[2])
+        local = (points - b["position"]) @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+        half = np.array(b["size"]) / 2
+        outside = np.maximum(np.abs(local) - half, 0)
+        inside = np.min(half - np.abs(local), axis=1)
+        to_surface = np.where(np.all(outside == 0, axis=1), inside, np.linalg.norm(outside, axis=1))
+        distance = np.minimum(distance, to_surface)
+    assert np.max(distance) < 1e-4  # float32 points of up to 30 m
+    assert set(np.unique(reading["ring"])) <= set(range(16))
+
+
+def noisy_scene(seed):
+    lidar = {"name": "scan", "type": "lidar_2d", "parent": "world", "pose": [0, 0, 1, 0, 0, 0],
+             "noise_stddev": 0.02}
+    imu = {"name": "imu", "type": "imu", "parent": "world", "gyro_noise": 0.01, "accel_noise": 0.05}
+    return scene(lidar, imu, bodies=[WALL], seed=seed)
+
+
+def test_noisy_runs_of_one_scene_are_bit_identical_and_seeds_differ():
+    def run(seed):
+        world = load_world(noisy_scene(seed))
+        sensors = Sensors()
+        out = []
+        while world.time < 0.5:
+            world.step(sensors.steps_until_due(world))
+            out += [(s.name, r["time"], r.get("ranges", r.get("linear_acceleration")).tobytes())
+                    for s, r in sensors.sample(world)]
+        return out
+
+    first, second = run(7), run(7)
+    assert len(first) == 10 and first == second
+    assert run(8) != first
+
+
+def test_samples_do_not_depend_on_how_the_steps_are_batched():
+    """The same scans whether the world steps one step at a time or in batches that end on the
+    sensors' due steps (real time vs --real-time-factor 0)."""
+    def run(batch):
+        world = load_world(noisy_scene(3))
+        world.add_body({"name": "falling", "size": [1, 1, 1], "position": [3.0, 0.0, 5.0]})
+        sensors = Sensors()
+        out = []
+        while world.time < 1.0:
+            world.step(min(batch, sensors.steps_until_due(world)))
+            out += [(s.name, r["time"], r.get("ranges", r.get("linear_acceleration")).tobytes())
+                    for s, r in sensors.sample(world)]
+        return out
+
+    assert run(1) == run(16) == run(1000)
+
+
+def test_sensors_are_saved_with_the_scene_and_go_with_a_removed_parent(caplog):
+    imu = {"name": "imu", "type": "imu", "parent": "b"}
+    world = load_world(scene(imu, bodies=[{"name": "b", "position": [0, 0, 0.5]}]))
+    saved = world_to_scene(world)
+    assert saved["sensors"][0]["name"] == "imu" and saved["sensors"][0]["rate"] == 10.0
+    assert load_world(saved).sensor_specs == world.sensor_specs
+    world.remove_body("b")
+    sensors = Sensors()
+    world.step(sensors.steps_until_due(world))
+    assert sensors.sample(world) == []
+    assert world.sensor_specs == [] and "parent b is gone" in caplog.text
+    assert "sensors" not in world_to_scene(world)
+
+
+@pytest.mark.parametrize("sensor, message", [
+    ({"name": "s", "type": "sonar", "parent": "world"}, "sensors[0].type: unknown type 'sonar'"),
+    ({"name": "s", "type": "imu", "parent": "nobody"}, "sensors[0].parent: no vehicle or body named 'nobody'"),
+    ({"name": "s", "type": "imu"}, "sensors[0].parent: missing"),
+    ({"name": "s", "type": "lidar_2d", "parent": "world", "samples": 0}, "sensors[0].samples: must be between 1"),
+    ({"name": "s", "type": "lidar_2d", "parent": "world", "range_min": 5, "range_max": 2},
+     "sensors[0].range_max: must be > range_min"),
+    ({"name": "s", "type": "camera", "parent": "world", "channels": 4}, "sensors[0].channels: unknown key"),
+    ({"name": "s", "type": "imu", "parent": "world", "rate": 0}, "sensors[0].rate: must be > 0"),
+    ({"name": "b", "type": "imu", "parent": "world"}, "sensors[0].name: duplicate name 'b'"),
+    ({"name": "s", "type": "depth_camera", "parent": "world", "pose": [0, 0, 1]},
+     "sensors[0].pose: expected 6 numbers"),
+])
+def test_bad_sensor_specs_are_refused_naming_the_key(sensor, message):
+    with pytest.raises(SceneError, match=re.escape(f"<scene>: {message}")):
+        load_world(scene(sensor, bodies=[{"name": "b"}]))
+
+
+def test_seed_is_validated():
+    with pytest.raises(SceneError, match=r"settings\.seed: must be between 0"):
+        load_world(scene(seed=-1))
+    assert World({"seed": 5}).settings["seed"] == 5

@@ -1,0 +1,331 @@
+"""Batches of rays (the sensors' scans) against the ground, the playground and every body.
+
+The wheels' single rays query the broad-phase octree with the ray's bounding box (raycast.py),
+which is right for a half-metre ray but not for a 30 m lidar beam: a long diagonal ray's box
+holds most of the yard. A scan is thousands of long rays at one instant, so it first files the
+bodies and the playground's triangles into a uniform grid of cells around them (one pass,
+~0.1 ms for a thousand bodies), then walks each ray through that grid front to back
+(Amanatides-Woo), testing only the objects of the cells it crosses, and stops at the first cell
+that ends behind the nearest hit. The exact tests are raycast.py's.
+"""
+from collections import namedtuple
+
+import numpy as np
+from numba import njit
+
+from .contact import GROUND, PLAYGROUND
+from .math3d import quat_to_matrix
+from .raycast import NO_HIT, ray_box, ray_triangle
+
+NOTHING = -3  # what a ray that hits nothing reports (GROUND -1 and PLAYGROUND -2 otherwise)
+
+# Cells about this large (m): a few boxes of the usual 0.5-1 m size share one, and a 30 m ray
+# crosses a few dozen. Smaller cells cost more steps per ray, larger ones more box tests.
+RAY_CELL_SIZE = 1.0
+# Grids never have more cells than this (memory and the filing pass); a scene spread wider gets
+# coarser cells instead.
+MAX_RAY_CELLS = 1 << 20
+# Cells are grouped in blocks of BLOCK^3; a ray crosses an empty block in one jump (most of a
+# yard is air: a lidar beam would otherwise step through every empty cell of its 30 m).
+BLOCK = 4
+# An object spanning more cells than this (a huge floor box) is tested by every ray instead of
+# being filed in each cell.
+MAX_CELLS_PER_ITEM = 512
+
+RayGrid = namedtuple("RayGrid", [
+    "lower",        # (3,) min corner of the grid, world
+    "cell_size",    # (1,) edge of a cell, m
+    "dims",         # (3,) int64 cells per axis (all zero when there is nothing to hit)
+    "cell_start",   # (C + 1,) int64: cell c holds items[cell_start[c]:cell_start[c + 1]]
+    "items",        # body slot, or body capacity + triangle index
+    "wide",         # items tested by every ray
+    "block_items",  # (B,) int64 items filed in each block of BLOCK^3 cells
+    "rotation",     # (N, 3, 3) body rotations now (the step's copy may predate edits)
+])
+
+
+@njit(cache=True, nogil=True)
+def item_cell_range(lo, hi, lower, cell, dims):
+    """Inclusive cell ranges (x0, x1, y0, y1, z0, z1) an AABB overlaps, clamped to the grid."""
+    r = np.empty(6, np.int64)
+    for k in range(3):
+        r[2 * k] = min(max(int(np.floor((lo[k] - lower[k]) / cell)), 0), dims[k] - 1)
+        r[2 * k + 1] = min(max(int(np.floor((hi[k] - lower[k]) / cell)), 0), dims[k] - 1)
+    return r
+
+
+@njit(cache=True, nogil=True)
+def build_ray_grid(active, position, orientation, half_extents, triangles, tri_min, tri_max):
+    """The RayGrid of the active bodies (at their current poses) and the playground triangles."""
+    n, capacity = len(active), len(active)
+    rotation = np.zeros((n, 3, 3))
+    item_min = np.empty((n + len(triangles), 3))
+    item_max = np.empty((n + len(triangles), 3))
+    used = np.zeros(n + len(triangles), np.bool_)
+    lower = np.full(3, np.inf)
+    upper = np.full(3, -np.inf)
+    for i in range(n):
+        # A body whose state went non-finite is removed after the step; nothing can hit it.
+        if not (active[i] and np.all(np.isfinite(position[i])) and np.all(np.isfinite(orientation[i]))):
+            continue
+        quat_to_matrix(orientation[i], rotation[i])
+        for k in range(3):
+            e = (abs(rotation[i, k, 0]) * half_extents[i, 0] + abs(rotation[i, k, 1]) * half_extents[i, 1]
+                 + abs(rotation[i, k, 2]) * half_extents[i, 2])
+            item_min[i, k], item_max[i, k] = position[i, k] - e, position[i, k] + e
+        used[i] = True
+    for t in range(len(triangles)):
+        item_min[capacity + t], item_max[capacity + t] = tri_min[t], tri_max[t]
+        used[capacity + t] = True
+    for i in range(len(used)):
+        if used[i]:
+            for k in range(3):
+                lower[k] = min(lower[k], item_min[i, k])
+                upper[k] = max(upper[k], item_max[i, k])
+    dims = np.zeros(3, np.int64)
+    if not np.isfinite(lower[0]):
+        return RayGrid(np.zeros(3), np.ones(1), dims, np.zeros(1, np.int64),
+                       np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(1, np.int64), rotation)
+    extent = upper - lower
+    cell = max(RAY_CELL_SIZE, (extent[0] * extent[1] * extent[2] / MAX_RAY_CELLS) ** (1.0 / 3.0))
+    while True:
+        for k in range(3):
+            dims[k] = max(1, int(np.ceil(extent[k] / cell)))
+        if dims[0] * dims[1] * dims[2] <= MAX_RAY_CELLS:
+            break
+        cell *= 1.1  # a flat scene: the volume estimate undercounts the cells of thin axes
+    counts = np.zeros(dims[0] * dims[1] * dims[2] + 1, np.int64)
+    wide_count = 0
+    for i in range(len(used)):
+        if not used[i]:
+            continue
+        r = item_cell_range(item_min[i], item_max[i], lower, cell, dims)
+        if (r[1] - r[0] + 1) * (r[3] - r[2] + 1) * (r[5] - r[4] + 1) > MAX_CELLS_PER_ITEM:
+            wide_count += 1
+            continue
+        for x in range(r[0], r[1] + 1):
+            for y in range(r[2], r[3] + 1):
+                for z in range(r[4], r[5] + 1):
+                    counts[(x * dims[1] + y) * dims[2] + z + 1] += 1
+    cell_start = np.cumsum(counts)
+    fill = cell_start[:-1].copy()
+    items = np.empty(cell_start[-1], np.int64)
+    wide = np.empty(wide_count, np.int64)
+    wide_count = 0
+    for i in range(len(used)):
+        if not used[i]:
+            continue
+        r = item_cell_range(item_min[i], item_max[i], lower, cell, dims)
+        if (r[1] - r[0] + 1) * (r[3] - r[2] + 1) * (r[5] - r[4] + 1) > MAX_CELLS_PER_ITEM:
+            wide[wide_count] = i
+            wide_count += 1
+            continue
+        for x in range(r[0], r[1] + 1):
+            for y in range(r[2], r[3] + 1):
+                for z in range(r[4], r[5] + 1):
+                    c = (x * dims[1] + y) * dims[2] + z
+                    items[fill[c]] = i
+                    fill[c] += 1
+    by, bz = (dims[1] + BLOCK - 1) // BLOCK, (dims[2] + BLOCK - 1) // BLOCK
+    block_items = np.zeros(((dims[0] + BLOCK - 1) // BLOCK) * by * bz, np.int64)
+    for x in range(dims[0]):
+        for y in range(dims[1]):
+            for z in range(dims[2]):
+                c = (x * dims[1] + y) * dims[2] + z
+                block_items[((x // BLOCK) * by + y // BLOCK) * bz + z // BLOCK] += cell_start[c + 1] - cell_start[c]
+    return RayGrid(lower, np.array((cell,)), dims, cell_start, items, wide, block_items, rotation)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def test_item(item, o, d, limit, excluded, position, rotation, half_extents, triangles, normals):
+    """(t, what, normal) of grid item `item` (a body slot, or capacity + a triangle) if the ray
+    hits it nearer than `limit`, else t NO_HIT."""
+    capacity = len(excluded)
+    if item < capacity:
+        if excluded[item]:
+            return NO_HIT, item, (0.0, 0.0, 0.0)
+        t, face = ray_box(o, d, limit, position, rotation, half_extents, item)
+        return t, item, face
+    tri = item - capacity
+    t = ray_triangle(o, d, limit, triangles, normals, tri)
+    return t, PLAYGROUND, (normals[tri, 0], normals[tri, 1], normals[tri, 2])
+
+
+@njit(cache=True, nogil=True, inline="always")
+def boundary_t(c, step, lower, cell, o, d):
+    """t at which the ray leaves cell c along one axis (NO_HIT when it does not move along it)."""
+    if step > 0:
+        return (lower + (c + 1) * cell - o) / d
+    if step < 0:
+        return (lower + c * cell - o) / d
+    return NO_HIT
+
+
+@njit(cache=True, nogil=True, inline="always")
+def clip_slab(o, d, lo, hi, t0, t1):
+    """[t0, t1] narrowed to where the ray lies between lo and hi along one axis (empty: t0 > t1)."""
+    if abs(d) < 1e-12:
+        return (t0, t1) if lo <= o <= hi else (1.0, 0.0)
+    a, b = (lo - o) / d, (hi - o) / d
+    return max(t0, min(a, b)), min(t1, max(a, b))
+
+
+@njit(cache=True, nogil=True, inline="always")
+def axis_step(d):
+    return 1 if d > 1e-12 else (-1 if d < -1e-12 else 0)
+
+
+@njit(cache=True, nogil=True)
+def cast_ray_batch(origins, directions, max_range, excluded, grid, position, half_extents,
+                   triangles, normals, ground_enabled, ground_height, distance, point, normal, hit):
+    """Nearest hit of each ray origins[i] + t directions[i] (unit), 0 <= t <= max_range[i], with
+    the ground, the playground or a body not `excluded` (bool per slot). Writes distance (NO_HIT
+    for nothing), the hit point (NaN for nothing), the surface normal and what was hit (a body
+    slot, GROUND, PLAYGROUND or NOTHING)."""
+    rotation, lower, cell, dims = grid.rotation, grid.lower, grid.cell_size[0], grid.dims
+    cell_start, items, wide, block_items = grid.cell_start, grid.items, grid.wide, grid.block_items
+    nx, ny, nz = dims[0], dims[1], dims[2]
+    by, bz = (ny + BLOCK - 1) // BLOCK, (nz + BLOCK - 1) // BLOCK
+    lx, ly, lz = lower[0], lower[1], lower[2]
+    for i in range(len(origins)):
+        o = (origins[i, 0], origins[i, 1], origins[i, 2])
+        d = (directions[i, 0], directions[i, 1], directions[i, 2])
+        best, what, n = NO_HIT, NOTHING, (0.0, 0.0, 0.0)
+        if ground_enabled and d[2] < 0.0:
+            t = (ground_height - o[2]) / d[2]
+            if 0.0 <= t <= max_range[i]:
+                best, what, n = t, GROUND, (0.0, 0.0, 1.0)
+        limit = min(best, max_range[i])
+        for k in range(len(wide)):
+            t, obj, face = test_item(wide[k], o, d, limit, excluded, position, rotation,
+                                     half_extents, triangles, normals)
+            if t < limit:
+                best, limit, what, n = t, t, obj, face
+        # The ray's part inside the grid box, [t0, t1].
+        t0, t1 = 0.0, limit
+        if nx == 0:
+            t1 = -1.0
+        t0, t1 = clip_slab(o[0], d[0], lx, lx + nx * cell, t0, t1)
+        t0, t1 = clip_slab(o[1], d[1], ly, ly + ny * cell, t0, t1)
+        t0, t1 = clip_slab(o[2], d[2], lz, lz + nz * cell, t0, t1)
+        if t0 > t1:
+            t1 = -1.0  # nothing to walk
+        # Amanatides-Woo from the entry point: the cell, and per axis the direction of travel,
+        # the t of the next cell boundary and the t between boundaries.
+        sx, sy, sz = axis_step(d[0]), axis_step(d[1]), axis_step(d[2])
+        cx = min(max(int(np.floor((o[0] + t0 * d[0] - lx) / cell)), 0), nx - 1)
+        cy = min(max(int(np.floor((o[1] + t0 * d[1] - ly) / cell)), 0), ny - 1)
+        cz = min(max(int(np.floor((o[2] + t0 * d[2] - lz) / cell)), 0), nz - 1)
+        next_x, next_y = boundary_t(cx, sx, lx, cell, o[0], d[0]), boundary_t(cy, sy, ly, cell, o[1], d[1])
+        next_z = boundary_t(cz, sz, lz, cell, o[2], d[2])
+        delta_x = cell / abs(d[0]) if sx else NO_HIT
+        delta_y = cell / abs(d[1]) if sy else NO_HIT
+        delta_z = cell / abs(d[2]) if sz else NO_HIT
+        while t1 >= 0.0:
+            if block_items[((cx // BLOCK) * by + cy // BLOCK) * bz + cz // BLOCK] == 0:
+                # An empty block: jump to where the ray leaves it, in the cell beyond.
+                ex = boundary_t(cx // BLOCK, sx, lx, BLOCK * cell, o[0], d[0])
+                ey = boundary_t(cy // BLOCK, sy, ly, BLOCK * cell, o[1], d[1])
+                ez = boundary_t(cz // BLOCK, sz, lz, BLOCK * cell, o[2], d[2])
+                leave = min(ex, ey, ez)
+                if leave > t1 or limit <= leave:
+                    break
+                # The other two axes stay within the block (clamped against rounding): a cell
+                # of the empty block visited again only costs another jump.
+                x0, y0, z0 = (cx // BLOCK) * BLOCK, (cy // BLOCK) * BLOCK, (cz // BLOCK) * BLOCK
+                cx = min(max(int(np.floor((o[0] + leave * d[0] - lx) / cell)), x0), x0 + BLOCK - 1)
+                cy = min(max(int(np.floor((o[1] + leave * d[1] - ly) / cell)), y0), y0 + BLOCK - 1)
+                cz = min(max(int(np.floor((o[2] + leave * d[2] - lz) / cell)), z0), z0 + BLOCK - 1)
+                if ex == leave:
+                    cx = x0 + BLOCK if sx > 0 else x0 - 1
+                elif ey == leave:
+                    cy = y0 + BLOCK if sy > 0 else y0 - 1
+                else:
+                    cz = z0 + BLOCK if sz > 0 else z0 - 1
+                if cx < 0 or cx >= nx or cy < 0 or cy >= ny or cz < 0 or cz >= nz:
+                    break
+                next_x, next_y = boundary_t(cx, sx, lx, cell, o[0], d[0]), boundary_t(cy, sy, ly, cell, o[1], d[1])
+                next_z = boundary_t(cz, sz, lz, cell, o[2], d[2])
+                continue
+            c = (cx * ny + cy) * nz + cz
+            for k in range(cell_start[c], cell_start[c + 1]):
+                t, obj, face = test_item(items[k], o, d, limit, excluded, position, rotation,
+                                         half_extents, triangles, normals)
+                if t < limit:
+                    best, limit, what, n = t, t, obj, face
+            cell_exit = min(next_x, next_y, next_z)
+            # Anything nearer than this cell's far side has been seen: objects of later cells
+            # start behind it.
+            if limit <= cell_exit or cell_exit > t1:
+                break
+            if next_x <= next_y and next_x <= next_z:
+                cx += sx
+                next_x += delta_x
+                if cx < 0 or cx >= nx:
+                    break
+            elif next_y <= next_z:
+                cy += sy
+                next_y += delta_y
+                if cy < 0 or cy >= ny:
+                    break
+            else:
+                cz += sz
+                next_z += delta_z
+                if cz < 0 or cz >= nz:
+                    break
+        distance[i], hit[i] = best, what
+        normal[i, 0], normal[i, 1], normal[i, 2] = n[0], n[1], n[2]
+        if best < NO_HIT:
+            point[i, 0], point[i, 1], point[i, 2] = o[0] + best * d[0], o[1] + best * d[1], o[2] + best * d[2]
+        else:
+            point[i, 0], point[i, 1], point[i, 2] = np.nan, np.nan, np.nan
+
+RayHits = namedtuple("RayHits", [
+    "distance",  # (R,) m along the ray, inf for no hit within its range
+    "point",     # (R, 3) world, NaN for no hit
+    "normal",    # (R, 3) unit outward surface normal at the hit (zero for no hit)
+    "body",      # (R,) row of World.state() hit, or GROUND, PLAYGROUND, NOTHING
+])
+
+
+class RayScene:
+    """What rays can hit at one instant (World.ray_scene()): the grid is filed once, and any
+    number of batches (the sensors due at that instant) cast through it."""
+
+    def __init__(self, bodies, playground, ground, slots):
+        self._bodies, self._playground, self._slots = bodies, playground, slots
+        self._ground = ground
+        self._grid = build_ray_grid(bodies.active, bodies.position, bodies.orientation,
+                                    bodies.half_extents, playground.triangles,
+                                    playground.aabb_min, playground.aabb_max)
+        self._row_of_slot = np.cumsum(bodies.active) - 1
+
+    def cast(self, origins, directions, max_range, exclude=()):
+        """RayHits of the rays origins (R, 3) + t directions (R, 3; normalised here), 0 <= t <=
+        max_range (a number or (R,)), ignoring the bodies named in `exclude` (a sensor's
+        parent). One compiled call for the whole batch."""
+        origins = np.ascontiguousarray(origins, dtype=np.float64).reshape(-1, 3)
+        directions = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+        if len(directions) != len(origins):
+            raise ValueError(f"cast_rays: {len(origins)} origins but {len(directions)} directions")
+        length = np.linalg.norm(directions, axis=1)
+        if not np.all(length > 0.0) or not np.all(np.isfinite(origins)):
+            raise ValueError("cast_rays: every direction must be non-zero and every value finite")
+        directions = np.ascontiguousarray(directions / length[:, None])
+        max_range = np.ascontiguousarray(np.broadcast_to(np.asarray(max_range, dtype=np.float64),
+                                                         (len(origins),)))
+        excluded = np.zeros(len(self._bodies.active), np.bool_)
+        for name in exclude:
+            if name not in self._slots:
+                raise KeyError(f"cast_rays: no body named {name!r} to exclude")
+            excluded[self._slots[name]] = True
+        count = len(origins)
+        distance, point = np.empty(count), np.empty((count, 3))
+        normal, hit = np.empty((count, 3)), np.empty(count, np.int64)
+        g = self._ground
+        cast_ray_batch(origins, directions, max_range, excluded, self._grid,
+                       self._bodies.position, self._bodies.half_extents,
+                       self._playground.triangles, self._playground.normals, g is not None,
+                       float(g["height"]) if g else 0.0, distance, point, normal, hit)
+        body = np.where(hit >= 0, self._row_of_slot[np.maximum(hit, 0)], hit)
+        return RayHits(distance, point, normal, body)

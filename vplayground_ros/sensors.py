@@ -1,0 +1,388 @@
+"""Sensors (scene key `sensors`): 2D and 3D lidars, depth and colour cameras and IMUs, computed
+from the World by its ray casts. ROS-free: readings are numpy arrays. Scene files take the
+`sensors` key and keep it on saving; the node does not publish the readings yet (ROS messages,
+topics and the Simulation's batches ending on due steps are the next stage of issue 18).
+
+Sampling runs on simulation time: a sensor of rate r is read after the step that first reaches
+each multiple of 1/r, from the state after that step. The Simulation ends its batches on those
+steps (steps_until_due), so a run at any real-time factor reads the same scans. Noise comes from
+one generator per sensor seeded from `settings.seed` and the sensor's name: the same scene gives
+bit-identical readings.
+
+Frames: a sensor's frame is its name, posed by `pose` (xyz + rpy) in its parent's frame (a
+vehicle's base_link, a body's own frame, or `world`). Lidars and the IMU look along +x with z up
+(REP 103); cameras also have `<name>_optical` (z forward, x right, y down).
+"""
+import logging
+import math
+import zlib
+
+import numpy as np
+
+from .messages import CATEGORY_COLOURS, COLOURS, FROZEN, IMMOVABLE, VEHICLE, BOX
+from .physics import specs
+from .physics.contact import GROUND, PLAYGROUND
+from .physics.math3d import rpy_to_quat
+from .physics.world import quaternions_to_matrices
+
+TYPES = ("lidar_2d", "lidar_3d", "depth_camera", "camera", "imu")
+COMMON_KEYS = {"name", "type", "parent", "pose", "rate"}
+RANGE_KEYS = {"range_min", "range_max", "noise_stddev"}
+TYPE_KEYS = {
+    "lidar_2d": RANGE_KEYS | {"angle_min", "angle_max", "samples"},
+    "lidar_3d": RANGE_KEYS | {"horizontal_samples", "channels", "vertical_min", "vertical_max"},
+    "depth_camera": RANGE_KEYS | {"width", "height", "horizontal_fov"},
+    "camera": {"range_min", "range_max", "width", "height", "horizontal_fov"},
+    "imu": {"gyro_noise", "accel_noise", "gyro_bias", "accel_bias"},
+}
+DEFAULTS = {
+    "pose": [0.0, 0.0, 0.0, 0.0, 0.0, 0.0], "rate": 10.0,
+    "range_min": 0.1, "range_max": 30.0, "noise_stddev": 0.0,
+    "angle_min": -math.pi, "angle_max": math.pi, "samples": 360,
+    "horizontal_samples": 1024, "channels": 16, "vertical_min": -math.radians(15.0),
+    "vertical_max": math.radians(15.0),
+    "width": 160, "height": 120, "horizontal_fov": math.radians(90.0),
+    "gyro_noise": 0.0, "accel_noise": 0.0, "gyro_bias": [0.0, 0.0, 0.0], "accel_bias": [0.0, 0.0, 0.0],
+}
+MAX_RAYS = 4_000_000  # per sensor and scan: beyond this one scan would stall the simulation
+MAX_RATE = 1000.0
+WORLD = "world"
+
+# The camera's fixed light: from above, a little from the front-left, so faces of one box differ.
+LIGHT = np.array([0.3, 0.4, 0.866]) / np.linalg.norm([0.3, 0.4, 0.866])
+AMBIENT = 0.35
+SKY = np.array([0.62, 0.75, 0.90])
+
+log = logging.getLogger(__name__)
+
+
+def validate_sensor(raw, path, parents):
+    """A normalised sensor spec (defaults filled in); `parents` are the names that may carry it."""
+    specs.mapping(raw, path, COMMON_KEYS | set().union(*TYPE_KEYS.values()))
+    for key in ("name", "type", "parent"):
+        if key not in raw:
+            raise specs.SpecError(specs.child(path, key), "missing")
+    name = specs.name(raw["name"], specs.child(path, "name"))
+    kind = raw["type"]
+    if kind not in TYPES:
+        raise specs.SpecError(specs.child(path, "type"), f"unknown type {specs.quote(kind)} "
+                                                         f"(one of: {', '.join(TYPES)})")
+    specs.mapping(raw, path, COMMON_KEYS | TYPE_KEYS[kind])
+    parent = raw["parent"]
+    if parent != WORLD and parent not in parents:
+        raise specs.SpecError(specs.child(path, "parent"), f"no vehicle or body named "
+                                                           f"{specs.quote(parent)} (or 'world')")
+    out = {"name": name, "type": kind, "parent": parent}
+    at = lambda key: specs.child(path, key)  # noqa: E731
+    value = lambda key: raw.get(key, DEFAULTS[key])  # noqa: E731
+    out["pose"] = specs.vector(value("pose"), at("pose"), 6, -specs.MAX_COORDINATE, specs.MAX_COORDINATE)
+    out["rate"] = specs.number(value("rate"), at("rate"), 0.0, MAX_RATE, low_open=True)
+    keys = TYPE_KEYS[kind]
+    for key in sorted(keys & {"range_min", "range_max", "noise_stddev", "gyro_noise", "accel_noise"}):
+        out[key] = specs.number(value(key), at(key), 0.0, 1.0e4)
+    for key in sorted(keys & {"samples", "horizontal_samples", "channels", "width", "height"}):
+        out[key] = specs.integer(value(key), at(key), 1, 100_000)
+    for key in sorted(keys & {"angle_min", "angle_max"}):
+        out[key] = specs.number(value(key), at(key), -math.pi, math.pi)
+    for key in sorted(keys & {"vertical_min", "vertical_max"}):
+        out[key] = specs.number(value(key), at(key), -math.pi / 2, math.pi / 2)
+    if "horizontal_fov" in keys:
+        out["horizontal_fov"] = specs.number(value("horizontal_fov"), at("horizontal_fov"), 0.0,
+                                             math.radians(170.0), low_open=True)
+    for key in sorted(keys & {"gyro_bias", "accel_bias"}):
+        out[key] = specs.vector(value(key), at(key), 3, -1.0e3, 1.0e3)
+    if "range_max" in out and not out["range_min"] < out["range_max"]:
+        raise specs.SpecError(at("range_max"), f"must be > range_min ({out['range_min']:g}), "
+                                               f"got {out['range_max']:g}")
+    for low, high in (("angle_min", "angle_max"), ("vertical_min", "vertical_max")):
+        if low in out and not out[low] <= out[high]:
+            raise specs.SpecError(at(high), f"must be >= {low} ({out[low]:g}), got {out[high]:g}")
+    rays = ray_count(out)
+    if rays > MAX_RAYS:
+        raise specs.SpecError(path, f"{rays} rays a scan, more than {MAX_RAYS}")
+    return out
+
+
+def validate_sensors(raw, parents, path="sensors"):
+    """The scene's `sensors` list, validated; names are unique among the sensors and the bodies
+    (a sensor's name is its frame, beside the bodies' frames)."""
+    raw = [] if raw is None else raw
+    if not isinstance(raw, list):
+        raise specs.SpecError(path, f"expected a list, got {type(raw).__name__}")
+    out, names = [], set()
+    for k, entry in enumerate(raw):
+        sensor = validate_sensor(entry, specs.child(path, k), parents)
+        if sensor["name"] in names or sensor["name"] in parents or sensor["name"] == WORLD:
+            raise specs.SpecError(specs.child(specs.child(path, k), "name"),
+                                  f"duplicate name {specs.quote(sensor['name'])} (sensor names are frames)")
+        names.add(sensor["name"])
+        out.append(sensor)
+    return out
+
+
+def ray_count(spec):
+    kind = spec["type"]
+    if kind == "lidar_2d":
+        return spec["samples"]
+    if kind == "lidar_3d":
+        return spec["horizontal_samples"] * spec["channels"]
+    if kind in ("depth_camera", "camera"):
+        return spec["width"] * spec["height"]
+    return 0
+
+
+def spread(low, high, count, closed):
+    """count angles from low to high: including high when closed, else a full turn's spacing."""
+    if count == 1:
+        return np.array([0.5 * (low + high)])
+    return low + (high - low) * np.arange(count) / (count - 1 if closed else count)
+
+
+def lidar_2d_angles(spec):
+    """The beam angles; a full turn does not repeat its first beam at its end."""
+    full = spec["angle_max"] - spec["angle_min"] >= 2.0 * math.pi - 1e-9
+    return spread(spec["angle_min"], spec["angle_max"], spec["samples"], not full)
+
+
+def camera_intrinsics(spec):
+    """fx = fy, cx, cy of a pinhole camera with the given horizontal field of view."""
+    width, height = spec["width"], spec["height"]
+    f = 0.5 * width / math.tan(0.5 * spec["horizontal_fov"])
+    return f, f, 0.5 * width, 0.5 * height
+
+
+def local_directions(spec):
+    """Unit ray directions in the sensor frame (x forward, y left, z up), scan order: a 2D scan
+    counter-clockwise; a 3D scan ring by ring (lowest first), each counter-clockwise from
+    behind; a camera image row by row from the top left, through pixel centres."""
+    kind = spec["type"]
+    if kind == "lidar_2d":
+        a = lidar_2d_angles(spec)
+        return np.stack([np.cos(a), np.sin(a), np.zeros_like(a)], axis=1)
+    if kind == "lidar_3d":
+        azimuth = spread(-math.pi, math.pi, spec["horizontal_samples"], False)
+        elevation = spread(spec["vertical_min"], spec["vertical_max"], spec["channels"], True)
+        e, a = np.meshgrid(elevation, azimuth, indexing="ij")
+        return np.stack([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)], axis=-1).reshape(-1, 3)
+    fx, fy, cx, cy = camera_intrinsics(spec)
+    v, u = np.meshgrid(np.arange(spec["height"]) + 0.5, np.arange(spec["width"]) + 0.5, indexing="ij")
+    # Optical (x right, y down, z forward) -> sensor frame (x forward, y left, z up).
+    right, down = (u - cx) / fx, (v - cy) / fy
+    d = np.stack([np.ones_like(right), -right, -down], axis=-1).reshape(-1, 3)
+    return d / np.linalg.norm(d, axis=1)[:, None]
+
+
+def pose_matrix(xyz, quaternion):
+    m = np.eye(4)
+    m[:3, :3] = quaternions_to_matrices(np.asarray(quaternion, float)[None])[0]
+    m[:3, 3] = xyz
+    return m
+
+
+class Sensor:
+    """One sensor: its spec, its rays in its own frame and its noise generator."""
+
+    def __init__(self, spec, seed):
+        self.spec = spec
+        self.name, self.kind, self.parent = spec["name"], spec["type"], spec["parent"]
+        self.mount = pose_matrix(spec["pose"][:3], rpy_to_quat(spec["pose"][3:]))
+        self.directions = local_directions(spec) if self.kind != "imu" else np.zeros((0, 3))
+        self.rng = np.random.Generator(np.random.PCG64([seed, zlib.crc32(self.name.encode())]))
+        self.samples_taken = 0  # n of the next sample time n / rate
+        self.last_velocity = None  # the parent's (linear, angular) world velocity at the last IMU sample
+
+    def due_step(self, steps_per_second):
+        """The step count at which the next sample is read: the first step at or after n / rate."""
+        return math.ceil(self.samples_taken * steps_per_second / self.spec["rate"] - 1e-9)
+
+
+class Sensors:
+    """The sensors of whatever World it is handed: when they are due, and their readings. It
+    follows the world's `sensor_specs` (rebuilt when the world, its sensors or its time go
+    back), and hands each reading to `on_reading(sensor, reading)`."""
+
+    def __init__(self, on_reading=None):
+        self.on_reading = on_reading
+        self.sensors = []
+        self._world, self._specs, self._step = None, None, -1
+
+    def follow(self, world):
+        if world is not self._world or world.sensor_specs is not self._specs or world.step_count < self._step:
+            self._world, self._specs = world, world.sensor_specs
+            self.sensors = [Sensor(spec, world.settings["seed"]) for spec in world.sensor_specs]
+            rate = world.settings["steps_per_second"]
+            for sensor in self.sensors:  # the first sample is the next one after now
+                sensor.samples_taken = math.floor(world.step_count * sensor.spec["rate"] / rate) + 1
+                while sensor.due_step(rate) <= world.step_count:
+                    sensor.samples_taken += 1
+        self._step = world.step_count
+
+    def steps_until_due(self, world):
+        """Steps the world may take before the next sample (at least 1): a batch ends there."""
+        self.follow(world)
+        if not self.sensors:
+            return math.inf
+        rate = world.settings["steps_per_second"]
+        return max(1, min(s.due_step(rate) for s in self.sensors) - world.step_count)
+
+    def sample(self, world):
+        """Reads the sensors due at the world's current step and returns [(sensor, reading)]
+        (see read()), after handing each to on_reading. Samples whose step was passed without a
+        reading (the world stepped past it) are skipped, not read late. A sensor whose parent
+        is gone goes with it, with a warning."""
+        self.follow(world)
+        rate, now = world.settings["steps_per_second"], world.step_count
+        present = None
+        due = []
+        for sensor in list(self.sensors):
+            while sensor.due_step(rate) < now:
+                sensor.samples_taken += 1
+            if sensor.due_step(rate) != now:
+                continue
+            sensor.samples_taken += 1
+            if sensor.parent != WORLD:
+                present = set(world.body_names()) if present is None else present
+                if sensor.parent not in present:
+                    log.warning("sensor %s removed: its parent %s is gone", sensor.name, sensor.parent)
+                    self.sensors.remove(sensor)
+                    world.sensor_specs = self._specs = [s for s in world.sensor_specs if s is not sensor.spec]
+                    continue
+            due.append(sensor)
+        if not due:
+            return []
+        scene = world.ray_scene() if any(s.kind != "imu" for s in due) else None
+        readings = [(sensor, self.read(sensor, world, scene)) for sensor in due]
+        if self.on_reading is not None:
+            for sensor, reading in readings:
+                self.on_reading(sensor, reading)
+        return readings
+
+    def all_rays(self, world):
+        """Every sensor's rays now, concatenated (origins, directions, ranges): for bench/."""
+        self.follow(world)
+        batches = [self.rays(s, world) for s in self.sensors if s.kind != "imu"]
+        return tuple(np.concatenate(parts) for parts in zip(*batches))
+
+    # ------------------------------------------------------------------ readings
+    def frame_pose(self, sensor, world):
+        """The sensor's pose in the world (4 x 4), and its parent's body state (or None)."""
+        if sensor.parent == WORLD:
+            return sensor.mount, None
+        body = world.body(sensor.parent)
+        return pose_matrix(body["position"], body["quaternion"]) @ sensor.mount, body
+
+    def rays(self, sensor, world):
+        pose, _ = self.frame_pose(sensor, world)
+        directions = sensor.directions @ pose[:3, :3].T
+        origins = np.broadcast_to(pose[:3, 3], directions.shape)
+        return origins, directions, np.full(len(directions), sensor.spec["range_max"])
+
+    def read(self, sensor, world, scene):
+        """A dict of the reading, by type:
+        lidar_2d: ranges (N,) float32 (REP 117: +inf no return, -inf nearer than range_min);
+        lidar_3d: points (N, 3) float32 in the sensor frame of the returns, intensity, ring;
+        depth_camera: depth (H, W) float32 along the optical axis, NaN for no return (REP 118);
+        camera: rgb (H, W, 3) uint8; imu: orientation (xyzw), angular_velocity,
+        linear_acceleration (specific force, sensor frame)."""
+        time = world.time
+        if sensor.kind == "imu":
+            return {"time": time, **self.read_imu(sensor, world)}
+        origins, directions, ranges = self.rays(sensor, world)
+        exclude = () if sensor.parent == WORLD else (sensor.parent,)
+        hits = scene.cast(origins, directions, ranges, exclude)
+        distance = hits.distance.copy()
+        spec = sensor.spec
+        if spec.get("noise_stddev", 0.0) > 0.0:
+            finite = np.isfinite(distance)
+            distance[finite] += sensor.rng.normal(0.0, spec["noise_stddev"], int(finite.sum()))
+        near = distance < spec["range_min"]
+        if sensor.kind == "lidar_2d":
+            ranges = distance.astype(np.float32)
+            ranges[near] = -np.inf
+            return {"time": time, "ranges": ranges}
+        if sensor.kind == "lidar_3d":
+            keep = np.isfinite(distance) & ~near
+            local = sensor.directions[keep] * distance[keep, None]
+            ring = np.repeat(np.arange(spec["channels"], dtype=np.uint16), spec["horizontal_samples"])[keep]
+            return {"time": time, "points": local.astype(np.float32), "ring": ring,
+                    "intensity": self.intensity(hits, directions)[keep].astype(np.float32)}
+        shape = (spec["height"], spec["width"])
+        if sensor.kind == "depth_camera":
+            # Depth is along the optical axis (x of the sensor frame), not along the ray.
+            depth = (distance * sensor.directions[:, 0]).astype(np.float32)
+            depth[~np.isfinite(distance) | near] = np.nan
+            return {"time": time, "depth": depth.reshape(shape)}
+        return {"time": time, "rgb": self.shade(hits, directions, world).reshape(shape + (3,))}
+
+    @staticmethod
+    def intensity(hits, directions):
+        """A lidar return's strength: the cosine between the beam and the surface, 0..1."""
+        with np.errstate(invalid="ignore"):
+            return np.clip(-np.einsum("ij,ij->i", hits.normal, directions), 0.0, 1.0)
+
+    def shade(self, hits, directions, world):
+        """Each pixel the colour of what it sees (the markers' colours) lit by a fixed light:
+        ambient plus Lambert; the sky where nothing is hit."""
+        rows = np.asarray(hits.body)
+        colour = np.tile(SKY, (len(rows), 1))
+        state = world.state()
+        vehicles = set(world.vehicle_names())
+        names = world.body_names()
+        kinds = np.where(state["immovable"], IMMOVABLE, BOX)
+        kinds[[k for k, n in enumerate(names) if n in vehicles]] = VEHICLE
+        kinds = np.where(state["frozen"], FROZEN, kinds)
+        body = rows >= 0
+        colour[body] = CATEGORY_COLOURS[kinds[rows[body]], :3]
+        colour[rows == GROUND] = COLOURS["ground"][:3]
+        colour[rows == PLAYGROUND] = COLOURS["playground"][:3]
+        hit = np.isfinite(hits.distance)
+        light = AMBIENT + (1.0 - AMBIENT) * np.clip(hits.normal @ LIGHT, 0.0, 1.0)
+        colour[hit] *= light[hit, None]
+        return np.round(np.clip(colour, 0.0, 1.0) * 255.0).astype(np.uint8)
+
+    def read_imu(self, sensor, world):
+        """REP 145 readings of the parent body at the sensor: orientation (sensor frame in the
+        world), angular velocity (sensor frame) and specific force: a - g, where a is the mean
+        acceleration of the mount point over the last sampling interval (the difference of the
+        velocities of two samples divided by 1 / rate; zero at the first sample), so at rest it
+        reads +9.81 m/s^2 up."""
+        pose, body = self.frame_pose(sensor, world)
+        rotation = pose[:3, :3]
+        gravity = np.asarray(world.settings["gravity"], float)
+        if body is None:
+            linear, angular = np.zeros(3), np.zeros(3)
+        else:
+            angular = np.asarray(body["angular_velocity"], float)
+            arm = pose[:3, 3] - np.asarray(body["position"], float)
+            linear = np.asarray(body["linear_velocity"], float) + np.cross(angular, arm)
+        previous = sensor.last_velocity if sensor.last_velocity is not None else linear
+        acceleration = (linear - previous) * sensor.spec["rate"]
+        sensor.last_velocity = linear
+        spec = sensor.spec
+        gyro = rotation.T @ angular + spec["gyro_bias"]
+        accel = rotation.T @ (acceleration - gravity) + spec["accel_bias"]
+        if spec["gyro_noise"] > 0.0:
+            gyro = gyro + sensor.rng.normal(0.0, spec["gyro_noise"], 3)
+        if spec["accel_noise"] > 0.0:
+            accel = accel + sensor.rng.normal(0.0, spec["accel_noise"], 3)
+        return {"orientation": matrix_to_quaternion(rotation), "angular_velocity": gyro,
+                "linear_acceleration": accel}
+
+
+def matrix_to_quaternion(m):
+    """(x, y, z, w) of a rotation matrix (Shepperd's method, the largest component first)."""
+    trace = m[0, 0] + m[1, 1] + m[2, 2]
+    if trace > 0.0:
+        s = 2.0 * math.sqrt(1.0 + trace)
+        q = ((m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, 0.25 * s)
+    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
+        q = (0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s, (m[2, 1] - m[1, 2]) / s)
+    elif m[1, 1] > m[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
+        q = ((m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s, (m[0, 2] - m[2, 0]) / s)
+    else:
+        s = 2.0 * math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
+        q = ((m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s, (m[1, 0] - m[0, 1]) / s)
+    q = np.array(q)
+    return q / np.linalg.norm(q)
