@@ -13,14 +13,16 @@ def kinetic_energy(world):
     return float(0.5 * np.sum(m * np.sum(v * v, axis=1)) + 0.5 * np.sum(inertia * w * w))
 
 
-def tower(count, size=1.0, settings=None):
+def tower(count, size=1.0, settings=None, **material):
+    """`count` cubes stacked exactly face on face; `material` holds body keys (mass, elasticity...)."""
     world = World(settings)
     for k in range(count):
-        world.add_body({"name": f"t{k}", "size": [size] * 3, "position": [0, 0, size * (0.5 + k)]})
+        world.add_body({"name": f"t{k}", "size": [size] * 3, "position": [0, 0, size * (0.5 + k)],
+                        **material})
     return world
 
 
-def brick_wall(rows=10, length=1.0, depth=0.5, height=0.5, settings=None):
+def brick_wall(rows=10, length=1.0, depth=0.5, height=0.5, settings=None, **material):
     """Running-bond wall: even rows of 6 bricks, odd rows of 5 offset by half a brick (55)."""
     world = World(settings)
     for row in range(rows):
@@ -28,7 +30,21 @@ def brick_wall(rows=10, length=1.0, depth=0.5, height=0.5, settings=None):
         offset = 0.0 if row % 2 == 0 else 0.5 * length
         for k in range(count):
             world.add_body({"name": f"b{row}_{k}", "size": [length, depth, height],
-                            "position": [offset + k * length - 2.5 * length, 0, height * (0.5 + row)]})
+                            "position": [offset + k * length - 2.5 * length, 0, height * (0.5 + row)],
+                            **material})
+    return world
+
+
+def pyramid(rows, size=1.0, settings=None, **material):
+    """A 2D pyramid of cubes: `rows` at the bottom, one fewer per row up, each row offset by half
+    a cube so every cube stands on two (rows (rows + 1) / 2 cubes)."""
+    world = World(settings, capacity=rows * (rows + 1) // 2)
+    for row in range(rows):
+        count = rows - row
+        for k in range(count):
+            world.add_body({"name": f"p{row}_{k}", "size": [size] * 3,
+                            "position": [size * (k - 0.5 * (count - 1)), 0, size * (0.5 + row)],
+                            **material})
     return world
 
 
@@ -50,3 +66,14 @@ def pile(count, seed=1, size=0.5, spacing=0.75, settings=None):
 
 def max_drift(world, start):
     return float(np.max(np.linalg.norm(world.state()["positions"] - start, axis=1)))
+
+
+def drift_every_second(world, seconds):
+    """Steps `seconds` simulated seconds; the largest distance (m) of any body from its start,
+    sampled at every whole second."""
+    start = world.state()["positions"].copy()
+    drift = 0.0
+    for _ in range(seconds):
+        world.step(world.settings["steps_per_second"])
+        drift = max(drift, max_drift(world, start))
+    return drift

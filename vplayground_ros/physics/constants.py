@@ -22,6 +22,14 @@ POSITION_CORRECTION = 0.2
 # spawned inside another) separates over a few steps instead of exploding.
 MAX_CORRECTION_SPEED = 2.0
 
+# Shock propagation sweeps at most this many times over the support points of one body (against
+# fixed supports), and stops once a sweep changes no velocity by more than SHOCK_TOLERANCE. What
+# a body's sweeps leave unsolved its upper neighbours inherit, so the error adds up with a
+# stack's height: with 4 sweeps a 30-box tower still swayed 3 cm, with 8 a 20-row pyramid's top
+# 11 mm, with 16 neither moved 5 mm. A tolerance of 1e-5 m/s let that tower creep 1.2 cm.
+SHOCK_SWEEPS = 16
+SHOCK_TOLERANCE = 1.0e-7  # m/s
+
 # Relative normal speeds below this do not bounce. Without it, the velocity that gravity adds in
 # a step would be reflected by elasticity and resting stacks would never come to rest.
 RESTITUTION_THRESHOLD = 0.2

@@ -43,6 +43,14 @@ Contacts = namedtuple("Contacts", [
     "position_impulse",   # (K,) split-impulse accumulator of the position pass
     "collision_target", "contact_target", "position_target",  # (K,) normal velocity goals
     "solve_order",        # (K,) points in the order the sweeps visit them
+    # Shock propagation: the support points (normal within 60 degrees of gravity) grouped by
+    # their upper body, bodies bottom to top; the one-sided impulses added on top of the
+    # contact pass's.
+    "support_count",      # (1,) support points in use
+    "support_order",      # (K,) support points, grouped per upper body
+    "support_body",       # (K,) velocity row of each point's upper body (-1: not a support)
+    "support_mass",       # (K, 3) effective mass of each row with the upper body alone moving
+    "support_impulse", "support_friction",  # (K,), (K, 2)
     "manifold_count",     # (1,)
     "manifold_start", "manifold_size", "manifold_a", "manifold_b",  # (M,)
     "table_key", "table_manifold",  # open-addressing hash: pair key -> manifold, for warm start
@@ -59,7 +67,9 @@ def allocate_contacts(points, manifolds):
         row_inv_mass=f(2), row_mass=f(3), restitution=f(), friction_coefficient=f(),
         approach_speed=f(), collision_impulse=f(), collision_friction=f(2), impulse=f(),
         friction=f(2), friction_world=f(3), position_impulse=f(), collision_target=f(),
-        contact_target=f(), position_target=f(), solve_order=i(points), manifold_count=i(1),
+        contact_target=f(), position_target=f(), solve_order=i(points), support_count=i(1),
+        support_order=i(points), support_body=i(points), support_mass=f(3), support_impulse=f(),
+        support_friction=f(2), manifold_count=i(1),
         manifold_start=i(manifolds), manifold_size=i(manifolds), manifold_a=i(manifolds),
         manifold_b=i(manifolds), table_key=np.full(table, -1, np.int64), table_manifold=i(table))
 

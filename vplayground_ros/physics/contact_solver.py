@@ -2,17 +2,22 @@
 as the 2008 thesis adapted them, solved as sequential impulses.
 
 - Collision pass (`resolve_iterations` sweeps, order alternating): contacts that the step's
-  motion would close (predicted separation < 0) are resolved with the pre-step velocities and the
-  pair's elasticity, aiming at -e times the approach speed they had before the pass.
+  motion would close (predicted separation < 0) faster than RESTITUTION_THRESHOLD are resolved
+  with the pre-step velocities and the pair's elasticity, aiming at -e times the approach speed
+  they had before the pass. Slower ones would not bounce: they are resting contacts, the contact
+  pass's.
 - Contact pass (twice as many sweeps) after gravity: zero elasticity, the normal velocity may only
   close the remaining gap (speculative contacts), warm-started from last step's impulses.
+- Shock propagation (the contact pass's last pass, Guendelman et al. 2003): bottom up, each body
+  against its supports as if they had infinite mass, on top of the contact pass's impulses.
 - Position pass (after the contact pass): penetration beyond LINEAR_SLOP is removed through
   pseudo velocities that move the bodies this step and are then forgotten (split impulse), so
   correcting an overlap never adds kinetic energy to a resting pile.
 - Sweep order: bottom to top along gravity, then top to bottom. Bridson et al. solve the
   deepest contacts first and the 2008 program chose a random order; ordering by height is what
-  lets 20-box towers and brick walls converge in the 2008 iteration counts. (Guendelman's shock
-  propagation was tried here too: its one-sided impulses made brick walls creep sideways.)
+  lets brick walls converge in the 2008 iteration counts; towers also need shock propagation.
+  (Shock propagation on the normal rows alone, one manifold at a time, made walls creep
+  sideways: it must take friction and all of a body's supports together.)
 
 Impulses are accumulated per point and clamped (normal >= 0, friction inside its cone), which
 converges where the 2008 per-iteration impulses could only approximate. Friction is Coulomb with
@@ -27,7 +32,8 @@ import numpy as np
 from numba import njit
 
 from .constants import (LINEAR_SLOP, MAX_CORRECTION_SPEED, POSITION_CORRECTION,
-                        RESTITUTION_THRESHOLD, STICKING_SPEED)
+                        RESTITUTION_THRESHOLD, SHOCK_SWEEPS, SHOCK_TOLERANCE,
+                        STICKING_SPEED)
 from .contact import ARM_A, ARM_B, DIRECTION, TURN_A, TURN_B
 from .math3d import cross
 
@@ -102,10 +108,13 @@ def prepare_contacts(contacts, bodies, ground_material, gravity, dt):
         else:
             contacts.friction_coefficient[c] = np.sqrt(bodies.dynamic_friction[a] * mu_d)
         depth = contacts.depth[c]
-        # Collision pass: only contacts this step's motion would close (Guendelman: detect at
-        # the predicted positions, resolve with the pre-step velocities).
-        if vn < 0.0 and -depth + dt * vn < 0.0:
-            contacts.collision_target[c] = -restitution * vn if vn < -RESTITUTION_THRESHOLD else 0.0
+        # Collision pass: contacts this step's motion would close (Guendelman: detect at the
+        # predicted positions, resolve with the pre-step velocities), fast enough to bounce.
+        # Slower ones are resting contacts, held by the contact pass's warm-started impulses:
+        # this pass's impulses on them were cold-started, lopsided after a few sweeps, and
+        # never taken back (the contact pass only adds), and they kept tall stacks rocking.
+        if vn < -RESTITUTION_THRESHOLD and -depth + dt * vn < 0.0:
+            contacts.collision_target[c] = -restitution * vn
         else:
             contacts.collision_target[c] = INACTIVE
         # Contact pass: a speculative contact may close its gap this step, but no more.
@@ -128,6 +137,49 @@ def prepare_contacts(contacts, bodies, ground_material, gravity, dt):
         p = contacts.point[c]
         heights[c] = -(p[0] * gravity[0] + p[1] * gravity[1] + p[2] * gravity[2])
     contacts.solve_order[:count] = np.argsort(heights, kind="mergesort")
+    order_supports(contacts, bodies, gravity)
+
+
+@njit(cache=True, nogil=True)
+def order_supports(contacts, bodies, gravity):
+    """Finds each point's upper body (the one the other holds up against gravity; none for side
+    contacts, or when the upper one does not move) and groups the support points per upper
+    body, bodies bottom to top by the height of their centre."""
+    count = contacts.count[0]
+    g = np.sqrt(gravity[0] * gravity[0] + gravity[1] * gravity[1] + gravity[2] * gravity[2])
+    keys = np.empty(count)
+    supports = 0
+    for c in range(count):
+        contacts.support_body[c] = -1
+        contacts.support_impulse[c] = 0.0
+        contacts.support_friction[c, 0] = contacts.support_friction[c, 1] = 0.0
+        keys[c] = np.inf
+        if g == 0.0:
+            continue
+        n = contacts.normal[c]
+        # n points from A to B: pointing down, B holds A up.
+        up = -(n[0] * gravity[0] + n[1] * gravity[1] + n[2] * gravity[2]) / g
+        a, b = contacts.body_a[c], contacts.body_b[c]
+        upper = a if up < -0.5 else (b if up > 0.5 else -1)
+        if upper < 0 or not bodies.awake[upper]:
+            continue
+        contacts.support_body[c] = upper
+        m = contacts.row_inv_mass[c, 0] if upper == a else contacts.row_inv_mass[c, 1]
+        arm, turn = (ARM_A, TURN_A) if upper == a else (ARM_B, TURN_B)
+        for row in range(3):
+            k = m
+            for e in range(3):
+                k += contacts.rows[c, row, arm + e] * contacts.rows[c, row, turn + e]
+            contacts.support_mass[c, row] = 1.0 / k if k > 0.0 else 0.0
+        p = bodies.position[upper]
+        keys[c] = -(p[0] * gravity[0] + p[1] * gravity[1] + p[2] * gravity[2])
+        supports += 1
+    # By body, then (stably) by height: one body's points stay together even where bodies
+    # stand at exactly the same height (a row of bricks).
+    by_body = np.argsort(contacts.support_body[:count], kind="mergesort")
+    order = by_body[np.argsort(keys[by_body], kind="mergesort")]
+    contacts.support_order[:count] = order
+    contacts.support_count[0] = supports
 
 
 @njit(cache=True, nogil=True)
@@ -211,11 +263,87 @@ def warm_start(contacts, bodies):
 
 
 @njit(cache=True, nogil=True)
+def shock_propagation(contacts, bodies):
+    """Guendelman, Bridson & Fedkiw (2003) section 7: one last pass of the contact pass, from the
+    bottom up, in which each body meets its supports as if they had infinite mass. Body by body,
+    sweeps over its support points (up to SHOCK_SWEEPS, fewer once converged) drive the normal
+    and friction rows on the totals (contact-pass impulse plus this pass's) to the contact
+    pass's targets, changing only the upper body's velocity: what the supports below do is
+    final by then, so a stack leaves the step as rigid as its lowest contact, however tall. Plain sweeps hand the load of a tall
+    stack down and its overturning moment through every joint only a little per sweep; the part
+    left over lets each joint tilt a little each step, gravity on the leaning stack turns that
+    tilt into more, and a 20-box tower rocks while a 30-box one falls. The one-sided impulses
+    are not warm-started (the contact pass's own are), so they only mop up what its sweeps left."""
+    velocity, rows, row_inv_mass = bodies.velocity, contacts.rows, contacts.row_inv_mass
+    target, mu = contacts.contact_target, contacts.friction_coefficient
+    impulse, friction = contacts.impulse, contacts.friction
+    shock, shock_friction = contacts.support_impulse, contacts.support_friction
+    support_mass = contacts.support_mass
+    order, supports = contacts.support_order, contacts.support_count[0]
+    group_start = 0
+    while group_start < supports:
+        upper = contacts.support_body[order[group_start]]
+        group_end = group_start + 1
+        while group_end < supports and contacts.support_body[order[group_end]] == upper:
+            group_end += 1
+        size = group_end - group_start
+        for sweep in range(SHOCK_SWEEPS):
+            largest = 0.0  # the largest velocity change of this sweep
+            for k in range(size):
+                c = order[group_start + (k if sweep % 2 == 0 else size - 1 - k)]
+                a, b = contacts.velocity_a[c], contacts.velocity_b[c]
+                # Only the upper body moves: A takes -j, B takes +j.
+                if upper == a:
+                    sign, m, turn = -1.0, row_inv_mass[c, 0], TURN_A
+                else:
+                    sign, m, turn = 1.0, row_inv_mass[c, 1], TURN_B
+                # Friction circle on the total friction, then the normal row on the total.
+                v1 = v2 = 0.0
+                for e in range(3):
+                    dv, wa, wb = velocity[b, e] - velocity[a, e], velocity[a, 3 + e], velocity[b, 3 + e]
+                    v1 += rows[c, 1, DIRECTION + e] * dv - rows[c, 1, ARM_A + e] * wa + rows[c, 1, ARM_B + e] * wb
+                    v2 += rows[c, 2, DIRECTION + e] * dv - rows[c, 2, ARM_A + e] * wa + rows[c, 2, ARM_B + e] * wb
+                old1 = friction[c, 0] + shock_friction[c, 0]
+                old2 = friction[c, 1] + shock_friction[c, 1]
+                new1 = old1 - support_mass[c, 1] * v1
+                new2 = old2 - support_mass[c, 2] * v2
+                magnitude = np.sqrt(new1 * new1 + new2 * new2)
+                limit = mu[c] * (impulse[c] + shock[c])
+                if magnitude > limit:
+                    new1 *= limit / magnitude
+                    new2 *= limit / magnitude
+                d1, d2 = new1 - old1, new2 - old2
+                largest = max(largest, abs(d1) / support_mass[c, 1], abs(d2) / support_mass[c, 2])
+                shock_friction[c, 0] += d1
+                shock_friction[c, 1] += d2
+                vn = 0.0
+                for e in range(3):
+                    linear = rows[c, 1, DIRECTION + e] * d1 + rows[c, 2, DIRECTION + e] * d2
+                    velocity[upper, e] += sign * m * linear
+                    velocity[upper, 3 + e] += sign * (rows[c, 1, turn + e] * d1 + rows[c, 2, turn + e] * d2)
+                for e in range(3):
+                    vn += (rows[c, 0, DIRECTION + e] * (velocity[b, e] - velocity[a, e])
+                           - rows[c, 0, ARM_A + e] * velocity[a, 3 + e] + rows[c, 0, ARM_B + e] * velocity[b, 3 + e])
+                total = impulse[c] + shock[c]
+                d = max(total + support_mass[c, 0] * (target[c] - vn), 0.0) - total
+                largest = max(largest, abs(d) / support_mass[c, 0])
+                shock[c] += d
+                for e in range(3):
+                    velocity[upper, e] += sign * m * d * rows[c, 0, DIRECTION + e]
+                    velocity[upper, 3 + e] += sign * d * rows[c, 0, turn + e]
+            if largest < SHOCK_TOLERANCE:
+                break
+        group_start = group_end
+
+
+@njit(cache=True, nogil=True)
 def contact_pass(contacts, bodies, iterations):
-    """Velocities (zero elasticity, friction), then the split-impulse position pass on the
-    pseudo velocities; keeps the friction as a world vector for the next step's warm start."""
+    """Velocities (zero elasticity, friction), shock propagation, then the split-impulse
+    position pass on the pseudo velocities; keeps the friction as a world vector for the next
+    step's warm start."""
     solve_rows(bodies.velocity, contacts, iterations, contacts.contact_target, contacts.impulse,
                contacts.friction, True)
+    shock_propagation(contacts, bodies)
     solve_rows(bodies.pseudo_velocity, contacts, iterations, contacts.position_target,
                contacts.position_impulse, contacts.friction, False)
     rows = contacts.rows

@@ -560,7 +560,7 @@ class World:
             "points": c.point[keep],
             "normals": c.normal[keep],
             "depths": c.depth[keep],
-            "impulses": c.collision_impulse[keep] + c.impulse[keep],
+            "impulses": c.collision_impulse[keep] + c.impulse[keep] + c.support_impulse[keep],
             "body_a": row_of_slot[a],
             "body_b": np.where(b >= 0, row_of_slot[np.maximum(b, 0)], b),
         }
