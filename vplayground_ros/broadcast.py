@@ -409,7 +409,7 @@ class Broadcaster:
         frozen = int(np.count_nonzero(snap.state["frozen"]))
         active, removed = len(snap.names) - frozen, len(sim.removed)
         target = f"{sim.real_time_factor:.2f}" if sim.real_time_factor > 0.0 else "max"
-        step_ms = 1e3 * sim.step_seconds / max(snap.step, 1)
+        step_ms = sim.mean_step_ms
         summary = (f"{['stopped', 'playing', 'paused'][sim.state]}, RTF {sim.achieved_rtf:.2f}/{target}, "
                    f"step {step_ms:.2f} ms, {sim.late_ticks} late ticks")
         if sim.fault_count:

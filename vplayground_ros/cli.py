@@ -74,9 +74,8 @@ def split_ros_args(argv):
 def status_line(sim):
     snap = sim.snapshot
     frozen = int(snap.state["frozen"].sum())
-    steps = max(snap.step, 1)
     return (f"t={snap.time:8.2f} s  bodies={len(snap.names)}  frozen={frozen}  "
-            f"rtf={sim.achieved_rtf:.2f}  step={1e3 * sim.step_seconds / steps:.3f} ms  "
+            f"rtf={sim.achieved_rtf:.2f}  step={sim.mean_step_ms:.3f} ms  "
             f"late={sim.late_ticks}")
 
 

@@ -56,7 +56,10 @@ class Simulation:
         self.with_contacts = with_contacts
         self.paused = start_paused
         self.late_ticks = 0
-        self.step_seconds = 0.0     # wall time spent inside world.step, for diagnostics
+        # Wall time inside world.step and the steps it ran, each world's first batch left out
+        # (Numba's cache load or compile, up to minutes, is no step time): mean_step_ms.
+        self.step_seconds = 0.0
+        self.timed_steps = 0
         self.thread_cpu_seconds = 0.0  # CPU time of the simulation thread (physics, snapshots)
         self.engine_cpu_seconds = 0.0  # the part of it inside the compiled step, over all worlds
         self.achieved_rtf = 0.0
@@ -76,6 +79,11 @@ class Simulation:
         self.snapshot = self._take_snapshot()
 
     # ---------------------------------------------------------------- control (any thread)
+    @property
+    def mean_step_ms(self):
+        """Wall milliseconds per step, over the steps after each world's first batch."""
+        return 1e3 * self.step_seconds / max(self.timed_steps, 1)
+
     @property
     def state(self):
         if self._finished.is_set():
@@ -176,11 +184,14 @@ class Simulation:
                 except Exception as error:  # an engine bug: keep the loop (and the node) alive
                     self.paused, self._pending_steps = True, 0  # not the same failure 100 times a second
                     self._fault("step", error)
-                self.step_seconds += time.perf_counter() - started
                 self.engine_cpu_seconds += world.engine_cpu_seconds - engine_before
-                if first_batch:
+                if not first_batch:
+                    self.step_seconds += time.perf_counter() - started
+                    self.timed_steps += steps
+                else:
                     # A world's first batch loads its kernels from Numba's cache, or compiles them
-                    # (a minute on a first run): real time starts after it, not as late ticks.
+                    # (a minute on a first run): real time starts after it, not as late ticks,
+                    # and it is not step time either.
                     first_batch = False
                     origin_wall, origin_sim = time.perf_counter(), world.time
                     rtf_wall, rtf_sim, rtf_measured = origin_wall, world.time, False
