@@ -175,6 +175,17 @@ def test_the_node_runs_to_its_duration_on_a_full_disk():
     assert "No space left on device" in output
 
 
+def stop_node(node_process, executor, client, context):
+    """Ends the test client, then the node (Ctrl-C, as a user stops it); returns its output."""
+    import rclpy
+
+    executor.shutdown()
+    client.destroy_node()
+    rclpy.try_shutdown(context=context)
+    node_process.send_signal(signal.SIGINT)
+    return node_process.communicate(timeout=60)[0]
+
+
 def test_an_unwritable_record_path_leaves_every_topic_publishing(tmp_path):
     """Issue 16.1: the recorder's status once assumed a file, and its IndexError ended the
     publisher thread: no poses, markers or diagnostics after the first /diagnostics."""
@@ -204,11 +215,7 @@ def test_an_unwritable_record_path_leaves_every_topic_publishing(tmp_path):
                                               stamp(poses[-1]) > stamp(diagnostics[1])):
             executor.spin_once(timeout_sec=0.1)
     finally:
-        executor.shutdown()
-        client.destroy_node()
-        rclpy.try_shutdown(context=context)
-        node_process.send_signal(signal.SIGINT)
-        output, _ = node_process.communicate(timeout=60)
+        output = stop_node(node_process, executor, client, context)
     assert node_process.returncode == 0, output[-2000:]
     assert len(diagnostics) >= 2 and stamp(poses[-1]) > stamp(diagnostics[1]), output[-2000:]
     recorder = next(s for s in diagnostics[-1].status if s.name == "recorder")  # level: a byte in rclpy
@@ -300,11 +307,7 @@ def test_the_node_refuses_a_hostile_corpus_keeps_stepping_and_finishes_its_bag(t
         response = call(services["spawn"], AddDiagnostics.Request(load_namespace="{name: fine, position: [0, 0, 5]}"))
         assert response.success, response.message
     finally:
-        executor.shutdown()
-        client.destroy_node()
-        rclpy.try_shutdown(context=context)
-        node_process.send_signal(signal.SIGINT)
-        output, _ = node_process.communicate(timeout=60)
+        output = stop_node(node_process, executor, client, context)
     assert node_process.returncode == 0, output[-2000:]
     for mesh, (_, problem) in broken_meshes.items():
         assert f"~/load_scene: RESULT_OPERATION_FAILED: {tmp_path / mesh}.yaml: playground.mesh: mesh " \
