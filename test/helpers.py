@@ -1,7 +1,22 @@
-"""Scene builders shared by the physics tests."""
+"""Helpers shared by the tests: waiting for a condition, and the scene builders of the physics tests."""
+import time
+
 import numpy as np
 
 from vplayground_ros.physics import World
+
+# Long enough for a loaded 2-core machine (a node's first batch can wait on Numba's cache load);
+# a condition that holds returns at once, so the timeout costs nothing when tests pass.
+WAIT_TIMEOUT = 30.0
+
+
+def wait_for(condition, timeout=WAIT_TIMEOUT):
+    """Polls `condition` until it holds (returns True) or `timeout` s pass (the test fails)."""
+    deadline = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < deadline, f"timed out after {timeout} s"
+        time.sleep(0.005)
+    return True
 
 
 def kinetic_energy(world):

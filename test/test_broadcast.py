@@ -39,6 +39,7 @@ from vplayground_ros.interfaces import decoder  # noqa: E402
 from vplayground_ros.runtime import Runtime  # noqa: E402
 from vplayground_ros.scene import load_world  # noqa: E402
 from vplayground_ros.simulation import Simulation  # noqa: E402
+from helpers import wait_for  # noqa: E402
 
 MARKERS = decoder("visualization_msgs/msg/MarkerArray")
 POSES = decoder("geometry_msgs/msg/PoseArray")
@@ -75,12 +76,6 @@ class Collector:
     def of(self, key, decode=None):
         return [(t, decode(d) if decode else d) for k, t, d in list(self.messages) if k == key]
 
-
-def wait_for(condition, timeout=30.0):
-    deadline = time.monotonic() + timeout
-    while not condition():
-        assert time.monotonic() < deadline, "timed out"
-        time.sleep(0.01)
 
 
 @pytest.fixture

@@ -18,17 +18,12 @@ from vplayground_ros.physics.world import WORLD_RADIUS
 from vplayground_ros.recorder import Recorder
 from vplayground_ros.scene import load_world
 from vplayground_ros.simulation import Simulation
+from helpers import wait_for
 
 SCENE = {"version": 1, "bodies": [{"name": "victim", "position": [0, 0, 0.5]},
                                   {"name": "bystander", "position": [3, 0, 0.5]},
                                   {"name": "neighbour", "position": [0, 3, 0.5]}]}
 
-
-def wait_for(condition, timeout=20.0):
-    deadline = time.monotonic() + timeout
-    while not condition():
-        assert time.monotonic() < deadline, "timed out"
-        time.sleep(0.005)
 
 
 @pytest.fixture

@@ -31,6 +31,7 @@ from visualization_msgs.srv import GetInteractiveMarkers  # noqa: E402
 
 from vplayground_ros.cli import parse_args  # noqa: E402
 from foxglove_client import FoxgloveClient  # noqa: E402
+from helpers import wait_for  # noqa: E402
 from vplayground_ros.foxglove_server import FoxgloveServer  # noqa: E402
 from vplayground_ros.node import SimulatorNode  # noqa: E402
 from vplayground_ros.runtime import Runtime  # noqa: E402
@@ -39,14 +40,6 @@ from vplayground_ros.simulation import Simulation  # noqa: E402
 
 NS = "/vplayground"
 
-
-def wait_for(predicate, timeout=10.0):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if predicate():
-            return True
-        time.sleep(0.02)
-    return False
 
 
 class Harness:
