@@ -4,6 +4,7 @@ window must work without a ROS install."""
 import json
 import math
 import random
+import socket
 import struct
 import subprocess
 import sys
@@ -17,6 +18,9 @@ from websockets.sync.client import connect
 
 from foxglove_client import OLD_SUBPROTOCOL, SUBPROTOCOL, URL_IN_LOG, FoxgloveClient
 from foxglove_js import needs_node, run_script
+from helpers import wait_for
+
+from vplayground_ros.foxglove_front import MAX_VIEWERS
 
 NS = "/vplayground"
 TOPICS = {
@@ -103,6 +107,30 @@ def test_a_viewer_asking_for_another_protocol_is_refused(server):
     with pytest.raises(InvalidStatus) as refused:
         connect(server[0], subprotocols=["foxglove.websocket.v2"], open_timeout=10)
     assert refused.value.response.status_code == 400
+
+
+def test_viewers_past_the_cap_are_refused_and_served_again_once_slots_free(server):
+    """Connections that never finish their handshake (a slow or hostile client) hold their slot
+    up to the handshake timeout; past MAX_VIEWERS the relay answers 503 instead of starting
+    threads without end."""
+    host, port = server[0].removeprefix("ws://").rsplit(":", 1)
+    idle = [socket.create_connection((host, int(port)), timeout=30) for _ in range(MAX_VIEWERS)]
+    try:
+        extra = socket.create_connection((host, int(port)), timeout=30)
+        with extra:
+            assert extra.recv(4096).startswith(b"HTTP/1.1 503 Service Unavailable")
+    finally:
+        for sock in idle:
+            sock.close()
+
+    def a_viewer_is_served():
+        try:
+            FoxgloveClient(server[0]).close()
+            return True
+        except InvalidStatus:
+            return False
+    assert wait_for(a_viewer_is_served)
+    assert f"foxglove: {MAX_VIEWERS} viewers connected, refusing more" in "".join(server[1])
 
 
 def test_a_taken_port_is_a_clear_error(server):

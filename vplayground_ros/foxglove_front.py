@@ -21,6 +21,9 @@ SUBPROTOCOLS = [SDK_SUBPROTOCOL, b"foxglove.websocket.v1"]
 HANDSHAKE_LIMIT = 64 * 1024  # bytes: an HTTP head larger than this is not a viewer's
 HANDSHAKE_TIMEOUT = 10.0  # s for a viewer (or the sdk) to send its handshake
 CHUNK = 256 * 1024  # bytes per copy: a scenery mesh message is megabytes
+# Viewers served at once (each holds two threads; one in the handshake holds its slot up to
+# HANDSHAKE_TIMEOUT): anyone who can reach the port could otherwise open connections without end.
+MAX_VIEWERS = 16
 
 
 class HandshakeError(Exception):
@@ -112,6 +115,16 @@ def with_metadata(payload, metadata):
     return json.dumps(info, separators=(",", ":")).encode()
 
 
+def refuse(sock, status, text):
+    """An HTTP error answer with `text` as its body; a peer already gone is ignored."""
+    body = f"{text}\n".encode()
+    try:
+        sock.sendall(b"HTTP/1.1 %s\r\nContent-Type: text/plain\r\nConnection: close\r\n"
+                     b"Content-Length: %d\r\n\r\n" % (status, len(body)) + body)
+    except OSError:
+        pass
+
+
 def copy(source, target):
     """Bytes from source to target until either side closes; then both are shut."""
     buffer = memoryview(bytearray(CHUNK))
@@ -141,6 +154,8 @@ class ProtocolFront:
         self.listener = socket.create_server((host, port))
         self.port = self.listener.getsockname()[1]
         self.connections = set()
+        self.serving = 0       # viewers with a thread of their own, at most MAX_VIEWERS
+        self._full_logged = False  # the warning about refused viewers, once until a slot frees
         self._lock = threading.Lock()
         self._thread = threading.Thread(target=self._accept, name="foxglove-front", daemon=True)
         self._thread.start()
@@ -162,6 +177,20 @@ class ProtocolFront:
                 viewer, address = self.listener.accept()
             except OSError:  # stopped
                 return
+            with self._lock:
+                full = self.serving >= MAX_VIEWERS
+                if not full:
+                    self.serving += 1
+                warn = full and not self._full_logged
+                self._full_logged |= full
+            if full:
+                if warn:
+                    self.log.warning(f"foxglove: {MAX_VIEWERS} viewers connected, refusing more "
+                                     f"(first refused: {address[0]}:{address[1]})")
+                viewer.settimeout(HANDSHAKE_TIMEOUT)
+                refuse(viewer, b"503 Service Unavailable", f"too many viewers: at most {MAX_VIEWERS} at once")
+                viewer.close()
+                continue
             threading.Thread(target=self._serve, args=(viewer, address), daemon=True).start()
 
     def _serve(self, viewer, address):
@@ -198,17 +227,14 @@ class ProtocolFront:
             if upgraded:
                 self.log.info(f"foxglove: viewer {peer} left")
         except HandshakeError as error:
-            text = f"{error}\n".encode()
-            try:
-                viewer.sendall(b"HTTP/1.1 400 Bad Request\r\nContent-Type: text/plain\r\nConnection: close\r\n"
-                               b"Content-Length: %d\r\n\r\n" % len(text) + text)
-            except OSError:
-                pass
+            refuse(viewer, b"400 Bad Request", error)
         except (OSError, ValueError) as error:  # a peer gone or silent mid-handshake, serverInfo not JSON
             self.log.warning(f"foxglove: viewer {peer}: {error}")
         finally:
             with self._lock:
                 self.connections.difference_update((viewer, sdk))
+                self.serving -= 1
+                self._full_logged = False
             for sock in (viewer, sdk):
                 if sock is not None:
                     sock.close()
