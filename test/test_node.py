@@ -325,7 +325,7 @@ def test_the_turning_cars_imu_yaw_rate_agrees_with_odometry(ros):
             publisher.publish(command)
             time.sleep(0.05)
     threading.Thread(target=keep_publishing, daemon=True).start()
-    turning = lambda: [t for t in set(imu) & set(odom) if odom[t].twist.twist.angular.z > 0.3]  # noqa: E731
+    turning = lambda: [t for t in set(imu) & set(odom) if odom[t].twist.twist.angular.z > 0.1]  # noqa: E731
     try:
         assert wait_for(lambda: len(turning()) >= 10, timeout=60)
     finally:
