@@ -216,6 +216,10 @@ def test_a_sensor_spawned_on_a_body_publishes_and_goes_with_its_parent(ros):
     assert ok, message
     ok, message = ros.text("edit", "{entity: crate_laser, range_max: -1}")
     assert not ok and "crate_laser.range_max" in message
+    saved = ros.scene_directory / "with_sensor.yaml"
+    assert ros.text("save_scene", str(saved))[0]
+    entry = next(s for s in yaml.safe_load(saved.read_text())["sensors"] if s["name"] == "crate_laser")
+    assert (entry["parent"], entry["rate"], entry["samples"]) == ("crate", 5.0, 3)
     ok, message = ros.text("remove", "{entity: crate}")
     assert ok and "crate_laser" in message
     assert wait_for(lambda: ("crate", "crate_laser") not in static_frames(ros))
