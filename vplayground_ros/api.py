@@ -386,8 +386,9 @@ class Requests:
             raise RequestError(FAILED, f"get_entity.entity: expected an entity name, got {specs.quote(name)}")
 
         def read(world):
-            if sensor_named(world, name) is not None:
-                return describe_sensor(world, sensor_named(world, name))
+            sensor = sensor_named(world, name)
+            if sensor is not None and (sensor["parent"] == "world" or sensor["parent"] in world.body_names()):
+                return describe_sensor(world, sensor)
             if name not in world.body_names():
                 raise RequestError(NOT_FOUND, f"no entity named {specs.quote(name)}")
             return describe(world, name)
@@ -398,8 +399,12 @@ class Requests:
         ~/bodies/poses, then the sensors."""
         def read(world):
             vehicles = set(world.vehicle_names())  # once, not per entity: 10,000 bodies stay linear
-            return ([(name, describe(world, name, vehicles)) for name in world.body_names()]
-                    + [(s["name"], describe_sensor(world, s)) for s in world.sensor_specs])
+            names = world.body_names()
+            present = set(names)
+            # A sensor whose parent left the world goes at its next sample: not listed meanwhile.
+            return ([(name, describe(world, name, vehicles)) for name in names]
+                    + [(s["name"], describe_sensor(world, s)) for s in world.sensor_specs
+                       if s["parent"] == "world" or s["parent"] in present])
         return self.sim.call(read)
 
     # --------------------------------------------------------------- simulation state
