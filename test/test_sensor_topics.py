@@ -35,6 +35,8 @@ SCENE = {
          "angle_min": -0.6, "angle_max": 0.6, "samples": 13, "range_min": 0.1, "range_max": 30.0},
         {"name": "back", "type": "lidar_2d", "parent": "world", "pose": [0, 0, HEIGHT, 0, 0, math.pi], "rate": 10,
          "angle_min": -0.6, "angle_max": 0.6, "samples": 13, "range_min": 0.1, "range_max": 30.0},
+        {"name": "near", "type": "lidar_2d", "parent": "world", "pose": [0, 0, HEIGHT, 0, 0, 0], "rate": 10,
+         "angle_min": -0.1, "angle_max": 0.1, "samples": 3, "range_min": WALL + 1.0, "range_max": 30.0},
         {"name": "velodyne", "type": "lidar_3d", "parent": "world", "pose": [0, 0, HEIGHT, 0, 0, 0], "rate": 5,
          "horizontal_samples": 64, "channels": 4, "vertical_min": -0.1, "vertical_max": 0.1,
          "range_min": 0.3, "range_max": 30.0},
@@ -45,7 +47,7 @@ SCENE = {
         {"name": "imu", "type": "imu", "parent": "world", "rate": 50},
     ],
 }
-TOPICS = {"/front/scan": LaserScan, "/back/scan": LaserScan, "/velodyne/points": PointCloud2,
+TOPICS = {"/front/scan": LaserScan, "/back/scan": LaserScan, "/near/scan": LaserScan, "/velodyne/points": PointCloud2,
           "/depth/depth/image_raw": Image, "/depth/depth/camera_info": CameraInfo,
           "/eye/image_raw": Image, "/eye/camera_info": CameraInfo, "/imu/data": Imu}
 
@@ -78,7 +80,7 @@ def test_every_sensor_topic_is_advertised_with_its_type(ros):
         assert advertised[topic] == f"sensor_msgs/msg/{kind.__name__}"
 
 
-def test_a_lidar_facing_a_wall_reads_its_distance_and_inf_beyond_range(ros):
+def test_a_lidar_facing_a_wall_reads_its_distance_and_inf_out_of_range(ros):
     scan = ros.latest["/front/scan"]
     assert scan.header.frame_id == "front"
     angles = scan.angle_min + scan.angle_increment * np.arange(len(scan.ranges))
@@ -89,6 +91,8 @@ def test_a_lidar_facing_a_wall_reads_its_distance_and_inf_beyond_range(ros):
     assert (scan.range_min, scan.range_max) == (pytest.approx(0.1), pytest.approx(30.0))
     # Facing away: nothing within range_max, REP 117's +inf on every beam.
     assert all(r == math.inf for r in ros.latest["/back/scan"].ranges)
+    # The wall nearer than range_min: -inf on every beam.
+    assert list(ros.latest["/near/scan"].ranges) == [-math.inf] * 3
 
 
 def test_sensor_messages_are_stamped_on_their_rate_grid(ros):
