@@ -111,6 +111,25 @@ def test_a_bag_has_the_same_message_times_at_any_speed(bags_at_two_speeds):
     assert all(value > 0.0 for value in rtf["0"][1:] + rtf["1"][1:]), rtf  # after t = 0 nothing was measured
 
 
+def reading(topic, msg):
+    """What a sensor message read: its numbers (the stamps are compared above)."""
+    if topic.endswith("/scan"):
+        return np.asarray(msg.ranges, np.float32).tobytes()
+    if topic.endswith("/data"):
+        return tuple(getattr(getattr(msg, part), axis) for part in ("linear_acceleration", "angular_velocity")
+                     for axis in "xyz")
+    return bytes(msg.data)
+
+
+def test_a_bag_holds_the_same_scans_at_any_speed(bags_at_two_speeds):
+    """The default car's sensors, read on simulated time from the state after the step: the
+    same readings in real time as as fast as possible (seeded noise included)."""
+    for topic in ("/laser/scan", "/lidar/points", "/depth_camera/depth/image_raw", "/camera/image_raw", "/imu/data"):
+        real_time, fast = ([(log_time, reading(topic, msg)) for name, log_time, _, msg in bags_at_two_speeds[rtf]
+                            if name == topic] for rtf in ("1", "0"))
+        assert len(fast) >= 19 and real_time == fast, topic
+
+
 def test_no_topic_repeats_a_log_time(bags_at_two_speeds):
     """The first batch (Numba loading the engine) once filled a bag's start with 30-40 copies
     of each state topic at t = 0."""
@@ -128,6 +147,9 @@ def test_tf_has_a_transform_for_every_body(bag):
     assert {"car", "tower_1", "base_link", "wheel_front_left", "wheel_rear_right"} <= children
     static = [msg for topic, _, _, msg in messages if topic == "/tf_static"]
     assert static[0].transforms[0].child_frame_id == "odom"
+    mounts = {t.child_frame_id: t.header.frame_id for t in static[-1].transforms}
+    assert {mounts[name] for name in ("laser", "lidar", "depth_camera", "camera", "imu")} == {"base_link"}
+    assert mounts["camera_optical"] == "camera" and mounts["depth_camera_optical"] == "depth_camera"
 
 
 def test_split_files_each_open_on_their_own(tmp_path):

@@ -7,6 +7,7 @@ from unittest.mock import MagicMock
 
 import pytest
 
+from vplayground_ros import sensor_messages
 from vplayground_ros.broadcast import TOPICS, resolve
 from vplayground_ros.foxglove_server import NAVIGATION_GOALS
 from vplayground_ros.inputs import SUBSCRIPTIONS
@@ -94,3 +95,29 @@ def test_plots_read_published_topics():
     published = {resolve(t.name) for t in TOPICS}
     paths = [p["value"] for p in PANELS["Plot!plot"]["paths"]]
     assert paths and all(path.split(".", 1)[0] in published for path in paths), paths
+
+
+def default_sensor_topics():
+    """{topic: type} of the default scene's sensors, as the node names them."""
+    from vplayground_ros.resources import find_shared
+    from vplayground_ros.scene import load_world
+    world = load_world(find_shared("config/default_scene.yaml"))
+    return {resolve(t.name): t.type for spec in world.sensor_specs for t in sensor_messages.topics(spec)}
+
+
+def test_the_3d_panel_shows_the_default_cars_scan_and_cloud():
+    published = default_sensor_topics()
+    published.update({resolve(t.name): t.type for t in TOPICS})
+    shown = {topic: published[topic] for topic, config in SCENE["topics"].items() if config["visible"]}
+    assert "sensor_msgs/msg/LaserScan" in shown.values() and "sensor_msgs/msg/PointCloud2" in shown.values()
+
+
+def test_image_panels_show_the_two_cameras_with_their_calibration():
+    published = default_sensor_topics()
+    images = [config["imageMode"] for key, config in PANELS.items() if key.startswith("Image!")]
+    assert sorted(published[mode["imageTopic"]] for mode in images) == ["sensor_msgs/msg/Image"] * 2
+    assert {mode["imageTopic"].rsplit("/", 1)[0] for mode in images} == \
+        {t.rsplit("/", 1)[0] for t, kind in published.items() if kind == "sensor_msgs/msg/Image"}
+    for mode in images:  # each image with the CameraInfo beside it
+        assert published[mode["calibrationTopic"]] == "sensor_msgs/msg/CameraInfo"
+        assert mode["calibrationTopic"].rsplit("/", 1)[0] == mode["imageTopic"].rsplit("/", 1)[0]

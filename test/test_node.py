@@ -25,6 +25,7 @@ from rcl_interfaces.srv import SetParameters  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
+from sensor_msgs.msg import Imu  # noqa: E402
 from std_msgs.msg import UInt8  # noqa: E402
 from std_srvs.srv import SetBool, Trigger  # noqa: E402
 from visualization_msgs.srv import GetInteractiveMarkers  # noqa: E402
@@ -45,11 +46,11 @@ NS = "/vplayground"
 class Harness:
     """The node on its own executor thread, and a client node beside it."""
 
-    def __init__(self, rtf=4.0):
+    def __init__(self, rtf=4.0, args=()):
         # Scene files only in a directory of the test's own (set at start, like any override).
         self.scene_directory = Path(tempfile.mkdtemp(prefix="vplayground_scenes_"))
         rclpy.init(args=["test", "--ros-args", "-p", f"scene_directories:=['{self.scene_directory}']"])
-        options = parse_args(["--real-time-factor", str(rtf), "--no-record"])
+        options = parse_args(["--real-time-factor", str(rtf), "--no-record", *args])
         self.sim = Simulation(load_world(options.scene), real_time_factor=rtf)
         self.node = SimulatorNode()
         self.runtime = Runtime(self.sim, options, self.node.get_logger(), None, self.node.resolve_topic_name)
@@ -297,6 +298,35 @@ def test_twist_drives_the_car_and_the_timeout_stops_it(ros):
     # No more commands: after cmd_vel_timeout (1.2 s simulated) the car brakes to rest.
     assert wait_for(lambda: ros.sim.snapshot.vehicles["car"]["command_speed"] == 0.0, timeout=10)
     assert wait_for(lambda: abs(speed()) < 0.05, timeout=10)
+
+
+def test_the_turning_cars_imu_yaw_rate_agrees_with_odometry(ros):
+    """The default scene's car and its IMU (at base_link): on the stamps both carry, the gyro's
+    z equals the odometry's yaw rate within the IMU's noise."""
+    stamp = lambda m: m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec  # noqa: E731
+    imu, odom = {}, {}
+    ros.client.create_subscription(Imu, "/imu/data", lambda m: imu.__setitem__(stamp(m), m), 100)
+    ros.client.create_subscription(Odometry, "/odom", lambda m: odom.__setitem__(stamp(m), m), 100)
+    publisher = ros.client.create_publisher(Twist, "cmd_vel", 10)
+    command = Twist()
+    command.linear.x, command.angular.z = 3.0, 1.0
+    driving = threading.Event()
+    driving.set()
+
+    def keep_publishing():
+        while driving.is_set():
+            publisher.publish(command)
+            time.sleep(0.05)
+    threading.Thread(target=keep_publishing, daemon=True).start()
+    turning = lambda: [t for t in set(imu) & set(odom) if odom[t].twist.twist.angular.z > 0.1]  # noqa: E731
+    try:
+        assert wait_for(lambda: len(turning()) >= 10, timeout=60)
+    finally:
+        driving.clear()
+    for t in turning():
+        gyro, twist = imu[t].angular_velocity, odom[t].twist.twist.angular
+        assert abs(gyro.z - twist.z) < 0.006, t  # gyro_noise 0.001 rad/s
+    assert wait_for(lambda: ros.sim.snapshot.vehicles["car"]["command_speed"] == 0.0, timeout=10)  # braking again
 
 
 def test_clicked_point_drops_a_box_and_initialpose_teleports_the_car(ros):

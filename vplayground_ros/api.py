@@ -26,6 +26,8 @@ import yaml
 from .physics import specs
 from .resources import find_shared
 from .scene import YAML_LOADER, SceneError, load_world, world_to_scene
+from .physics.math3d import rpy_to_quat
+from .sensors import TYPES as SENSOR_TYPES, matrix_to_quaternion, pose_matrix, validate_sensor
 from .simulation import PAUSED
 
 OK = "RESULT_OK"
@@ -59,6 +61,7 @@ SIMULATOR_FEATURES = {
     "STEP_SIMULATION_SINGLE": 31,    # ~/step with step_count 1
     "STEP_SIMULATION_MULTIPLE": 32,  # ~/step with step_count n
 }
+SENSOR_SIZE = 0.1  # m: the cube ~/get_entities draws a sensor as
 MAX_PAYLOAD = 1 << 20  # bytes of YAML a request may carry
 DEFAULT_MAX_BODIES = 10_000  # bodies (vehicles included) the world may hold; ~real time at 128 Hz
 MAX_STEPS = 1_000_000  # steps one ~/step may queue (~2 h of simulated time at 128 Hz)
@@ -73,13 +76,19 @@ YAML_DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
 log = logging.getLogger(__name__)
 
 
-def warn_unpublished_sensors(world, scene):
-    """The node reads sensors' scene entries but does not publish them yet (issue 18): say so
-    rather than leave a user waiting for topics."""
-    if world.sensor_specs:
-        names = ", ".join(s["name"] for s in world.sensor_specs)
-        log.warning(f"{scene}: sensors ({names}) are validated and saved with the scene, but the node "
-                    "does not publish their readings yet (vplayground_ros.sensors reads them from Python)")
+def sensor_named(world, name):
+    """The spec of the world's sensor `name`, or None."""
+    return next((s for s in world.sensor_specs if s["name"] == name), None)
+
+
+def drop_sensors_of(world, removed):
+    """The sensors whose parent was just removed go with it, with a warning."""
+    removed = set(removed)
+    orphans = [s["name"] for s in world.sensor_specs if s["parent"] in removed]
+    if orphans:
+        log.warning(f"sensors {', '.join(orphans)} removed with their parent")
+        world.sensor_specs = [s for s in world.sensor_specs if s["parent"] not in removed]
+    return orphans
 
 
 class RequestError(Exception):
@@ -227,6 +236,8 @@ class Requests:
             item.update(pose_fields(pose, f"{path}.initial_pose"))
             if "quaternion" in item:
                 item.pop("rpy", None)  # the pose's orientation wins over the spec's
+        if item.get("type") in SENSOR_TYPES:  # its parent is checked against the world
+            return path, "sensor", item, rename
         vehicle = "wheels" in item or "chassis" in item
         spec = specs.validate_vehicle(item, path) if vehicle else specs.validate_body(item, path)
         return path, vehicle, spec, rename
@@ -236,8 +247,18 @@ class Requests:
         if len(existing) + len(prepared) > cap:
             raise RequestError(FAILED, f"spawn of {len(prepared)} entities: the world has {len(existing)} "
                                        f"bodies and max_bodies is {cap}")
-        names, suffixes = set(existing), {}
+        names, suffixes = set(existing) | {s["name"] for s in world.sensor_specs}, {}
+        parents = set(existing) | {spec.get("name") for _, kind, spec, _ in prepared if kind != "sensor"}
+        sensors = []
         for path, vehicle, spec, rename in prepared:
+            if vehicle == "sensor":
+                sensor = validate_sensor(spec, path, parents)
+                if sensor["name"] in names or sensor["name"] == "world":
+                    raise RequestError(NAME_NOT_UNIQUE, f"{path}.name: {sensor['name']!r} is taken "
+                                                        "(sensor names are frames, unique among entities)")
+                names.add(sensor["name"])
+                sensors.append(sensor)
+                continue
             name = spec.get("name")
             if name is not None and name in names:
                 if not rename:
@@ -250,11 +271,14 @@ class Requests:
         added = []
         try:
             for _, vehicle, spec, _ in prepared:
-                added.append(world.add_vehicle(spec) if vehicle else world.add_body(spec))
+                if vehicle != "sensor":
+                    added.append(world.add_vehicle(spec) if vehicle else world.add_body(spec))
         except Exception:
             world.remove_bodies(added)  # all or nothing
             raise
-        return reply(OK, ", ".join(added))
+        if sensors:  # a new list: whoever follows the sensors sees them change
+            world.sensor_specs = [*world.sensor_specs, *sensors]
+        return reply(OK, ", ".join(added + [s["name"] for s in sensors]))
 
     @handled
     def edit(self, text):
@@ -263,6 +287,8 @@ class Requests:
         if not isinstance(name, str):
             raise RequestError(FAILED, "edit.entity: the name of the entity to edit is missing")
         label = name if specs.NAME_PATTERN.fullmatch(name) else specs.quote(name)  # for messages
+        if self.sim.call(lambda world: sensor_named(world, name) is not None):
+            return self.sim.call(lambda world: self._edit_sensor(world, name, request))
         state = as_mapping(request.pop("state", {}) or {}, "edit.state")
         specs.mapping(state, "edit.state", {"pose", "twist", "header", "acceleration"})
         set_pose = specs.boolean(request.pop("set_pose", "pose" in state), "edit.set_pose")
@@ -298,6 +324,21 @@ class Requests:
             world.edit_vehicle(name, **vehicle_edit)
         return reply(OK, f"edited {name}: {', '.join(sorted(fields) + (['vehicle'] if vehicle_edit else []))}")
 
+    @staticmethod
+    def _edit_sensor(world, name, fields):
+        """A sensor's keys replaced and the whole spec validated again (its name and type stay)."""
+        spec = sensor_named(world, name)
+        if spec is None:
+            raise RequestError(NOT_FOUND, f"no entity named {specs.quote(name)}")
+        for key in ("name", "type"):
+            if key in fields and fields[key] != spec[key]:
+                raise RequestError(FAILED, f"{name}.{key}: a sensor's {key} cannot be edited "
+                                           "(remove it and spawn another)")
+        parents = set(world.body_names())
+        edited = validate_sensor({**spec, **fields}, name, parents)
+        world.sensor_specs = [edited if s is spec else s for s in world.sensor_specs]
+        return reply(OK, f"edited {name}: {', '.join(sorted(set(fields) - {'name', 'type'}))}")
+
     @handled
     def remove(self, text):
         request = as_mapping(parse(text), "remove")
@@ -314,7 +355,7 @@ class Requests:
             if not isinstance(pattern, str) or not pattern or len(pattern) > MAX_FILTER:
                 raise RequestError(FAILED, f"remove.filter: expected a regular expression of 1-{MAX_FILTER} "
                                            f"characters, got {specs.quote(pattern)}")
-            names = self.sim.call(lambda world: world.body_names())
+            names = self.sim.call(lambda world: world.body_names() + [s["name"] for s in world.sensor_specs])
             doomed = match_names(pattern, names)  # here, not on the simulation thread
             if not doomed:
                 raise RequestError(NOT_FOUND, f"no entity matches {specs.quote(pattern)}")
@@ -326,11 +367,15 @@ class Requests:
     @staticmethod
     def _remove(world, doomed, strict):
         present = set(world.body_names())
-        if strict and doomed and doomed[0] not in present:
+        sensors = {s["name"] for s in world.sensor_specs} & set(doomed)
+        if strict and doomed and doomed[0] not in present and doomed[0] not in sensors:
             raise RequestError(NOT_FOUND, f"no entity named {specs.quote(doomed[0])}")
         doomed = [name for name in doomed if name in present]  # a filter's may have gone meanwhile
         world.remove_bodies(doomed)
-        return reply(OK, ", ".join(doomed))
+        if sensors:
+            world.sensor_specs = [s for s in world.sensor_specs if s["name"] not in sensors]
+        orphans = drop_sensors_of(world, doomed)
+        return reply(OK, ", ".join(doomed + sorted(sensors) + orphans))
 
     @handled
     def get_entity(self, text):
@@ -341,16 +386,25 @@ class Requests:
             raise RequestError(FAILED, f"get_entity.entity: expected an entity name, got {specs.quote(name)}")
 
         def read(world):
+            sensor = sensor_named(world, name)
+            if sensor is not None and (sensor["parent"] == "world" or sensor["parent"] in world.body_names()):
+                return describe_sensor(world, sensor)
             if name not in world.body_names():
                 raise RequestError(NOT_FOUND, f"no entity named {specs.quote(name)}")
             return describe(world, name)
         return True, yaml.dump(self.sim.call(read), Dumper=YAML_DUMPER, sort_keys=False)
 
     def entities(self):
-        """[(name, description dict)] of every entity, in the order of ~/bodies/poses."""
+        """[(name, description dict)] of every entity: the bodies in the order of
+        ~/bodies/poses, then the sensors."""
         def read(world):
             vehicles = set(world.vehicle_names())  # once, not per entity: 10,000 bodies stay linear
-            return [(name, describe(world, name, vehicles)) for name in world.body_names()]
+            names = world.body_names()
+            present = set(names)
+            # A sensor whose parent left the world goes at its next sample: not listed meanwhile.
+            return ([(name, describe(world, name, vehicles)) for name in names]
+                    + [(s["name"], describe_sensor(world, s)) for s in world.sensor_specs
+                       if s["parent"] == "world" or s["parent"] in present])
         return self.sim.call(read)
 
     # --------------------------------------------------------------- simulation state
@@ -393,7 +447,12 @@ class Requests:
         initial.update({v["name"]: v for v in self.initial["vehicles"]})
         done = []
         if scope & SCOPE_SPAWNED:
-            world.remove_bodies([name for name in world.body_names() if name not in initial])
+            spawned = [name for name in world.body_names() if name not in initial]
+            world.remove_bodies(spawned)
+            drop_sensors_of(world, spawned)
+            loaded = {s["name"] for s in self.initial.get("sensors", [])}
+            if any(s["name"] not in loaded for s in world.sensor_specs):
+                world.sensor_specs = [s for s in world.sensor_specs if s["name"] in loaded]
             done.append("spawned removed")
         if scope & SCOPE_STATE:
             present = set(world.body_names())
@@ -490,7 +549,6 @@ class Requests:
             self.sim.call(install)
         except TimeoutError as error:
             return UNDEFINED_FAILURE, f"{FAILED}: {error}"
-        warn_unpublished_sensors(world, target)
         return MAP_SUCCESS, f"{OK}: loaded {target} ({len(world.body_names())} bodies)"
 
     @handled
@@ -595,4 +653,21 @@ def describe(world, name, vehicles=None):
         "frozen": body["frozen"],
         "properties": props,
         "bounds": {"size": size.tolist()},
+    }
+
+
+def describe_sensor(world, spec):
+    """A sensor as plain data, like describe(): its pose in `world` now, its spec as properties
+    and a 0.1 m cube as its bounds (for ~/get_entities' marker)."""
+    mount = pose_matrix(spec["pose"][:3], rpy_to_quat(spec["pose"][3:]))
+    if spec["parent"] != "world":
+        body = world.body(spec["parent"])
+        mount = pose_matrix(body["position"], body["quaternion"]) @ mount
+    return {
+        "name": spec["name"],
+        "category": "sensor",
+        "frame": "world",
+        "pose": {"position": mount[:3, 3].tolist(), "orientation": matrix_to_quaternion(mount[:3, :3]).tolist()},
+        "properties": dict(spec),
+        "bounds": {"size": [SENSOR_SIZE] * 3},
     }

@@ -15,7 +15,7 @@ from collections import deque, namedtuple
 
 import numpy as np
 
-from . import cdr, messages
+from . import cdr, messages, sensor_messages
 
 Topic = namedtuple("Topic", "key name type qos")
 # qos: "reliable_1", "reliable_10", "reliable_100", "latched" (reliable, transient local, depth 1)
@@ -49,6 +49,7 @@ PENDING_LIMIT = 8
 HAND_OVER_TIMEOUT = 1.0
 PAUSED_JOBS = ("state", "markers", "diagnostics")  # what goes out while paused, by the wall clock
 PAUSED_ON_CHANGE = ("state", "markers")            # ... and only when the snapshot changed
+SENSOR_QOS = "reliable_10"  # a reliable publisher serves best-effort (sensor data) subscribers too
 
 
 def resolve(name, node_name=NODE_NAME):
@@ -124,6 +125,7 @@ class Broadcaster:
         self.sim = sim
         self.parameters = parameters
         self.log = log
+        self.resolve_name = resolve_name
         self.topics = {t.key: t._replace(name=resolve_name(t.name)) for t in TOPICS}
         self.sinks = []
         self.frames = tuple(parameters[p] for p in ("world_frame", "odom_frame", "base_frame"))
@@ -136,6 +138,10 @@ class Broadcaster:
         self._last_state = None
         self._latched = {}  # key -> (data, seconds) last sent
         self._removed_reported = 0
+        self._sensor_frames = []        # [(parent, child, pose)] of the sensors' static frames
+        self._static_key = None         # (world, its sensor specs, the car) they were made for
+        self._sensor_topics = {}        # (sensor name, type, suffix) -> topic key
+        self._sensor_job = Job("sensors", math.inf, self.publish_readings)  # errors counted like a job's
         self._jobs = {
             "state": Job("state", 1.0 / parameters["publish_rate"], self.publish_state),
             "markers": Job("markers", 1.0 / parameters["marker_rate"], self.publish_markers),
@@ -168,6 +174,18 @@ class Broadcaster:
         sink, a client subscribing) only: the others, the bag above all, have them."""
         for key, (data, seconds) in list(self._latched.items()):
             sink.publish(self.topics[key], data, seconds)
+
+    def sensor_topic(self, spec, suffix):
+        """The key of a sensor's topic (`<name>/<suffix>`), added to the table on first use:
+        the sinks make their publishers and channels for it as it comes."""
+        ident = (spec["name"], spec["type"], suffix)
+        key = self._sensor_topics.get(ident)
+        if key is None:
+            topic = next(t for t in sensor_messages.topics(spec) if t.suffix == suffix)
+            key = f"sensor:{topic.name}:{topic.type}"
+            self.topics[key] = Topic(key, self.resolve_name(topic.name), topic.type, SENSOR_QOS)
+            self._sensor_topics[ident] = key
+        return key
 
     def wanted(self, key):
         topic = self.topics[key]
@@ -235,20 +253,37 @@ class Broadcaster:
             self._scenery.advance(seconds)
             cells = self.sim.world.octree_cells() if self.parameters["show_octree"] else ()
             self._scenery_pending = True
-        self._send_state(seconds)
+        self._send_state(seconds, self._static_frames_changed(snapshot))
         self.sim.next_publish_time = min(job.due for job in (*self._jobs.values(), self._scenery))
-        if due or cells is not None:
+        if due or cells is not None or snapshot.readings:
             self._hand_over((snapshot, due, cells))
 
-    def _send_state(self, seconds):
-        """~/state and /tf_static, latched: when the state changes."""
+    def _static_frames_changed(self, snapshot):
+        """The sensors' static frames made again when the world, its sensors or the car
+        changed (on the simulation thread, which may read the world): True then."""
+        world, car = self.sim.world, self.car(snapshot)
+        key = (world, world.sensor_specs, car)
+        if self._static_key is not None and all(a is b for a, b in zip(key, self._static_key)):
+            return False
+        self._static_key = key
+        base_frame = self.frames[2]
+        self._sensor_frames = sensor_messages.static_frames(
+            world.sensor_specs, lambda parent: base_frame if parent == car else parent)
+        return True
+
+    def _send_state(self, seconds, frames_changed=False):
+        """~/state and /tf_static, latched: when the state changes (and /tf_static when the
+        sensors' frames do)."""
         state = self.sim.state
         if state != self._last_state:
             self._last_state = state
-            world_frame, odom_frame, _ = self.frames
             self.send("state", messages.uint8(state), seconds)
-            self.send("tf_static", self.tf_encoder.encode(seconds, [world_frame], [odom_frame],
-                                                          [messages.IDENTITY]), seconds)
+            frames_changed = True
+        if frames_changed:
+            world_frame, odom_frame, _ = self.frames
+            frames = [(world_frame, odom_frame, messages.IDENTITY), *self._sensor_frames]
+            self.send("tf_static", self.tf_encoder.encode(seconds, [p for p, _, _ in frames], [c for _, c, _ in frames],
+                                                          [pose for _, _, pose in frames]), seconds)
 
     def _hand_over(self, item):
         with self._ready:
@@ -275,6 +310,8 @@ class Broadcaster:
             if cells is not None:
                 self._scenery_pending = False
                 self._run(self._scenery, snapshot, cells)
+            if snapshot.readings:
+                self._run(self._sensor_job, snapshot)
         elif self.sim.paused:
             self._publish_paused()
 
@@ -344,6 +381,8 @@ class Broadcaster:
                 car_frames = messages.car_transforms(snap, car, self.frames, wheels)
                 for parent, child, pose in [(world_frame, odom_frame, messages.IDENTITY), *car_frames]:
                     self.send("transforms", cdr.transform_stamped(snap.time, parent, child, pose), snap.time)
+        for parent, child, pose in self._sensor_frames:  # static: the same on every message
+            self.send("transforms", cdr.transform_stamped(snap.time, parent, child, pose), snap.time)
         s = snap.state
         if self.parameters["publish_body_frames"]:
             for row, name in enumerate(snap.names):
@@ -429,7 +468,7 @@ class Broadcaster:
         if car is not None:
             age = snap.vehicles[car]["command_age"]
             statuses.append(("car", OK, f"{car}: last command {age:.1f} s ago", {"command_age": round(age, 3)}))
-        failed = [job for job in (*self._jobs.values(), self._scenery) if job.errors]
+        failed = [job for job in (*self._jobs.values(), self._scenery, self._sensor_job) if job.errors]
         statuses.append(("publisher", ERROR if failed else (WARN if self.skipped else OK),
                          "; ".join(f"{job.name} failed {job.errors} times: {job.last_error}" for job in failed)
                          or f"publishing, {self.skipped} snapshots skipped",
@@ -437,3 +476,14 @@ class Broadcaster:
         for sink in self.sinks:
             statuses.extend(sink.statuses())
         self.send("diagnostics", messages.diagnostics(snap.time, statuses), snap.time)
+
+    def publish_readings(self, snap):
+        """The sensors read after this snapshot's step: each reading's messages, built when
+        some sink wants one of its topics (the bag always does)."""
+        for sensor, reading in snap.readings:
+            spec = sensor.spec
+            keys = {suffix: self.sensor_topic(spec, suffix) for suffix, _ in sensor_messages.TOPIC_SUFFIXES[spec["type"]]}
+            if not any(self.wanted(key) for key in keys.values()):
+                continue
+            for suffix, data in sensor_messages.build(spec, reading, reading["time"]):
+                self.send(keys[suffix], data, reading["time"])

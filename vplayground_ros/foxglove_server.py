@@ -79,12 +79,20 @@ class FoxgloveServer:
     # ------------------------------------------------------------- the Broadcaster sink
     def publish(self, topic, data, seconds):
         stamp = int(round(seconds * 1e9))
-        self.channels[topic.key].log(data, log_time=stamp)
+        self.channel(topic).log(data, log_time=stamp)
         if topic.key == "clock":
             self.server.broadcast_time(stamp)
 
     def subscribed(self, topic):
-        return self.channels[topic.key].has_sinks()
+        return self.channel(topic).has_sinks()
+
+    def channel(self, topic):
+        """The topic's channel, advertised on first use (a scene's sensor topics)."""
+        channel = self.channels.get(topic.key)
+        if channel is None:
+            channel = self.channels[topic.key] = Channel(topic.name, schema=ros2msg(topic.type),
+                                                         message_encoding="cdr", context=self.context)
+        return channel
 
     def statuses(self):
         return [("foxglove", 0, self.url, {"subscriptions": self.subscriptions,

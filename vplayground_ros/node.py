@@ -72,21 +72,30 @@ class RosSink:
     imports (a ROS install); everything else always."""
 
     def __init__(self, node):
+        self.node = node
         self.publishers = {}
         for topic in TOPICS:
+            self.publisher(topic)
+
+    def publisher(self, topic):
+        """The topic's publisher, made on first use (a scene's sensor topics come and go with
+        it); None where its type does not import."""
+        if topic.key not in self.publishers:
             try:
                 kind = interface_class(topic.type)
             except ImportError:
-                continue
-            self.publishers[topic.key] = node.create_publisher(kind, topic.name, QOS[topic.qos])
+                self.publishers[topic.key] = None
+                return None
+            self.publishers[topic.key] = self.node.create_publisher(kind, topic.name, QOS[topic.qos])
+        return self.publishers[topic.key]
 
     def publish(self, topic, data, seconds):
-        publisher = self.publishers.get(topic.key)
+        publisher = self.publisher(topic)
         if publisher is not None:
             publisher.publish(data)
 
     def subscribed(self, topic):
-        publisher = self.publishers.get(topic.key)
+        publisher = self.publisher(topic)
         return publisher is not None and publisher.get_subscription_count() > 0
 
     def statuses(self):

@@ -5,7 +5,7 @@ the services). ROS-free: `vplayground --no-ros --foxglove` runs on this alone.
 import threading
 from pathlib import Path
 
-from .api import Requests, warn_unpublished_sensors
+from .api import Requests
 from .broadcast import BagSink, Broadcaster, resolve
 from .inputs import Inputs
 from .parameters import PHYSICS, Parameters, parameter_table, settings_from
@@ -30,7 +30,6 @@ class Runtime:
         self.inputs = Inputs(sim, self.requests, self.parameters, log, self.broadcaster.car)
         self.services = service_table(self)
         self.sim.real_time_factor = self.parameters["real_time_factor"]
-        warn_unpublished_sensors(sim.world, options.scene)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._publish, name="vplayground-publisher", daemon=True)
 

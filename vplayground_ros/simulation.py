@@ -14,6 +14,8 @@ from collections import namedtuple
 from concurrent.futures import Future
 from dataclasses import dataclass, field
 
+from .sensors import Sensors
+
 # A batch runs this long at most in wall time, so commands and snapshots stay fresh.
 BATCH_PERIOD = 0.01
 # Steps per batch when running as fast as possible.
@@ -41,6 +43,9 @@ class Snapshot:
     state: dict
     vehicles: dict = field(default_factory=dict)  # name -> vehicle_state()
     contacts: dict = None
+    # [(sensors.Sensor, reading)] of the sensors read after this batch's last step, on the
+    # simulation thread (the rays need the World); the publisher turns them into messages.
+    readings: list = field(default_factory=list)
 
 
 # What the snapshots of one world's layout share, taken once per layout rather than per batch.
@@ -66,6 +71,7 @@ class Simulation:
         # The next simulated time a listener publishes at: a batch ends at the first step at or
         # after it, so what is published carries the same times at any real-time factor.
         self.next_publish_time = math.inf
+        self.sensors = Sensors()  # the world's `sensors:`, read when due after a step
         self.removed = []          # names of bodies removed for going non-finite or away
         self.faults = []           # texts of the first exceptions the loop survived (listeners, steps)
         self.fault_count = 0       # all of them
@@ -172,7 +178,7 @@ class Simulation:
                     origin_wall, origin_sim = time.perf_counter(), world.time
             if self.duration is not None:
                 steps = min(steps, max(0, int(round((self.duration - world.time) * rate))))
-            to_publish = (self.next_publish_time - world.time) * rate
+            to_publish = (self._next_due_time(world) - world.time) * rate
             if 0.0 < to_publish < steps:
                 steps = max(1, math.ceil(to_publish - 1e-6))
             if self.paused:
@@ -196,7 +202,7 @@ class Simulation:
                     origin_wall, origin_sim = time.perf_counter(), world.time
                     rtf_wall, rtf_sim, rtf_measured = origin_wall, world.time, False
                 self.removed += world.remove_escaped()
-                self._publish()
+                self._publish(self._read_sensors(world))
             if self.duration is not None and world.time >= self.duration - 0.5 / rate:
                 break
             now = time.perf_counter()
@@ -237,8 +243,27 @@ class Simulation:
         if applied:
             self._publish()
 
-    def _publish(self):
+    def _next_due_time(self, world):
+        """Where the batch ends: the next time a listener publishes at or a sensor is read."""
+        if not world.sensor_specs:
+            return self.next_publish_time
+        return min(self.next_publish_time, world.time + self.sensors.steps_until_due(world)
+                   / world.settings["steps_per_second"])
+
+    def _read_sensors(self, world):
+        """The sensors due at this step, read from the state after it (a failing read is
+        survived like a failing listener: the physics goes on)."""
+        if not world.sensor_specs:
+            return []
+        try:
+            return self.sensors.sample(world)
+        except Exception as error:
+            self._fault("sensors", error)
+            return []
+
+    def _publish(self, readings=()):
         self.snapshot = self._take_snapshot()
+        self.snapshot.readings = list(readings)
         for listener in self._listeners:
             try:
                 listener(self.snapshot)
