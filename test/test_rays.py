@@ -228,3 +228,21 @@ def test_any_thread_count_gives_the_same_bytes():
             numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
     for one, two in zip(*by_threads):
         assert np.array_equal(one, two, equal_nan=True)
+
+
+def test_one_origin_and_one_range_serve_every_ray_and_out_is_filled_in_place():
+    world = world_with({"name": "b", "size": [1.0, 1.0, 1.0], "position": [5.0, 0.0, 0.5]})
+    directions = [[1.0, 0.0, 0.0], [1.0, 0.0, -0.1], [0.0, 1.0, 0.0]] * 700  # several chunks
+    one = world.cast_rays([0.0, 0.0, 0.5], directions, 20.0)
+    each = world.cast_rays([[0.0, 0.0, 0.5]] * 2100, directions, [20.0] * 2100)
+    for a, b in zip(one, each):
+        assert np.array_equal(a, b, equal_nan=True)
+    assert one.distance[:3] == pytest.approx([4.5, 4.5 / math.cos(math.atan(0.1)), math.inf])
+    scene = world.ray_scene()
+    out = scene.cast([0.0, 0.0, 0.5], directions, 20.0)
+    again = scene.cast([0.0, 0.0, 0.5], np.negative(directions), 20.0, out=out)
+    assert again is out and np.all(out.distance[0::3] == math.inf)
+    with pytest.raises(ValueError, match="out holds 2100 rays, not 3"):
+        scene.cast([0.0, 0.0, 0.5], directions[:3], 20.0, out=out)
+    with pytest.raises(ValueError, match="2 ranges for 3 rays"):
+        scene.cast([0.0, 0.0, 0.5], directions[:3], [20.0, 20.0])

@@ -218,21 +218,22 @@ def test_item(item, o, d, limit, excluded, position, rotation, half_extents, tri
 
 
 @njit(cache=True, nogil=True, inline="always")
-def boundary_t(c, step, lower, cell, o, d):
-    """t at which the ray leaves cell c along one axis (NO_HIT when it does not move along it)."""
+def boundary_t(c, step, lower, cell, o, inverse_d):
+    """t at which the ray leaves cell c along one axis (NO_HIT when it does not move along it);
+    inverse_d is 1 / the direction's component (multiplying: the walk is mostly this)."""
     if step > 0:
-        return (lower + (c + 1) * cell - o) / d
+        return (lower + (c + 1) * cell - o) * inverse_d
     if step < 0:
-        return (lower + c * cell - o) / d
+        return (lower + c * cell - o) * inverse_d
     return NO_HIT
 
 
 @njit(cache=True, nogil=True, inline="always")
-def clip_slab(o, d, lo, hi, t0, t1):
+def clip_slab(o, step, inverse_d, lo, hi, t0, t1):
     """[t0, t1] narrowed to where the ray lies between lo and hi along one axis (empty: t0 > t1)."""
-    if abs(d) < 1e-12:
+    if step == 0:
         return (t0, t1) if lo <= o <= hi else (1.0, 0.0)
-    a, b = (lo - o) / d, (hi - o) / d
+    a, b = (lo - o) * inverse_d, (hi - o) * inverse_d
     return max(t0, min(a, b)), min(t1, max(a, b))
 
 
@@ -241,7 +242,9 @@ def axis_step(d):
     return 1 if d > 1e-12 else (-1 if d < -1e-12 else 0)
 
 
-@njit(cache=True, nogil=True)
+# error_model "numpy": no zero-division checks (every division here is guarded or meant to give
+# inf), which cost the walk a branch each.
+@njit(cache=True, nogil=True, error_model="numpy")
 def cast_chunk(start, stop, origins, directions, max_range, excluded, grid, position, half_extents,
                triangles, normals, ground_enabled, ground_height, row_of_slot, distance, point,
                normal, hit):
@@ -252,13 +255,17 @@ def cast_chunk(start, stop, origins, directions, max_range, excluded, grid, posi
     nx, ny, nz = dims[0], dims[1], dims[2]
     by, bz = (ny + BLOCK - 1) // BLOCK, (nz + BLOCK - 1) // BLOCK
     lx, ly, lz = lower[0], lower[1], lower[2]
+    inverse_cell = 1.0 / cell
     # The ray that last tested each item: an object filed in several cells is tested once a ray.
     tested_by = np.full(len(excluded) + len(triangles), -1, np.int64)
     invalid = 0
+    # One origin or one range may serve every ray (a sensor's scan): row 0 then.
+    origin_step, range_step = min(len(origins) - 1, 1), min(len(max_range) - 1, 1)
     for i in range(start, stop):
-        o = (origins[i, 0], origins[i, 1], origins[i, 2])
+        j = i * origin_step
+        o = (origins[j, 0], origins[j, 1], origins[j, 2])
         length = np.sqrt(directions[i, 0] ** 2 + directions[i, 1] ** 2 + directions[i, 2] ** 2)
-        reach = max_range[i]
+        reach = max_range[i * range_step]
         if not (length > 0.0 and np.isfinite(length) and np.isfinite(o[0]) and np.isfinite(o[1])
                 and np.isfinite(o[2]) and not np.isnan(reach)):
             invalid += 1
@@ -275,41 +282,45 @@ def cast_chunk(start, stop, origins, directions, max_range, excluded, grid, posi
                                      half_extents, triangles, normals)
             if t < limit:
                 best, limit, what, n = t, t, obj, face
-        # The ray's part inside the grid box, [t0, t1].
+        # The ray's part inside the grid box, [t0, t1]. Per axis the direction of travel and
+        # 1 / the direction (unused along an axis it does not move along).
+        sx, sy, sz = axis_step(d[0]), axis_step(d[1]), axis_step(d[2])
+        ix = 1.0 / d[0] if sx else 0.0
+        iy = 1.0 / d[1] if sy else 0.0
+        iz = 1.0 / d[2] if sz else 0.0
         t0, t1 = 0.0, limit
         if nx == 0:
             t1 = -1.0
-        t0, t1 = clip_slab(o[0], d[0], lx, lx + nx * cell, t0, t1)
-        t0, t1 = clip_slab(o[1], d[1], ly, ly + ny * cell, t0, t1)
-        t0, t1 = clip_slab(o[2], d[2], lz, lz + nz * cell, t0, t1)
+        t0, t1 = clip_slab(o[0], sx, ix, lx, lx + nx * cell, t0, t1)
+        t0, t1 = clip_slab(o[1], sy, iy, ly, ly + ny * cell, t0, t1)
+        t0, t1 = clip_slab(o[2], sz, iz, lz, lz + nz * cell, t0, t1)
         if t0 > t1:
             t1 = -1.0  # nothing to walk
-        # Amanatides-Woo from the entry point: the cell, and per axis the direction of travel,
-        # the t of the next cell boundary and the t between boundaries.
-        sx, sy, sz = axis_step(d[0]), axis_step(d[1]), axis_step(d[2])
-        cx = min(max(int(np.floor((o[0] + t0 * d[0] - lx) / cell)), 0), nx - 1)
-        cy = min(max(int(np.floor((o[1] + t0 * d[1] - ly) / cell)), 0), ny - 1)
-        cz = min(max(int(np.floor((o[2] + t0 * d[2] - lz) / cell)), 0), nz - 1)
-        next_x, next_y = boundary_t(cx, sx, lx, cell, o[0], d[0]), boundary_t(cy, sy, ly, cell, o[1], d[1])
-        next_z = boundary_t(cz, sz, lz, cell, o[2], d[2])
-        delta_x = cell / abs(d[0]) if sx else NO_HIT
-        delta_y = cell / abs(d[1]) if sy else NO_HIT
-        delta_z = cell / abs(d[2]) if sz else NO_HIT
+        # Amanatides-Woo from the entry point: the cell, and per axis the t of the next cell
+        # boundary and the t between boundaries.
+        cx = min(max(int(np.floor((o[0] + t0 * d[0] - lx) * inverse_cell)), 0), nx - 1)
+        cy = min(max(int(np.floor((o[1] + t0 * d[1] - ly) * inverse_cell)), 0), ny - 1)
+        cz = min(max(int(np.floor((o[2] + t0 * d[2] - lz) * inverse_cell)), 0), nz - 1)
+        next_x, next_y = boundary_t(cx, sx, lx, cell, o[0], ix), boundary_t(cy, sy, ly, cell, o[1], iy)
+        next_z = boundary_t(cz, sz, lz, cell, o[2], iz)
+        delta_x = cell * abs(ix) if sx else NO_HIT
+        delta_y = cell * abs(iy) if sy else NO_HIT
+        delta_z = cell * abs(iz) if sz else NO_HIT
         while t1 >= 0.0:
             if block_items[((cx // BLOCK) * by + cy // BLOCK) * bz + cz // BLOCK] == 0:
                 # An empty block: jump to where the ray leaves it, in the cell beyond.
-                ex = boundary_t(cx // BLOCK, sx, lx, BLOCK * cell, o[0], d[0])
-                ey = boundary_t(cy // BLOCK, sy, ly, BLOCK * cell, o[1], d[1])
-                ez = boundary_t(cz // BLOCK, sz, lz, BLOCK * cell, o[2], d[2])
+                ex = boundary_t(cx // BLOCK, sx, lx, BLOCK * cell, o[0], ix)
+                ey = boundary_t(cy // BLOCK, sy, ly, BLOCK * cell, o[1], iy)
+                ez = boundary_t(cz // BLOCK, sz, lz, BLOCK * cell, o[2], iz)
                 leave = min(ex, ey, ez)
                 if leave > t1 or limit <= leave:
                     break
                 # The other two axes stay within the block (clamped against rounding): a cell
                 # of the empty block visited again only costs another jump.
                 x0, y0, z0 = (cx // BLOCK) * BLOCK, (cy // BLOCK) * BLOCK, (cz // BLOCK) * BLOCK
-                cx = min(max(int(np.floor((o[0] + leave * d[0] - lx) / cell)), x0), x0 + BLOCK - 1)
-                cy = min(max(int(np.floor((o[1] + leave * d[1] - ly) / cell)), y0), y0 + BLOCK - 1)
-                cz = min(max(int(np.floor((o[2] + leave * d[2] - lz) / cell)), z0), z0 + BLOCK - 1)
+                cx = min(max(int(np.floor((o[0] + leave * d[0] - lx) * inverse_cell)), x0), x0 + BLOCK - 1)
+                cy = min(max(int(np.floor((o[1] + leave * d[1] - ly) * inverse_cell)), y0), y0 + BLOCK - 1)
+                cz = min(max(int(np.floor((o[2] + leave * d[2] - lz) * inverse_cell)), z0), z0 + BLOCK - 1)
                 if ex == leave:
                     cx = x0 + BLOCK if sx > 0 else x0 - 1
                 elif ey == leave:
@@ -318,8 +329,8 @@ def cast_chunk(start, stop, origins, directions, max_range, excluded, grid, posi
                     cz = z0 + BLOCK if sz > 0 else z0 - 1
                 if cx < 0 or cx >= nx or cy < 0 or cy >= ny or cz < 0 or cz >= nz:
                     break
-                next_x, next_y = boundary_t(cx, sx, lx, cell, o[0], d[0]), boundary_t(cy, sy, ly, cell, o[1], d[1])
-                next_z = boundary_t(cz, sz, lz, cell, o[2], d[2])
+                next_x, next_y = boundary_t(cx, sx, lx, cell, o[0], ix), boundary_t(cy, sy, ly, cell, o[1], iy)
+                next_z = boundary_t(cz, sz, lz, cell, o[2], iz)
                 continue
             c = (cx * ny + cy) * nz + cz
             for k in range(cell_start[c], cell_start[c + 1]):
@@ -360,19 +371,19 @@ def cast_chunk(start, stop, origins, directions, max_range, excluded, grid, posi
     return invalid
 
 
-@njit(cache=True, nogil=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True, error_model="numpy")
 def cast_ray_batch(origins, directions, max_range, excluded, grid, position, half_extents,
                    triangles, normals, ground_enabled, ground_height, row_of_slot, distance, point,
                    normal, hit):
     """Nearest hit of each ray origins[i] + t directions[i] (normalised here), 0 <= t <=
-    max_range[i], with the ground, the playground or a body not `excluded` (bool per slot).
+    max_range[i] (origins or max_range may have one row for all rays), with the ground, the playground or a body not `excluded` (bool per slot).
     Writes distance (NO_HIT for nothing), the hit point (NaN for nothing), the surface normal and
     what was hit (row_of_slot of the body slot, GROUND, PLAYGROUND or NOTHING). Returns the count
     of invalid rays (see cast_chunk)."""
-    chunks = (len(origins) + RAY_CHUNK - 1) // RAY_CHUNK
+    chunks = (len(directions) + RAY_CHUNK - 1) // RAY_CHUNK
     invalid = np.zeros(chunks, np.int64)
     for chunk in prange(chunks):
-        invalid[chunk] = cast_chunk(chunk * RAY_CHUNK, min(len(origins), (chunk + 1) * RAY_CHUNK),
+        invalid[chunk] = cast_chunk(chunk * RAY_CHUNK, min(len(directions), (chunk + 1) * RAY_CHUNK),
                                     origins, directions, max_range, excluded, grid, position,
                                     half_extents, triangles, normals, ground_enabled, ground_height,
                                     row_of_slot, distance, point, normal, hit)
@@ -399,33 +410,37 @@ class RayScene:
                                     playground.aabb_min, playground.aabb_max)
         self._row_of_slot = np.cumsum(bodies.active) - 1
 
-    def cast(self, origins, directions, max_range, exclude=()):
-        """RayHits of the rays origins (R, 3) + t directions (R, 3; normalised here), 0 <= t <=
-        max_range (a number or (R,)), ignoring the bodies named in `exclude` (a sensor's
-        parent). One compiled call for the whole batch."""
-        origins = np.ascontiguousarray(origins, dtype=np.float64).reshape(-1, 3)
+    def cast(self, origins, directions, max_range, exclude=(), out=None):
+        """RayHits of the rays origins (R, 3, or one point (3,) for all) + t directions (R, 3;
+        normalised here), 0 <= t <= max_range (a number or (R,)), ignoring the bodies named in
+        `exclude` (a sensor's parent). One compiled call for the whole batch. `out`: RayHits of
+        R rows to fill and return instead of new arrays (a sensor reuses its own every scan)."""
         directions = np.ascontiguousarray(directions, dtype=np.float64).reshape(-1, 3)
-        if len(directions) != len(origins):
-            raise ValueError(f"cast_rays: {len(origins)} origins but {len(directions)} directions")
-        count = len(origins)
-        max_range = np.asarray(max_range, dtype=np.float64)
-        max_range = (np.full(count, float(max_range)) if max_range.ndim == 0
-                     else np.ascontiguousarray(np.broadcast_to(max_range, (count,))))
+        count = len(directions)
+        origins = np.ascontiguousarray(origins, dtype=np.float64)
+        origins = origins.reshape(1, 3) if origins.shape == (3,) else origins.reshape(-1, 3)
+        if len(origins) != count and origins.shape != (1, 3):
+            raise ValueError(f"cast_rays: {len(origins)} origins but {count} directions")
+        max_range = np.ascontiguousarray(max_range, dtype=np.float64).reshape(-1)
+        if len(max_range) not in (1, count):
+            raise ValueError(f"cast_rays: {len(max_range)} ranges for {count} rays")
         excluded = np.zeros(len(self._bodies.active), np.bool_)
         for name in exclude:
             if name not in self._slots:
                 raise KeyError(f"cast_rays: no body named {name!r} to exclude")
             excluded[self._slots[name]] = True
-        distance, point = np.empty(count), np.empty((count, 3))
-        normal, body = np.empty((count, 3)), np.empty(count, np.int64)
+        if out is None:
+            out = RayHits(np.empty(count), np.empty((count, 3)), np.empty((count, 3)),
+                          np.empty(count, np.int64))
+        elif len(out.distance) != count:
+            raise ValueError(f"cast_rays: out holds {len(out.distance)} rays, not {count}")
         g = self._ground
         invalid = cast_ray_batch(origins, directions, max_range, excluded, self._grid,
                                  self._bodies.position, self._bodies.half_extents,
                                  self._playground.triangles, self._playground.normals, g is not None,
-                                 float(g["height"]) if g else 0.0, self._row_of_slot, distance, point,
-                                 normal, body)
+                                 float(g["height"]) if g else 0.0, self._row_of_slot, *out)
         if invalid:
-            raise ValueError(f"cast_rays: {invalid} rays with a zero or non-finite direction or a "
-                             "non-finite origin or a NaN range: every direction must be non-zero and every "
-                             "value finite")
-        return RayHits(distance, point, normal, body)
+            raise ValueError(f"cast_rays: {invalid} rays with a zero or non-finite direction, a "
+                             "non-finite origin or a NaN range: every direction must be non-zero and "
+                             "every value finite")
+        return out
