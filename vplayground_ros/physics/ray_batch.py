@@ -10,6 +10,7 @@ crosses, each object once per ray, and stops at the first cell that ends behind 
 The exact tests are raycast.py's. Rays are cast in parallel chunks (Numba's threads): each ray's
 result depends on that ray alone, so any thread count gives the same bytes.
 """
+import os
 from collections import namedtuple
 
 import numpy as np
@@ -18,6 +19,13 @@ from numba import njit, prange
 from .contact import GROUND, PLAYGROUND
 from .math3d import quat_to_matrix
 from .raycast import NO_HIT, ray_box, ray_triangle
+
+# Numba's OpenMP threads spin after each parallel batch by default: on a machine shared with the
+# node's other threads (or other processes) that spinning took several times the casting's own
+# CPU (bench/rays.py: 73 % of a core instead of 10 % for the sensor set). Idle threads sleep
+# instead, unless the user chose a policy. Read when OpenMP loads, at the first parallel batch, so
+# setting it here, after importing Numba, is in time.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 NOTHING = -3  # what a ray that hits nothing reports (GROUND -1 and PLAYGROUND -2 otherwise)
 
