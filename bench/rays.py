@@ -93,7 +93,8 @@ def main():
     parser.add_argument("--boxes", type=int, default=1000)
     parser.add_argument("--rays", type=int, default=200_000)
     parser.add_argument("--repeats", type=int, default=10)
-    parser.add_argument("--settle", type=float, default=2.0, help="seconds the settled pile is simulated first")
+    parser.add_argument("--settle", type=float, default=2.0,
+                        help="seconds the settled pile is simulated first")
     parser.add_argument("--seconds", type=float, default=2.0, help="simulated seconds of sensor readings")
     args = parser.parse_args()
     scenes = [("settled pile", dict(settle_seconds=args.settle)),

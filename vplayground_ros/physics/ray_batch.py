@@ -132,8 +132,9 @@ def file_items(used, item_min, item_max, capacity, triangles, lower, cell, dims,
             for y in range(r[2], r[3] + 1):
                 for z in range(r[4], r[5] + 1):
                     if i >= capacity:
-                        centre[0], centre[1], centre[2] = (lower[0] + (x + 0.5) * cell, lower[1] + (y + 0.5) * cell,
-                                                           lower[2] + (z + 0.5) * cell)
+                        centre[0] = lower[0] + (x + 0.5) * cell
+                        centre[1] = lower[1] + (y + 0.5) * cell
+                        centre[2] = lower[2] + (z + 0.5) * cell
                         if not triangle_meets_cell(triangles, i - capacity, centre, half):
                             continue
                     c = (x * dims[1] + y) * dims[2] + z
@@ -217,6 +218,14 @@ def test_item(item, o, d, limit, excluded, position, rotation, half_extents, tri
     capacity = len(excluded)
     if item < capacity:
         if excluded[item]:
+            return NO_HIT, item, (0.0, 0.0, 0.0)
+        # Most boxes a ray meets in its cells it passes by: the bounding sphere rules those out
+        # without the slab test's three divisions (with a margin for the rounding of a far box).
+        vx, vy, vz = position[item, 0] - o[0], position[item, 1] - o[1], position[item, 2] - o[2]
+        along = vx * d[0] + vy * d[1] + vz * d[2]
+        h = (half_extents[item, 0], half_extents[item, 1], half_extents[item, 2])
+        radius2, away2 = h[0] * h[0] + h[1] * h[1] + h[2] * h[2], vx * vx + vy * vy + vz * vz
+        if away2 - along * along > radius2 + 1e-9 * (radius2 + away2):
             return NO_HIT, item, (0.0, 0.0, 0.0)
         t, face = ray_box(o, d, limit, position, rotation, half_extents, item)
         return t, item, face
@@ -384,10 +393,10 @@ def cast_ray_batch(origins, directions, max_range, excluded, grid, position, hal
                    triangles, normals, ground_enabled, ground_height, row_of_slot, distance, point,
                    normal, hit):
     """Nearest hit of each ray origins[i] + t directions[i] (normalised here), 0 <= t <=
-    max_range[i] (origins or max_range may have one row for all rays), with the ground, the playground or a body not `excluded` (bool per slot).
-    Writes distance (NO_HIT for nothing), the hit point (NaN for nothing), the surface normal and
-    what was hit (row_of_slot of the body slot, GROUND, PLAYGROUND or NOTHING). Returns the count
-    of invalid rays (see cast_chunk)."""
+    max_range[i] (origins or max_range may have one row for all rays), with the ground, the
+    playground or a body not `excluded` (bool per slot). Writes distance (NO_HIT for nothing),
+    the hit point (NaN for nothing), the surface normal and what was hit (row_of_slot of the body
+    slot, GROUND, PLAYGROUND or NOTHING). Returns the count of invalid rays (see cast_chunk)."""
     chunks = (len(directions) + RAY_CHUNK - 1) // RAY_CHUNK
     invalid = np.zeros(chunks, np.int64)
     for chunk in prange(chunks):
