@@ -246,3 +246,36 @@ def test_one_origin_and_one_range_serve_every_ray_and_out_is_filled_in_place():
         scene.cast([0.0, 0.0, 0.5], directions[:3], 20.0, out=out)
     with pytest.raises(ValueError, match="2 ranges for 3 rays"):
         scene.cast([0.0, 0.0, 0.5], directions[:3], [20.0, 20.0])
+
+
+def test_a_triangle_corner_poking_a_little_into_a_cell_is_found_in_that_cell():
+    """Each triangle reaches across a cell plane by a thousandth of a cell at one corner only, and a
+    ray ending just behind that corner never leaves the cell: only filing the triangle in the cell
+    it barely enters lets the ray see it."""
+    rng = np.random.default_rng(8)
+    world = World(ground=None)
+    # Small boxes set the cell size (the median object); two at the corners fix the grid's corner.
+    for position in [*rng.uniform(-6.0, 6.0, (200, 3)), (-8.0, -8.0, -8.0), (8.0, 8.0, 8.0)]:
+        world.add_body({"size": [0.2, 0.2, 0.2], "position": list(position), "immovable": True})
+    grid = world.ray_scene()._grid
+    lower, cell = grid.lower.copy(), grid.cell_size[0]
+    steps = np.floor((np.array([-4.0, -5.0, -5.0]) - lower) / cell)
+    corners = []
+    for k in range(30):
+        plane, y, z = lower + (steps + rng.integers(0, 30, 3) + (0.0, 0.5, 0.5)) * cell
+        poke = (plane + 1e-3 * cell, y, z)  # just inside the cell beyond the plane
+        spread = rng.uniform(0.5, 1.0, 2)
+        # Counter-clockwise seen from +x: facing the rays, which come from there.
+        corners.append([poke, (plane - 1.5, y - spread[0], z - spread[1]),
+                        (plane - 1.5, y + spread[0], z - spread[1])])
+    corners = np.array(corners)
+    world.set_playground(corners.reshape(-1, 3), np.arange(90).reshape(30, 3))
+    after = world.ray_scene()._grid
+    assert np.array_equal(after.lower, lower) and after.cell_size[0] == cell  # the same cells
+    targets = np.einsum("v,tvj->tj", [1 - 2e-6, 1e-6, 1e-6], corners)
+    directions = -np.column_stack([np.ones(30), rng.uniform(-0.3, 0.3, (30, 2))])
+    directions /= np.linalg.norm(directions, axis=1)[:, None]
+    origins = targets - 2.0 * directions
+    hits = world.cast_rays(origins, directions, 2.0 + 1e-4 * cell, exclude=world.body_names())
+    assert hits.distance == pytest.approx(np.full(30, 2.0), abs=1e-9)
+    assert np.all(hits.body == PLAYGROUND)
