@@ -280,7 +280,7 @@ class Sensors:
         return pose_matrix(body["position"], body["quaternion"]) @ sensor.mount, body
 
     def rays(self, sensor, world):
-        """The sensor's rays now: (its origin (3,), the directions (R, 3), range_max), world."""
+        """The sensor's rays now, in the world frame: (its origin (3,), the directions (R, 3), range_max)."""
         pose, _ = self.frame_pose(sensor, world)
         return pose[:3, 3], sensor.directions @ pose[:3, :3].T, sensor.spec["range_max"]
 
