@@ -23,6 +23,7 @@ from .messages import CATEGORY_COLOURS, COLOURS, FROZEN, IMMOVABLE, VEHICLE, BOX
 from .physics import specs
 from .physics.contact import GROUND, PLAYGROUND
 from .physics.math3d import rpy_to_quat
+from .physics.ray_batch import NOTHING
 from .physics.world import quaternions_to_matrices
 
 TYPES = ("lidar_2d", "lidar_3d", "depth_camera", "camera", "imu")
@@ -188,6 +189,7 @@ class Sensor:
         self.mount = pose_matrix(spec["pose"][:3], rpy_to_quat(spec["pose"][3:]))
         self.directions = local_directions(spec) if self.kind != "imu" else np.zeros((0, 3))
         self.rng = np.random.Generator(np.random.PCG64([seed, zlib.crc32(self.name.encode())]))
+        self.hits = None  # the RayHits each scan is cast into (allocated once: a scan's size is fixed)
         self.samples_taken = 0  # n of the next sample time n / rate
         self.last_velocity = None  # the parent's (linear, angular) world velocity at the last IMU sample
 
@@ -260,8 +262,14 @@ class Sensors:
     def all_rays(self, world):
         """Every sensor's rays now, concatenated (origins, directions, ranges): for bench/."""
         self.follow(world)
-        batches = [self.rays(s, world) for s in self.sensors if s.kind != "imu"]
-        return tuple(np.concatenate(parts) for parts in zip(*batches))
+        origins, directions, ranges = [], [], []
+        for sensor in self.sensors:
+            if sensor.kind != "imu":
+                origin, sensor_directions, reach = self.rays(sensor, world)
+                origins.append(np.broadcast_to(origin, sensor_directions.shape))
+                directions.append(sensor_directions)
+                ranges.append(np.full(len(sensor_directions), reach))
+        return np.concatenate(origins), np.concatenate(directions), np.concatenate(ranges)
 
     # ------------------------------------------------------------------ readings
     def frame_pose(self, sensor, world):
@@ -272,10 +280,9 @@ class Sensors:
         return pose_matrix(body["position"], body["quaternion"]) @ sensor.mount, body
 
     def rays(self, sensor, world):
+        """The sensor's rays now, in the world frame: (its origin (3,), the directions (R, 3), range_max)."""
         pose, _ = self.frame_pose(sensor, world)
-        directions = sensor.directions @ pose[:3, :3].T
-        origins = np.broadcast_to(pose[:3, 3], directions.shape)
-        return origins, directions, np.full(len(directions), sensor.spec["range_max"])
+        return pose[:3, 3], sensor.directions @ pose[:3, :3].T, sensor.spec["range_max"]
 
     def read(self, sensor, world, scene):
         """A dict of the reading, by type:
@@ -287,9 +294,9 @@ class Sensors:
         time = world.time
         if sensor.kind == "imu":
             return {"time": time, **self.read_imu(sensor, world)}
-        origins, directions, ranges = self.rays(sensor, world)
+        origin, directions, reach = self.rays(sensor, world)
         exclude = () if sensor.parent == WORLD else (sensor.parent,)
-        hits = scene.cast(origins, directions, ranges, exclude)
+        hits = sensor.hits = scene.cast(origin, directions, reach, exclude, out=sensor.hits)
         distance = hits.distance.copy()
         spec = sensor.spec
         if spec.get("noise_stddev", 0.0) > 0.0:
@@ -323,22 +330,22 @@ class Sensors:
     def shade(self, hits, directions, world):
         """Each pixel the colour of what it sees (the markers' colours) lit by a fixed light:
         ambient plus Lambert; the sky where nothing is hit."""
-        rows = np.asarray(hits.body)
-        colour = np.tile(SKY, (len(rows), 1))
         state = world.state()
         vehicles = set(world.vehicle_names())
-        names = world.body_names()
         kinds = np.where(state["immovable"], IMMOVABLE, BOX)
-        kinds[[k for k, n in enumerate(names) if n in vehicles]] = VEHICLE
+        kinds[[k for k, n in enumerate(world.body_names()) if n in vehicles]] = VEHICLE
         kinds = np.where(state["frozen"], FROZEN, kinds)
-        body = rows >= 0
-        colour[body] = CATEGORY_COLOURS[kinds[rows[body]], :3]
-        colour[rows == GROUND] = COLOURS["ground"][:3]
-        colour[rows == PLAYGROUND] = COLOURS["playground"][:3]
-        hit = np.isfinite(hits.distance)
+        # One palette row per body, then NOTHING, PLAYGROUND, GROUND: what a pixel hit (a row, or
+        # one of those negative codes) modulo the palette's length is its row.
+        palette = np.empty((len(kinds) + 3, 3))
+        palette[:len(kinds)] = CATEGORY_COLOURS[kinds, :3]
+        for what, colour in ((NOTHING, SKY), (PLAYGROUND, COLOURS["playground"][:3]),
+                             (GROUND, COLOURS["ground"][:3])):
+            palette[what] = colour
         light = AMBIENT + (1.0 - AMBIENT) * np.clip(hits.normal @ LIGHT, 0.0, 1.0)
-        colour[hit] *= light[hit, None]
-        return np.round(np.clip(colour, 0.0, 1.0) * 255.0).astype(np.uint8)
+        light[hits.body == NOTHING] = 1.0  # the sky is not lit
+        colour = palette[hits.body % len(palette)] * light[:, None]
+        return np.rint(colour * 255.0).astype(np.uint8)
 
     def read_imu(self, sensor, world):
         """REP 145 readings of the parent body at the sensor: orientation (sensor frame in the

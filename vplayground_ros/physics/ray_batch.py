@@ -4,24 +4,35 @@ The wheels' single rays query the broad-phase octree with the ray's bounding box
 which is right for a half-metre ray but not for a 30 m lidar beam: a long diagonal ray's box
 holds most of the yard. A scan is thousands of long rays at one instant, so it first files the
 bodies and the playground's triangles into a uniform grid of cells around them (one pass,
-~0.1 ms for a thousand bodies), then walks each ray through that grid front to back
-(Amanatides-Woo), testing only the objects of the cells it crosses, and stops at the first cell
-that ends behind the nearest hit. The exact tests are raycast.py's.
+~0.5 ms for a thousand bodies, once per instant for every sensor due then), then walks each ray
+through that grid front to back (Amanatides-Woo), testing only the objects of the cells it
+crosses, each object once per ray, and stops at the first cell that ends behind the nearest hit.
+The exact tests are raycast.py's. Rays are cast in parallel chunks (Numba's threads): each ray's
+result depends on that ray alone, so any thread count gives the same bytes.
 """
+import os
 from collections import namedtuple
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from .contact import GROUND, PLAYGROUND
 from .math3d import quat_to_matrix
 from .raycast import NO_HIT, ray_box, ray_triangle
 
+# Numba's OpenMP threads spin after each parallel batch by default: on a machine shared with the
+# node's other threads (or other processes) that spinning took several times the casting's own
+# CPU (bench/rays.py: 73 % of a core instead of 10 % for the sensor set). Idle threads sleep
+# instead, unless the user chose a policy. Read when OpenMP loads, at the first parallel batch, so
+# setting it here, after importing Numba, is in time.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
 NOTHING = -3  # what a ray that hits nothing reports (GROUND -1 and PLAYGROUND -2 otherwise)
 
-# Cells about this large (m): a few boxes of the usual 0.5-1 m size share one, and a 30 m ray
-# crosses a few dozen. Smaller cells cost more steps per ray, larger ones more box tests.
-RAY_CELL_SIZE = 1.0
+# A cell's edge is this many times the median object's size (the longest edge of its bounding
+# box, bodies and triangles alike): an object then spans a few cells and a cell holds a few
+# objects. Smaller cells cost a ray more steps, larger ones more exact tests.
+CELL_PER_OBJECT = 1.5
 # Grids never have more cells than this (memory and the filing pass); a scene spread wider gets
 # coarser cells instead.
 MAX_RAY_CELLS = 1 << 20
@@ -31,6 +42,11 @@ BLOCK = 4
 # An object spanning more cells than this (a huge floor box) is tested by every ray instead of
 # being filed in each cell.
 MAX_CELLS_PER_ITEM = 512
+# An object is filed in every cell it comes this close to (a fraction of the cell), so that a
+# ray grazing a cell boundary, stepped into the neighbour by rounding, still finds it.
+FILING_MARGIN = 1e-6
+# Rays cast by one thread in a row (one mailbox of objects already tested, reset per chunk).
+RAY_CHUNK = 1024
 
 RayGrid = namedtuple("RayGrid", [
     "lower",        # (3,) min corner of the grid, world
@@ -45,13 +61,89 @@ RayGrid = namedtuple("RayGrid", [
 
 
 @njit(cache=True, nogil=True)
-def item_cell_range(lo, hi, lower, cell, dims):
-    """Inclusive cell ranges (x0, x1, y0, y1, z0, z1) an AABB overlaps, clamped to the grid."""
+def filed_range(lo, hi, lower, cell, dims):
+    """Inclusive cell ranges (x0, x1, y0, y1, z0, z1) an AABB (grown by the filing margin)
+    overlaps, clamped to the grid, and whether that is too many cells to file it in (it is then
+    tested by every ray)."""
     r = np.empty(6, np.int64)
+    pad = FILING_MARGIN * cell
     for k in range(3):
-        r[2 * k] = min(max(int(np.floor((lo[k] - lower[k]) / cell)), 0), dims[k] - 1)
-        r[2 * k + 1] = min(max(int(np.floor((hi[k] - lower[k]) / cell)), 0), dims[k] - 1)
-    return r
+        r[2 * k] = min(max(int(np.floor((lo[k] - pad - lower[k]) / cell)), 0), dims[k] - 1)
+        r[2 * k + 1] = min(max(int(np.floor((hi[k] + pad - lower[k]) / cell)), 0), dims[k] - 1)
+    return r, (r[1] - r[0] + 1) * (r[3] - r[2] + 1) * (r[5] - r[4] + 1) > MAX_CELLS_PER_ITEM
+
+
+@njit(cache=True, nogil=True, inline="always")
+def separated_on(ax, ay, az, v0, v1, v2, half):
+    """Whether axis a separates the triangle (vertices v, relative to the box centre) from the
+    cube of half edge `half` centred on the origin."""
+    p0 = ax * v0[0] + ay * v0[1] + az * v0[2]
+    p1 = ax * v1[0] + ay * v1[1] + az * v1[2]
+    p2 = ax * v2[0] + ay * v2[1] + az * v2[2]
+    radius = half * (abs(ax) + abs(ay) + abs(az))
+    return min(p0, p1, p2) > radius or max(p0, p1, p2) < -radius
+
+
+@njit(cache=True, nogil=True)
+def triangle_meets_cell(triangles, t, centre, half):
+    """Separating-axis test of triangle t against the cube (centre, half edge): the cube's axes,
+    the triangle's normal and the nine edge-by-axis cross products (Akenine-Moeller)."""
+    v0 = (triangles[t, 0, 0] - centre[0], triangles[t, 0, 1] - centre[1], triangles[t, 0, 2] - centre[2])
+    v1 = (triangles[t, 1, 0] - centre[0], triangles[t, 1, 1] - centre[1], triangles[t, 1, 2] - centre[2])
+    v2 = (triangles[t, 2, 0] - centre[0], triangles[t, 2, 1] - centre[1], triangles[t, 2, 2] - centre[2])
+    for k in range(3):
+        if min(v0[k], v1[k], v2[k]) > half or max(v0[k], v1[k], v2[k]) < -half:
+            return False
+    e0 = (v1[0] - v0[0], v1[1] - v0[1], v1[2] - v0[2])
+    e1 = (v2[0] - v1[0], v2[1] - v1[1], v2[2] - v1[2])
+    e2 = (v0[0] - v2[0], v0[1] - v2[1], v0[2] - v2[2])
+    nx, ny, nz = e0[1] * e1[2] - e0[2] * e1[1], e0[2] * e1[0] - e0[0] * e1[2], e0[0] * e1[1] - e0[1] * e1[0]
+    if separated_on(nx, ny, nz, v0, v1, v2, half):
+        return False
+    for e in (e0, e1, e2):
+        # The edge crossed with the cube's x, y and z axes.
+        if (separated_on(0.0, -e[2], e[1], v0, v1, v2, half)
+                or separated_on(e[2], 0.0, -e[0], v0, v1, v2, half)
+                or separated_on(-e[1], e[0], 0.0, v0, v1, v2, half)):
+            return False
+    return True
+
+
+@njit(cache=True, nogil=True)
+def file_items(used, item_min, item_max, capacity, triangles, lower, cell, dims, counts, items, fill,
+               wide, write):
+    """One filing pass over the used items: with write False it counts each cell's items into
+    counts[c + 1] and returns how many are wide; with write True it writes them into items
+    (fill[c]: cell c's next free place) and the wide ones into `wide`. A body is filed in every
+    cell of its bounding box, a triangle only in the cells it passes through."""
+    half = 0.5 * cell * (1.0 + FILING_MARGIN)
+    centre = np.empty(3)
+    wide_count = 0
+    for i in range(len(used)):
+        if not used[i]:
+            continue
+        r, too_wide = filed_range(item_min[i], item_max[i], lower, cell, dims)
+        if too_wide:
+            if write:
+                wide[wide_count] = i
+            wide_count += 1
+            continue
+        for x in range(r[0], r[1] + 1):
+            for y in range(r[2], r[3] + 1):
+                for z in range(r[4], r[5] + 1):
+                    if i >= capacity:
+                        centre[0] = lower[0] + (x + 0.5) * cell
+                        centre[1] = lower[1] + (y + 0.5) * cell
+                        centre[2] = lower[2] + (z + 0.5) * cell
+                        if not triangle_meets_cell(triangles, i - capacity, centre, half):
+                            continue
+                    c = (x * dims[1] + y) * dims[2] + z
+                    if write:
+                        items[fill[c]] = i
+                        fill[c] += 1
+                    else:
+                        counts[c + 1] += 1
+    return wide_count
 
 
 @njit(cache=True, nogil=True)
@@ -77,17 +169,23 @@ def build_ray_grid(active, position, orientation, half_extents, triangles, tri_m
     for t in range(len(triangles)):
         item_min[capacity + t], item_max[capacity + t] = tri_min[t], tri_max[t]
         used[capacity + t] = True
+    sizes = np.empty(len(used))
+    count = 0
     for i in range(len(used)):
         if used[i]:
+            sizes[count] = 0.0
             for k in range(3):
                 lower[k] = min(lower[k], item_min[i, k])
                 upper[k] = max(upper[k], item_max[i, k])
+                sizes[count] = max(sizes[count], item_max[i, k] - item_min[i, k])
+            count += 1
     dims = np.zeros(3, np.int64)
-    if not np.isfinite(lower[0]):
+    if count == 0:
         return RayGrid(np.zeros(3), np.ones(1), dims, np.zeros(1, np.int64),
                        np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(1, np.int64), rotation)
     extent = upper - lower
-    cell = max(RAY_CELL_SIZE, (extent[0] * extent[1] * extent[2] / MAX_RAY_CELLS) ** (1.0 / 3.0))
+    cell = max(CELL_PER_OBJECT * np.median(sizes[:count]), 1e-3,
+               (extent[0] * extent[1] * extent[2] / MAX_RAY_CELLS) ** (1.0 / 3.0))
     while True:
         for k in range(3):
             dims[k] = max(1, int(np.ceil(extent[k] / cell)))
@@ -95,37 +193,14 @@ def build_ray_grid(active, position, orientation, half_extents, triangles, tri_m
             break
         cell *= 1.1  # a flat scene: the volume estimate undercounts the cells of thin axes
     counts = np.zeros(dims[0] * dims[1] * dims[2] + 1, np.int64)
-    wide_count = 0
-    for i in range(len(used)):
-        if not used[i]:
-            continue
-        r = item_cell_range(item_min[i], item_max[i], lower, cell, dims)
-        if (r[1] - r[0] + 1) * (r[3] - r[2] + 1) * (r[5] - r[4] + 1) > MAX_CELLS_PER_ITEM:
-            wide_count += 1
-            continue
-        for x in range(r[0], r[1] + 1):
-            for y in range(r[2], r[3] + 1):
-                for z in range(r[4], r[5] + 1):
-                    counts[(x * dims[1] + y) * dims[2] + z + 1] += 1
+    no_items = np.zeros(0, np.int64)
+    wide_count = file_items(used, item_min, item_max, capacity, triangles, lower, cell, dims, counts,
+                            no_items, no_items, no_items, False)
     cell_start = np.cumsum(counts)
-    fill = cell_start[:-1].copy()
     items = np.empty(cell_start[-1], np.int64)
     wide = np.empty(wide_count, np.int64)
-    wide_count = 0
-    for i in range(len(used)):
-        if not used[i]:
-            continue
-        r = item_cell_range(item_min[i], item_max[i], lower, cell, dims)
-        if (r[1] - r[0] + 1) * (r[3] - r[2] + 1) * (r[5] - r[4] + 1) > MAX_CELLS_PER_ITEM:
-            wide[wide_count] = i
-            wide_count += 1
-            continue
-        for x in range(r[0], r[1] + 1):
-            for y in range(r[2], r[3] + 1):
-                for z in range(r[4], r[5] + 1):
-                    c = (x * dims[1] + y) * dims[2] + z
-                    items[fill[c]] = i
-                    fill[c] += 1
+    file_items(used, item_min, item_max, capacity, triangles, lower, cell, dims, counts, items,
+               cell_start[:-1].copy(), wide, True)
     by, bz = (dims[1] + BLOCK - 1) // BLOCK, (dims[2] + BLOCK - 1) // BLOCK
     block_items = np.zeros(((dims[0] + BLOCK - 1) // BLOCK) * by * bz, np.int64)
     for x in range(dims[0]):
@@ -144,6 +219,14 @@ def test_item(item, o, d, limit, excluded, position, rotation, half_extents, tri
     if item < capacity:
         if excluded[item]:
             return NO_HIT, item, (0.0, 0.0, 0.0)
+        # Most boxes a ray meets in its cells it passes by: the bounding sphere rules those out
+        # without the slab test's three divisions (with a margin for the rounding of a far box).
+        vx, vy, vz = position[item, 0] - o[0], position[item, 1] - o[1], position[item, 2] - o[2]
+        along = vx * d[0] + vy * d[1] + vz * d[2]
+        h = (half_extents[item, 0], half_extents[item, 1], half_extents[item, 2])
+        radius2, away2 = h[0] * h[0] + h[1] * h[1] + h[2] * h[2], vx * vx + vy * vy + vz * vz
+        if away2 - along * along > radius2 + 1e-9 * (radius2 + away2):
+            return NO_HIT, item, (0.0, 0.0, 0.0)
         t, face = ray_box(o, d, limit, position, rotation, half_extents, item)
         return t, item, face
     tri = item - capacity
@@ -152,21 +235,22 @@ def test_item(item, o, d, limit, excluded, position, rotation, half_extents, tri
 
 
 @njit(cache=True, nogil=True, inline="always")
-def boundary_t(c, step, lower, cell, o, d):
-    """t at which the ray leaves cell c along one axis (NO_HIT when it does not move along it)."""
+def boundary_t(c, step, lower, cell, o, inverse_d):
+    """t at which the ray leaves cell c along one axis (NO_HIT when it does not move along it);
+    inverse_d is 1 / the direction's component (multiplying: the walk is mostly this)."""
     if step > 0:
-        return (lower + (c + 1) * cell - o) / d
+        return (lower + (c + 1) * cell - o) * inverse_d
     if step < 0:
-        return (lower + c * cell - o) / d
+        return (lower + c * cell - o) * inverse_d
     return NO_HIT
 
 
 @njit(cache=True, nogil=True, inline="always")
-def clip_slab(o, d, lo, hi, t0, t1):
+def clip_slab(o, step, inverse_d, lo, hi, t0, t1):
     """[t0, t1] narrowed to where the ray lies between lo and hi along one axis (empty: t0 > t1)."""
-    if abs(d) < 1e-12:
+    if step == 0:
         return (t0, t1) if lo <= o <= hi else (1.0, 0.0)
-    a, b = (lo - o) / d, (hi - o) / d
+    a, b = (lo - o) * inverse_d, (hi - o) * inverse_d
     return max(t0, min(a, b)), min(t1, max(a, b))
 
 
@@ -175,67 +259,85 @@ def axis_step(d):
     return 1 if d > 1e-12 else (-1 if d < -1e-12 else 0)
 
 
-@njit(cache=True, nogil=True)
-def cast_ray_batch(origins, directions, max_range, excluded, grid, position, half_extents,
-                   triangles, normals, ground_enabled, ground_height, distance, point, normal, hit):
-    """Nearest hit of each ray origins[i] + t directions[i] (unit), 0 <= t <= max_range[i], with
-    the ground, the playground or a body not `excluded` (bool per slot). Writes distance (NO_HIT
-    for nothing), the hit point (NaN for nothing), the surface normal and what was hit (a body
-    slot, GROUND, PLAYGROUND or NOTHING)."""
+# error_model "numpy": no zero-division checks (every division here is guarded or meant to give
+# inf), which cost the walk a branch each.
+@njit(cache=True, nogil=True, error_model="numpy")
+def cast_chunk(start, stop, origins, directions, max_range, excluded, grid, position, half_extents,
+               triangles, normals, ground_enabled, ground_height, row_of_slot, distance, point,
+               normal, hit):
+    """cast_ray_batch for rays start..stop; returns how many of them were invalid (a zero or
+    non-finite direction, a non-finite origin, a NaN range): those are left unwritten."""
     rotation, lower, cell, dims = grid.rotation, grid.lower, grid.cell_size[0], grid.dims
     cell_start, items, wide, block_items = grid.cell_start, grid.items, grid.wide, grid.block_items
     nx, ny, nz = dims[0], dims[1], dims[2]
     by, bz = (ny + BLOCK - 1) // BLOCK, (nz + BLOCK - 1) // BLOCK
     lx, ly, lz = lower[0], lower[1], lower[2]
-    for i in range(len(origins)):
-        o = (origins[i, 0], origins[i, 1], origins[i, 2])
-        d = (directions[i, 0], directions[i, 1], directions[i, 2])
+    inverse_cell = 1.0 / cell
+    # The ray that last tested each item: an object filed in several cells is tested once a ray.
+    tested_by = np.full(len(excluded) + len(triangles), -1, np.int64)
+    invalid = 0
+    # One origin or one range may serve every ray (a sensor's scan): row 0 then.
+    origin_step, range_step = min(len(origins) - 1, 1), min(len(max_range) - 1, 1)
+    for i in range(start, stop):
+        j = i * origin_step
+        o = (origins[j, 0], origins[j, 1], origins[j, 2])
+        length = np.sqrt(directions[i, 0] ** 2 + directions[i, 1] ** 2 + directions[i, 2] ** 2)
+        reach = max_range[i * range_step]
+        if not (length > 0.0 and np.isfinite(length) and np.isfinite(o[0]) and np.isfinite(o[1])
+                and np.isfinite(o[2]) and not np.isnan(reach)):
+            invalid += 1
+            continue
+        d = (directions[i, 0] / length, directions[i, 1] / length, directions[i, 2] / length)
         best, what, n = NO_HIT, NOTHING, (0.0, 0.0, 0.0)
         if ground_enabled and d[2] < 0.0:
             t = (ground_height - o[2]) / d[2]
-            if 0.0 <= t <= max_range[i]:
+            if 0.0 <= t <= reach:
                 best, what, n = t, GROUND, (0.0, 0.0, 1.0)
-        limit = min(best, max_range[i])
+        limit = min(best, reach)
         for k in range(len(wide)):
             t, obj, face = test_item(wide[k], o, d, limit, excluded, position, rotation,
                                      half_extents, triangles, normals)
             if t < limit:
                 best, limit, what, n = t, t, obj, face
-        # The ray's part inside the grid box, [t0, t1].
+        # The ray's part inside the grid box, [t0, t1]. Per axis the direction of travel and
+        # 1 / the direction (unused along an axis it does not move along).
+        sx, sy, sz = axis_step(d[0]), axis_step(d[1]), axis_step(d[2])
+        ix = 1.0 / d[0] if sx else 0.0
+        iy = 1.0 / d[1] if sy else 0.0
+        iz = 1.0 / d[2] if sz else 0.0
         t0, t1 = 0.0, limit
         if nx == 0:
             t1 = -1.0
-        t0, t1 = clip_slab(o[0], d[0], lx, lx + nx * cell, t0, t1)
-        t0, t1 = clip_slab(o[1], d[1], ly, ly + ny * cell, t0, t1)
-        t0, t1 = clip_slab(o[2], d[2], lz, lz + nz * cell, t0, t1)
+        t0, t1 = clip_slab(o[0], sx, ix, lx, lx + nx * cell, t0, t1)
+        t0, t1 = clip_slab(o[1], sy, iy, ly, ly + ny * cell, t0, t1)
+        t0, t1 = clip_slab(o[2], sz, iz, lz, lz + nz * cell, t0, t1)
         if t0 > t1:
             t1 = -1.0  # nothing to walk
-        # Amanatides-Woo from the entry point: the cell, and per axis the direction of travel,
-        # the t of the next cell boundary and the t between boundaries.
-        sx, sy, sz = axis_step(d[0]), axis_step(d[1]), axis_step(d[2])
-        cx = min(max(int(np.floor((o[0] + t0 * d[0] - lx) / cell)), 0), nx - 1)
-        cy = min(max(int(np.floor((o[1] + t0 * d[1] - ly) / cell)), 0), ny - 1)
-        cz = min(max(int(np.floor((o[2] + t0 * d[2] - lz) / cell)), 0), nz - 1)
-        next_x, next_y = boundary_t(cx, sx, lx, cell, o[0], d[0]), boundary_t(cy, sy, ly, cell, o[1], d[1])
-        next_z = boundary_t(cz, sz, lz, cell, o[2], d[2])
-        delta_x = cell / abs(d[0]) if sx else NO_HIT
-        delta_y = cell / abs(d[1]) if sy else NO_HIT
-        delta_z = cell / abs(d[2]) if sz else NO_HIT
+        # Amanatides-Woo from the entry point: the cell, and per axis the t of the next cell
+        # boundary and the t between boundaries.
+        cx = min(max(int(np.floor((o[0] + t0 * d[0] - lx) * inverse_cell)), 0), nx - 1)
+        cy = min(max(int(np.floor((o[1] + t0 * d[1] - ly) * inverse_cell)), 0), ny - 1)
+        cz = min(max(int(np.floor((o[2] + t0 * d[2] - lz) * inverse_cell)), 0), nz - 1)
+        next_x, next_y = boundary_t(cx, sx, lx, cell, o[0], ix), boundary_t(cy, sy, ly, cell, o[1], iy)
+        next_z = boundary_t(cz, sz, lz, cell, o[2], iz)
+        delta_x = cell * abs(ix) if sx else NO_HIT
+        delta_y = cell * abs(iy) if sy else NO_HIT
+        delta_z = cell * abs(iz) if sz else NO_HIT
         while t1 >= 0.0:
             if block_items[((cx // BLOCK) * by + cy // BLOCK) * bz + cz // BLOCK] == 0:
                 # An empty block: jump to where the ray leaves it, in the cell beyond.
-                ex = boundary_t(cx // BLOCK, sx, lx, BLOCK * cell, o[0], d[0])
-                ey = boundary_t(cy // BLOCK, sy, ly, BLOCK * cell, o[1], d[1])
-                ez = boundary_t(cz // BLOCK, sz, lz, BLOCK * cell, o[2], d[2])
+                ex = boundary_t(cx // BLOCK, sx, lx, BLOCK * cell, o[0], ix)
+                ey = boundary_t(cy // BLOCK, sy, ly, BLOCK * cell, o[1], iy)
+                ez = boundary_t(cz // BLOCK, sz, lz, BLOCK * cell, o[2], iz)
                 leave = min(ex, ey, ez)
                 if leave > t1 or limit <= leave:
                     break
                 # The other two axes stay within the block (clamped against rounding): a cell
                 # of the empty block visited again only costs another jump.
                 x0, y0, z0 = (cx // BLOCK) * BLOCK, (cy // BLOCK) * BLOCK, (cz // BLOCK) * BLOCK
-                cx = min(max(int(np.floor((o[0] + leave * d[0] - lx) / cell)), x0), x0 + BLOCK - 1)
-                cy = min(max(int(np.floor((o[1] + leave * d[1] - ly) / cell)), y0), y0 + BLOCK - 1)
-                cz = min(max(int(np.floor((o[2] + leave * d[2] - lz) / cell)), z0), z0 + BLOCK - 1)
+                cx = min(max(int(np.floor((o[0] + leave * d[0] - lx) * inverse_cell)), x0), x0 + BLOCK - 1)
+                cy = min(max(int(np.floor((o[1] + leave * d[1] - ly) * inverse_cell)), y0), y0 + BLOCK - 1)
+                cz = min(max(int(np.floor((o[2] + leave * d[2] - lz) * inverse_cell)), z0), z0 + BLOCK - 1)
                 if ex == leave:
                     cx = x0 + BLOCK if sx > 0 else x0 - 1
                 elif ey == leave:
@@ -244,12 +346,16 @@ def cast_ray_batch(origins, directions, max_range, excluded, grid, position, hal
                     cz = z0 + BLOCK if sz > 0 else z0 - 1
                 if cx < 0 or cx >= nx or cy < 0 or cy >= ny or cz < 0 or cz >= nz:
                     break
-                next_x, next_y = boundary_t(cx, sx, lx, cell, o[0], d[0]), boundary_t(cy, sy, ly, cell, o[1], d[1])
-                next_z = boundary_t(cz, sz, lz, cell, o[2], d[2])
+                next_x, next_y = boundary_t(cx, sx, lx, cell, o[0], ix), boundary_t(cy, sy, ly, cell, o[1], iy)
+                next_z = boundary_t(cz, sz, lz, cell, o[2], iz)
                 continue
             c = (cx * ny + cy) * nz + cz
             for k in range(cell_start[c], cell_start[c + 1]):
-                t, obj, face = test_item(items[k], o, d, limit, excluded, position, rotation,
+                item = items[k]
+                if tested_by[item] == i:
+                    continue  # its nearest hit, if any nearer than the limit then, is counted
+                tested_by[item] = i
+                t, obj, face = test_item(item, o, d, limit, excluded, position, rotation,
                                          half_extents, triangles, normals)
                 if t < limit:
                     best, limit, what, n = t, t, obj, face
@@ -273,12 +379,33 @@ def cast_ray_batch(origins, directions, max_range, excluded, grid, position, hal
                 next_z += delta_z
                 if cz < 0 or cz >= nz:
                     break
-        distance[i], hit[i] = best, what
+        distance[i], hit[i] = best, row_of_slot[what] if what >= 0 else what
         normal[i, 0], normal[i, 1], normal[i, 2] = n[0], n[1], n[2]
         if best < NO_HIT:
             point[i, 0], point[i, 1], point[i, 2] = o[0] + best * d[0], o[1] + best * d[1], o[2] + best * d[2]
         else:
             point[i, 0], point[i, 1], point[i, 2] = np.nan, np.nan, np.nan
+    return invalid
+
+
+@njit(cache=True, nogil=True, parallel=True, error_model="numpy")
+def cast_ray_batch(origins, directions, max_range, excluded, grid, position, half_extents,
+                   triangles, normals, ground_enabled, ground_height, row_of_slot, distance, point,
+                   normal, hit):
+    """Nearest hit of each ray origins[i] + t directions[i] (normalised here), 0 <= t <=
+    max_range[i] (origins or max_range may have one row for all rays), with the ground, the
+    playground or a body not `excluded` (bool per slot). Writes distance (NO_HIT for nothing),
+    the hit point (NaN for nothing), the surface normal and what was hit (row_of_slot of the body
+    slot, GROUND, PLAYGROUND or NOTHING). Returns the count of invalid rays (see cast_chunk)."""
+    chunks = (len(directions) + RAY_CHUNK - 1) // RAY_CHUNK
+    invalid = np.zeros(chunks, np.int64)
+    for chunk in prange(chunks):
+        invalid[chunk] = cast_chunk(chunk * RAY_CHUNK, min(len(directions), (chunk + 1) * RAY_CHUNK),
+                                    origins, directions, max_range, excluded, grid, position,
+                                    half_extents, triangles, normals, ground_enabled, ground_height,
+                                    row_of_slot, distance, point, normal, hit)
+    return invalid.sum()
+
 
 RayHits = namedtuple("RayHits", [
     "distance",  # (R,) m along the ray, inf for no hit within its range
@@ -300,32 +427,37 @@ class RayScene:
                                     playground.aabb_min, playground.aabb_max)
         self._row_of_slot = np.cumsum(bodies.active) - 1
 
-    def cast(self, origins, directions, max_range, exclude=()):
-        """RayHits of the rays origins (R, 3) + t directions (R, 3; normalised here), 0 <= t <=
-        max_range (a number or (R,)), ignoring the bodies named in `exclude` (a sensor's
-        parent). One compiled call for the whole batch."""
-        origins = np.ascontiguousarray(origins, dtype=np.float64).reshape(-1, 3)
-        directions = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
-        if len(directions) != len(origins):
-            raise ValueError(f"cast_rays: {len(origins)} origins but {len(directions)} directions")
-        length = np.linalg.norm(directions, axis=1)
-        if not np.all(length > 0.0) or not np.all(np.isfinite(origins)):
-            raise ValueError("cast_rays: every direction must be non-zero and every value finite")
-        directions = np.ascontiguousarray(directions / length[:, None])
-        max_range = np.ascontiguousarray(np.broadcast_to(np.asarray(max_range, dtype=np.float64),
-                                                         (len(origins),)))
+    def cast(self, origins, directions, max_range, exclude=(), out=None):
+        """RayHits of the rays origins (R, 3, or one point (3,) for all) + t directions (R, 3;
+        normalised here), 0 <= t <= max_range (a number or (R,)), ignoring the bodies named in
+        `exclude` (a sensor's parent). One compiled call for the whole batch. `out`: RayHits of
+        R rows to fill and return instead of new arrays (a sensor reuses its own every scan)."""
+        directions = np.ascontiguousarray(directions, dtype=np.float64).reshape(-1, 3)
+        count = len(directions)
+        origins = np.ascontiguousarray(origins, dtype=np.float64)
+        origins = origins.reshape(1, 3) if origins.shape == (3,) else origins.reshape(-1, 3)
+        if len(origins) != count and origins.shape != (1, 3):
+            raise ValueError(f"cast_rays: {len(origins)} origins but {count} directions")
+        max_range = np.ascontiguousarray(max_range, dtype=np.float64).reshape(-1)
+        if len(max_range) not in (1, count):
+            raise ValueError(f"cast_rays: {len(max_range)} ranges for {count} rays")
         excluded = np.zeros(len(self._bodies.active), np.bool_)
         for name in exclude:
             if name not in self._slots:
                 raise KeyError(f"cast_rays: no body named {name!r} to exclude")
             excluded[self._slots[name]] = True
-        count = len(origins)
-        distance, point = np.empty(count), np.empty((count, 3))
-        normal, hit = np.empty((count, 3)), np.empty(count, np.int64)
+        if out is None:
+            out = RayHits(np.empty(count), np.empty((count, 3)), np.empty((count, 3)),
+                          np.empty(count, np.int64))
+        elif len(out.distance) != count:
+            raise ValueError(f"cast_rays: out holds {len(out.distance)} rays, not {count}")
         g = self._ground
-        cast_ray_batch(origins, directions, max_range, excluded, self._grid,
-                       self._bodies.position, self._bodies.half_extents,
-                       self._playground.triangles, self._playground.normals, g is not None,
-                       float(g["height"]) if g else 0.0, distance, point, normal, hit)
-        body = np.where(hit >= 0, self._row_of_slot[np.maximum(hit, 0)], hit)
-        return RayHits(distance, point, normal, body)
+        invalid = cast_ray_batch(origins, directions, max_range, excluded, self._grid,
+                                 self._bodies.position, self._bodies.half_extents,
+                                 self._playground.triangles, self._playground.normals, g is not None,
+                                 float(g["height"]) if g else 0.0, self._row_of_slot, *out)
+        if invalid:
+            raise ValueError(f"cast_rays: {invalid} rays with a zero or non-finite direction, a "
+                             "non-finite origin or a NaN range: every direction must be non-zero and "
+                             "every value finite")
+        return out

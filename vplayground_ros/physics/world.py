@@ -519,7 +519,8 @@ class World:
 
     def cast_rays(self, origins, directions, max_range, exclude=()):
         """RayHits (distance, point, normal, body row or GROUND/PLAYGROUND/NOTHING) of a batch
-        of rays, ignoring the bodies named in `exclude`. See ray_scene() for several batches."""
+        of rays (origins (R, 3) or one point for all), ignoring the bodies named in `exclude`.
+        See ray_scene() for several batches."""
         return self.ray_scene().cast(origins, directions, max_range, exclude)
 
     def state(self):
