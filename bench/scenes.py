@@ -31,6 +31,32 @@ def pile(count, seed=1):
     return boxes
 
 
+def loose_pile(count, seed=1, layers=10, spacing=0.8):
+    """Issue 20's loose pile: 0.5 m boxes on a spread grid of `layers` layers (0.8 m apart: a yawed box spans up to 0.71 m; the
+    lowest 0.75 m up), each with a random yaw and a small tilt (up to 0.1 rad about x and y)."""
+    rng = np.random.default_rng(seed)
+    per_layer = int(np.ceil(count / layers))
+    side = int(np.ceil(np.sqrt(per_layer)))
+    boxes = []
+    for k in range(count):
+        ix, iy, iz = k % side, (k // side) % side, k // per_layer
+        tilt = rng.uniform(-0.1, 0.1, 2)
+        position = ((ix - (side - 1) / 2) * spacing, (iy - (side - 1) / 2) * spacing, 0.75 + iz * spacing)
+        boxes.append(box((0.5, 0.5, 0.5), position,
+                         yaw_pitch_roll_quaternion((tilt[0], tilt[1], rng.uniform(-np.pi, np.pi)))))
+    return boxes
+
+
+def resting_columns(columns, size=0.5, gap=0.25):
+    """Columns of two boxes standing exactly on each other and on the ground, on a square grid."""
+    side = int(np.ceil(np.sqrt(columns)))
+    boxes = []
+    for k in range(columns):
+        x, y = (k % side - side / 2) * (size + gap), (k // side - side / 2) * (size + gap)
+        boxes += [box((size,) * 3, (x, y, size * (0.5 + level))) for level in range(2)]
+    return boxes
+
+
 def tower(count, size=1.0):
     return [box((size,) * 3, (0.0, 0.0, size * (0.5 + k))) for k in range(count)]
 

@@ -40,12 +40,13 @@ def allocate_index(capacity):
 
 BroadPhase = namedtuple("BroadPhase", [
     "moving", "static",   # OctreeIndex of the moving bodies (per step) and of the resting ones
-    "moving_ids",         # (N,) scratch: slots in the moving index
+    "moving_ids",         # (N,) the step's live bodies: slots outside the static index
     "stamp", "scratch",   # (N,) scratch of the ray casts' index queries
     "pair_a", "pair_b",   # (P,) candidate pairs
     "pair_count",         # (1,) pairs found in the last step
     "playground_body", "playground_triangle",  # (P,) candidate (body, playground triangle) pairs
     "playground_count",   # (1,) of those found in the last step
+    "indexed",            # (1,) bodies put in the static index at its last rebuild
     "stale",              # (1,) static-index entries of bodies that have since woken or gone
     "force_rebuild",      # (1,) bool: the World changed resting bodies between calls
 ])
@@ -64,7 +65,8 @@ def allocate_broad_phase(body_capacity, pair_capacity):
         playground_body=np.zeros(pair_capacity, np.int64),
         playground_triangle=np.zeros(pair_capacity, np.int64),
         playground_count=np.zeros(1, np.int64),
-        stale=np.zeros(1, np.int64), force_rebuild=np.ones(1, np.bool_))
+        indexed=np.zeros(1, np.int64), stale=np.zeros(1, np.int64),
+        force_rebuild=np.ones(1, np.bool_))
 
 
 @njit(cache=True, nogil=True)

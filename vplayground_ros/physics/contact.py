@@ -43,6 +43,7 @@ Contacts = namedtuple("Contacts", [
     "position_impulse",   # (K,) split-impulse accumulator of the position pass
     "collision_target", "contact_target", "position_target",  # (K,) normal velocity goals
     "solve_order",        # (K,) points in the order the sweeps visit them
+    "sweep_points",       # (K,) scratch: the points of solve_order a pass solves (target set)
     # Shock propagation: the support points (normal within 60 degrees of gravity) grouped by
     # their upper body, bodies bottom to top; the one-sided impulses added on top of the
     # contact pass's.
@@ -54,6 +55,7 @@ Contacts = namedtuple("Contacts", [
     "manifold_count",     # (1,)
     "manifold_start", "manifold_size", "manifold_a", "manifold_b",  # (M,)
     "table_key", "table_manifold",  # open-addressing hash: pair key -> manifold, for warm start
+    "table_slot", "table_count",  # (M,), (1,) the slots filled, so clearing them is all a refill clears
 ])
 
 
@@ -67,11 +69,13 @@ def allocate_contacts(points, manifolds):
         row_inv_mass=f(2), row_mass=f(3), restitution=f(), friction_coefficient=f(),
         approach_speed=f(), collision_impulse=f(), collision_friction=f(2), impulse=f(),
         friction=f(2), friction_world=f(3), position_impulse=f(), collision_target=f(),
-        contact_target=f(), position_target=f(), solve_order=i(points), support_count=i(1),
+        contact_target=f(), position_target=f(), solve_order=i(points), sweep_points=i(points),
+        support_count=i(1),
         support_order=i(points), support_body=i(points), support_mass=f(3), support_impulse=f(),
         support_friction=f(2), manifold_count=i(1),
         manifold_start=i(manifolds), manifold_size=i(manifolds), manifold_a=i(manifolds),
-        manifold_b=i(manifolds), table_key=np.full(table, -1, np.int64), table_manifold=i(table))
+        manifold_b=i(manifolds), table_key=np.full(table, -1, np.int64), table_manifold=i(table),
+        table_slot=i(manifolds), table_count=i(1))
 
 
 @njit(cache=True, nogil=True)
@@ -88,9 +92,12 @@ def table_slot(key, mask):
 
 @njit(cache=True, nogil=True)
 def index_manifolds(contacts):
-    """Fills the pair -> manifold hash table (read by the next step's warm start)."""
+    """Fills the pair -> manifold hash table (read by the next step's warm start). Only the slots
+    of its last filling are cleared: the table is sized for the largest pile the World held, and
+    clearing all of it each step was most of the step of a world at rest."""
     keys = contacts.table_key
-    keys[:] = -1
+    for m in range(contacts.table_count[0]):
+        keys[contacts.table_slot[m]] = -1
     mask = len(keys) - 1
     for m in range(contacts.manifold_count[0]):
         key = pair_key(contacts.manifold_a[m], contacts.manifold_b[m])
@@ -99,6 +106,8 @@ def index_manifolds(contacts):
             slot = (slot + 1) & mask
         keys[slot] = key
         contacts.table_manifold[slot] = m
+        contacts.table_slot[m] = slot
+    contacts.table_count[0] = contacts.manifold_count[0]
 
 
 @njit(cache=True, nogil=True)

@@ -49,13 +49,14 @@ def wake_touched(contacts, bodies, linear_threshold):
 
 
 @njit(cache=True, nogil=True)
-def update_freezing(bodies, enabled, time_to_freeze, linear_threshold, angular_threshold, dt):
-    """Advances the freeze timers of awake bodies and freezes those that stayed slow long enough.
-    Returns how many froze."""
+def update_freezing(bodies, live, enabled, time_to_freeze, linear_threshold, angular_threshold, dt):
+    """Advances the freeze timers of the awake bodies among `live` and freezes those that stayed
+    slow long enough. Returns how many froze."""
     frozen = 0
     lin_sq, ang_sq = linear_threshold * linear_threshold, angular_threshold * angular_threshold
     velocity = bodies.velocity
-    for i in range(len(bodies.active)):
+    for k in range(len(live)):
+        i = live[k]
         if not bodies.awake[i]:
             continue
         v = velocity[i]

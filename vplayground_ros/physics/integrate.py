@@ -12,15 +12,14 @@ from .math3d import integrate_orientation, quat_to_matrix
 
 
 @njit(cache=True, nogil=True)
-def update_bodies(bodies, dt, root_size, depth, refresh_static):
+def update_bodies(bodies, live, dt, root_size, depth):
     """Rotations, solver masses, speculative reach and the broad-phase bounds (grown by this
-    step's motion) of every body. Bodies in the static index are skipped unless
-    `refresh_static`: they have not moved since they were indexed (the World un-indexes a body
-    it edits), so their derived state still holds, and a settled pile costs next to nothing."""
+    step's motion) of the bodies `live` (slots). The step passes the bodies outside the static
+    index: those in it have not moved since they were indexed (the World un-indexes a body it
+    edits), so their derived state still holds, and a settled pile costs next to nothing."""
     velocity, position = bodies.velocity, bodies.position
-    for i in range(len(bodies.active)):
-        if not bodies.active[i] or (bodies.static_indexed[i] and not refresh_static):
-            continue
+    for k in range(len(live)):
+        i = live[k]
         if not finite_state(bodies, i):
             quarantine(bodies, i)
             continue
@@ -81,10 +80,12 @@ def quarantine(bodies, i):
 
 
 @njit(cache=True, nogil=True)
-def integrate_velocities(bodies, gravity, dt):
-    """Gravity and the queued external impulses (cleared once applied)."""
+def integrate_velocities(bodies, live, gravity, dt):
+    """Gravity and the queued external impulses (cleared once applied), for the awake bodies
+    among `live` (every awake body is: see pipeline.list_live_bodies)."""
     velocity = bodies.velocity
-    for i in range(len(bodies.active)):
+    for k in range(len(live)):
+        i = live[k]
         if not bodies.awake[i]:
             continue
         m = bodies.inv_mass[i]
@@ -98,11 +99,12 @@ def integrate_velocities(bodies, gravity, dt):
 
 
 @njit(cache=True, nogil=True)
-def integrate_positions(bodies, dt):
-    """Positions from the solved velocities plus this step's position correction, which is then
-    dropped so it never becomes momentum."""
+def integrate_positions(bodies, live, dt):
+    """Positions of the awake bodies among `live` from the solved velocities plus this step's
+    position correction, which is then dropped so it never becomes momentum."""
     velocity, pseudo = bodies.velocity, bodies.pseudo_velocity
-    for i in range(len(bodies.active)):
+    for k in range(len(live)):
+        i = live[k]
         if not bodies.awake[i]:
             continue
         for e in range(3):

@@ -395,9 +395,9 @@ def box_ground(p, r, h, height, margin, out_point, out_depth):
 
 
 @njit(cache=True, nogil=True)
-def collide(contacts, bodies, broad, playground, ground_enabled, ground_height):
+def collide(contacts, bodies, broad, playground, ground_enabled, ground_height, live):
     """Manifolds of every candidate pair, of every (body, playground triangle) candidate and of
-    every awake body with the ground, each reduced to at most 4 points and appended to
+    every awake body among `live` (slots, ascending) with the ground, each reduced to at most 4 points and appended to
     `contacts`. Returns False when the contact buffers are full (nothing of the step has been
     applied yet).
 
@@ -419,7 +419,7 @@ def collide(contacts, bodies, broad, playground, ground_enabled, ground_height):
     manifold_a, manifold_b = contacts.manifold_a, contacts.manifold_b
     pair_a, pair_b = broad.pair_a, broad.pair_b
     body_pairs, mesh_pairs = broad.pair_count[0], broad.playground_count[0]
-    ground_jobs = len(bodies.active) if ground_enabled else 0
+    ground_jobs = len(live) if ground_enabled else 0
     down = (0.0, 0.0, -1.0)
     count = manifolds = 0
     for job in range(body_pairs + mesh_pairs + ground_jobs):
@@ -441,7 +441,7 @@ def collide(contacts, bodies, broad, playground, ground_enabled, ground_height):
                                      vector3(playground.normals, t), CONTACT_MARGIN + reach[a],
                                      poly_a, poly_b, scratch_point, scratch_depth)
         else:
-            a = job - body_pairs - mesh_pairs
+            a = live[job - body_pairs - mesh_pairs]
             if not awake[a] or bodies.aabb_min[a, 2] > ground_height + 0.5 * CONTACT_MARGIN:
                 continue
             b, key_b, normal = GROUND, GROUND, down

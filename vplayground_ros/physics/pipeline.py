@@ -64,34 +64,45 @@ def rebuild_static_index(bodies, broad, settings):
         return False
     bodies.static_indexed[:] = False
     bodies.static_indexed[ids] = True
+    broad.indexed[0] = len(ids)
     broad.stale[0] = 0
     broad.force_rebuild[0] = False
     return True
 
 
 @njit(cache=True, nogil=True)
-def static_index_outdated(bodies, broad):
-    indexed = 0
+def list_live_bodies(bodies, broad, everyone):
+    """The step's live bodies in slot order, in broad.moving_ids: the active ones outside the
+    static index (every active one when `everyone`). Every awake body is among them, so the
+    per-body stages visit these alone and a world at rest costs one pass over two flags."""
+    n = 0
+    active, indexed = bodies.active, bodies.static_indexed
+    for i in range(len(active)):
+        if active[i] and (everyone or not indexed[i]):
+            broad.moving_ids[n] = i
+            n += 1
+    return broad.moving_ids[:n]
+
+
+@njit(cache=True, nogil=True)
+def static_index_outdated(bodies, broad, live):
+    """Enough bodies wait for the static index (resting but outside it), or enough of its
+    entries are stale. Every un-indexing counts one stale entry, so the index holds
+    `indexed - stale` bodies."""
     pending = 0
-    for i in range(len(bodies.active)):
-        if bodies.static_indexed[i]:
-            indexed += 1
-        elif bodies.active[i] and not bodies.awake[i]:
+    for k in range(len(live)):
+        if not bodies.awake[live[k]]:
             pending += 1
+    indexed = broad.indexed[0] - broad.stale[0]
     limit = max(STATIC_REINDEX_MIN_PENDING, int(STATIC_REINDEX_PENDING_FRACTION * indexed))
     return broad.force_rebuild[0] or pending >= limit or broad.stale[0] >= limit
 
 
 @njit(cache=True, nogil=True)
-def detect(bodies, broad, playground, contacts, settings):
-    """Broad phase then narrow phase for the current positions. Returns a status."""
+def detect(bodies, broad, playground, contacts, settings, moving_ids):
+    """Broad phase then narrow phase for the current positions of the live bodies `moving_ids`
+    (list_live_bodies). Returns a status."""
     s = settings
-    moving_count = 0
-    for i in range(len(bodies.active)):
-        if bodies.active[i] and not bodies.static_indexed[i]:
-            broad.moving_ids[moving_count] = i
-            moving_count += 1
-    moving_ids = broad.moving_ids[:moving_count]
     if not build_index(broad.moving, moving_ids, bodies.aabb_min, bodies.aabb_max,
                        bodies.octree_level, s.root_min, s.root_size):
         return GROW_INDEX
@@ -106,7 +117,8 @@ def detect(bodies, broad, playground, contacts, settings):
     if pairs < 0:
         return GROW_PAIRS
     broad.playground_count[0] = pairs
-    if not collide(contacts, bodies, broad, playground, s.ground_enabled, s.ground_height):
+    if not collide(contacts, bodies, broad, playground, s.ground_enabled, s.ground_height,
+                   moving_ids):
         return GROW_CONTACTS
     return DONE
 
@@ -124,13 +136,16 @@ def step_world(steps, bodies, playground, vehicles, settings, broad, previous, c
         t0 = clock_ns(profile)
         # 1. Derived state: rotations, solver masses, broad-phase bounds (of every body when the
         #    octree changed under the static index).
-        update_bodies(bodies, s.dt, s.root_size, s.octree_depth, broad.force_rebuild[0])
-        if static_index_outdated(bodies, broad) and not rebuild_static_index(bodies, broad, s):
-            return done, GROW_INDEX
+        live = list_live_bodies(bodies, broad, broad.force_rebuild[0])
+        update_bodies(bodies, live, s.dt, s.root_size, s.octree_depth)
+        if static_index_outdated(bodies, broad, live):
+            if not rebuild_static_index(bodies, broad, s):
+                return done, GROW_INDEX
+            live = list_live_bodies(bodies, broad, False)
         t1 = clock_ns(profile)
         # 2. Collision detection (octree broad phase, SAT narrow phase) at the current positions,
         #    with speculative margins covering this step's motion.
-        status = detect(bodies, broad, playground, current, s)
+        status = detect(bodies, broad, playground, current, s, live)
         if status != DONE:
             return done, status
         t2 = clock_ns(profile)
@@ -138,9 +153,10 @@ def step_world(steps, bodies, playground, vehicles, settings, broad, previous, c
         #    own contacts so they do not sink for a step.
         woken, stale = wake_touched(current, bodies, s.freezing_linear_speed)
         if woken > 0:
-            update_bodies(bodies, s.dt, s.root_size, s.octree_depth, False)
+            live = list_live_bodies(bodies, broad, False)
+            update_bodies(bodies, live, s.dt, s.root_size, s.octree_depth)
             broad.stale[0] += stale
-            status = detect(bodies, broad, playground, current, s)
+            status = detect(bodies, broad, playground, current, s, live)
             if status != DONE:
                 return done, status
         t3 = clock_ns(profile)
@@ -154,17 +170,17 @@ def step_world(steps, bodies, playground, vehicles, settings, broad, previous, c
         #    gravity and pushes.
         drive_vehicles(vehicles, bodies, broad, playground, s.ground_enabled, s.ground_height,
                        s.root_min, s.root_size, s.octree_depth, s.dt)
-        integrate_velocities(bodies, s.gravity, s.dt)
+        integrate_velocities(bodies, live, s.gravity, s.dt)
         t5 = clock_ns(profile)
         # 6. Contact pass: zero elasticity, twice the iterations, split-impulse penetration fix.
         warm_start(current, bodies)
         contact_pass(current, bodies, 2 * s.resolve_iterations)
         t6 = clock_ns(profile)
         # 7. Positions from velocities.
-        integrate_positions(bodies, s.dt)
+        integrate_positions(bodies, live, s.dt)
         t7 = clock_ns(profile)
         # 8. Freezing of bodies that have been at rest long enough.
-        frozen_now = update_freezing(bodies, s.freezing_enabled, s.freezing_time,
+        frozen_now = update_freezing(bodies, live, s.freezing_enabled, s.freezing_time,
                                      s.freezing_linear_speed, s.freezing_angular_speed, s.dt)
         index_manifolds(current)
         if profile:

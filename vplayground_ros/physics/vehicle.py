@@ -127,6 +127,8 @@ def drive_vehicles(vehicles, bodies, broad, playground, ground_enabled, ground_h
     applied as impulses to the chassis (and the opposite to any box a wheel stands on). The four
     springs are evaluated on the same state, then applied; the tyres follow one by one, each
     seeing what the others already did (so four wheels never cancel the same slip four times)."""
+    if not np.any(vehicles.active):
+        return  # nothing to drive: no per-body work (a world at rest costs next to nothing)
     position, velocity = bodies.position, bodies.velocity
     broad.stamp[:] = -1  # the rays' query ids repeat every step
     for v in range(len(vehicles.active)):
