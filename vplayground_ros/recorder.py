@@ -24,6 +24,7 @@ import argparse
 import queue
 import sys
 import threading
+import time
 from pathlib import Path
 
 import mcap.writer
@@ -50,6 +51,10 @@ ZSTD_LEVEL = 3
 # zstd windows decoders take by default (libzstd, the mcap readers): 2^27 bytes.
 MAX_WINDOW_LOG = 27
 QUEUE_MESSAGES = 4096
+# The writer wakes this often (s) and writes what has queued, rather than at every message: a
+# wake-up per message (128 Hz of /clock alone) cost more CPU than the writing, and made the
+# simulation thread and the writer take the GIL from each other. The queue holds 4096.
+WAKE_PERIOD = 0.05
 
 
 class WholeChunkZstd:
@@ -153,18 +158,28 @@ class Recorder:
             self._add(topic, type_name, data, stamp)
 
     def _run(self):
-        while True:
-            item = self._queue.get()
-            if item is None:
-                break
-            if self.error is not None:
-                continue  # the disk failed: keep draining so nobody blocks, record nothing
-            try:
-                if self.split_size and self._file.tell() > self.split_size:
-                    self._split()
-                self._add(*item)
-            except Exception as error:  # OSError mostly (ENOSPC, EIO); anything else must not kill the thread
-                self.error = f"{self._file.name}: {getattr(error, 'strerror', None) or error}"
+        closing = False
+        while not closing:
+            batch = [self._queue.get()]
+            while True:  # everything queued meanwhile, taken at once
+                try:
+                    batch.append(self._queue.get_nowait())
+                except queue.Empty:
+                    break
+            for item in batch:
+                if item is None:
+                    closing = True
+                    break
+                if self.error is not None:
+                    continue  # the disk failed: keep draining so nobody blocks, record nothing
+                try:
+                    if self.split_size and self._file.tell() > self.split_size:
+                        self._split()
+                    self._add(*item)
+                except Exception as error:  # OSError mostly (ENOSPC, EIO); anything else must not kill the thread
+                    self.error = f"{self._file.name}: {getattr(error, 'strerror', None) or error}"
+            if not closing:
+                time.sleep(WAKE_PERIOD)
         try:
             self._finish()
         except Exception as error:
