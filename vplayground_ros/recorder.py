@@ -8,8 +8,8 @@ the package free of a native extension wherever it is built (colcon, pip); zstd 
 - ROS 2 profile, `ros2msg` schemas with full definitions (interfaces.schema), `cdr` messages,
   zstd chunks, message indexes and a summary.
 - log time = publish time = simulation time (ns).
-- Writes happen on the recorder's own thread from a bounded queue: the simulation and the
-  publishers never wait on the disk; what does not fit is dropped and counted.
+- Writes happen on the recorder's own thread, every WAKE_PERIOD, from a bounded queue: the
+  simulation and the publishers never wait on the disk; what does not fit is dropped and counted.
 - record_split_size: a new file <stem>_<n>.mcap starts past that many bytes, and the latched
   topics (the scenery, /tf_static, the state) are written again at its start, so every file
   opens on its own.
