@@ -7,9 +7,10 @@ simulation thread spent inside the compiled step over the same interval (/diagno
 gives the Python threads' names to the OS), the time from starting the process to the first
 ~/bodies/poses message (warm Numba cache), and the bag's bytes per simulated second. With
 --foxglove the built-in Foxglove server runs too, with a WebSocket client subscribed to every
-channel.
+channel. With --awake the pile never freezes (freezing off, 2 s after the drop): the boxes
+jostle in contact all along, so every pose, marker, transform and contact changes each round.
 
-    python bench/node_overhead.py [--boxes 1000] [--seconds 20] [--foxglove] [--scene PATH]
+    python bench/node_overhead.py [--boxes 1000] [--seconds 20] [--foxglove] [--awake] [--scene PATH]
 """
 import argparse
 import json
@@ -72,6 +73,14 @@ def settled_scene(boxes, path):
     return int(world.state()["frozen"].sum())
 
 
+def awake_scene(boxes, path, seconds=2):
+    """A pile of `boxes` dropped `seconds` ago with freezing off, saved to `path`."""
+    world = build_pile(boxes)
+    world.update_settings({"freezing": {"enabled": False}})
+    world.step(seconds * world.settings["steps_per_second"])
+    save_world(world, path)
+
+
 def diagnostic_values(message):
     return {kv.key: kv.value for s in message.status for kv in s.values}
 
@@ -81,12 +90,16 @@ def main():
     parser.add_argument("--boxes", type=int, default=1000)
     parser.add_argument("--seconds", type=float, default=20.0)
     parser.add_argument("--foxglove", action="store_true", help="also serve Foxglove, a client subscribed to all")
+    parser.add_argument("--awake", action="store_true", help="a pile that never freezes, instead of a settled one")
     parser.add_argument("--scene", type=Path, help="run this scene instead of building a settled pile (--boxes unused)")
     args = parser.parse_args()
     os.environ.setdefault("ROS_DOMAIN_ID", str(150 + os.getpid() % 50))
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     workspace = Path(tempfile.mkdtemp())
-    if args.scene is None:
+    if args.scene is None and args.awake:
+        scene, frozen_at_start = workspace / "awake.yaml", 0
+        awake_scene(args.boxes, scene)
+    elif args.scene is None:
         scene = workspace / "pile.yaml"
         frozen_at_start = settled_scene(args.boxes, scene)
     else:

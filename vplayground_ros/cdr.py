@@ -124,6 +124,7 @@ class TemplateEncoder:
         self._write = write_element  # (writer, key) -> {field: offset}, with zero numbers
         self._templates = {}
         self._last_layout = None
+        self._filled = None  # (layout, its elements as last written, {number key: their bits})
 
     def template(self, key, alignment):
         if (key, alignment) not in self._templates:
@@ -166,28 +167,37 @@ class TemplateEncoder:
         self._last_layout = (cache_key, layout)
         return layout
 
-    def append_all(self, w, stamp_bytes, keys, numbers, identity=None):
-        """Appends one element per key; numbers: {field: array (N, k) of the field's values,
-        its dtype the wire type ('<f8', '<f4', '<i4')}: the stamp and every field are written
-        into a copy of the layout at once with numpy. `identity`: see layout."""
+    def elements(self, stamp_bytes, keys, numbers, alignment, identity=None):
+        """One element per key, laid from a payload position ≡ alignment (mod 8): a memoryview
+        of their bytes, valid until the next call. numbers: {field: array (N, k) of the field's
+        values, its dtype the wire type ('<f8', '<f4', '<i4')}. The elements of the last layout
+        are kept filled: a call writes the stamps and only the fields whose bits changed (a
+        frozen body's pose, every size and colour of a settled pile: nothing), each through a
+        numpy view of its type. `identity`: see layout."""
         count = next(iter(numbers.values())).shape[0]
         if count == 0:
-            return
-        alignment = w.position % 8
-        template, stamp_words, starts, indices = self.layout(keys, alignment, identity)
-        # The buffer starts `alignment` bytes before the elements, so every number sits at a
-        # multiple of its size in it, as CDR aligns it in the payload: each field is written
-        # through a view of its own type, one index per number rather than per byte.
-        end = alignment + len(template)
-        buffer = np.empty(-(-end // 8) * 8, np.uint8)
-        buffer[alignment:end] = template
+            return b""
+        layout = self.layout(keys, alignment, identity)
+        template, stamp_words, starts, indices = layout
+        if self._filled is None or self._filled[0] is not layout:
+            # The buffer starts `alignment` bytes before the elements, so every number sits at
+            # a multiple of its size in it, as CDR aligns it in the payload: each field is
+            # written through a view of its own type, one index per number rather than per byte.
+            buffer = np.zeros(-(-(alignment + len(template)) // 8) * 8, np.uint8)
+            buffer[alignment:alignment + len(template)] = template
+            self._filled = (layout, buffer, {})
+        _, buffer, written = self._filled
         buffer.view("<u4")[stamp_words] = np.frombuffer(stamp_bytes, "<u4")
         for field, values in numbers.items():
             key = (field, values.dtype.str, values.shape[1])
+            bits = np.ascontiguousarray(values).view(f"<u{values.dtype.itemsize}")
+            if key in written and np.array_equal(written[key], bits):
+                continue
             if key not in indices:
                 indices[key] = spread((starts[field] + alignment) // values.dtype.itemsize, values.shape[1])
             buffer.view(values.dtype)[indices[key]] = values
-        w.data += buffer[alignment:end].data
+            written[key] = bits.copy()
+        return memoryview(buffer)[alignment:alignment + len(template)]
 
 
 def spread(starts, count):
@@ -201,21 +211,32 @@ class BodyMarkerEncoder:
     def __init__(self):
         self._elements = TemplateEncoder(lambda w, key: w.marker(
             (0, 0), key[0], key[1], 0, CUBE, 0, [0.0] * 7, [0.0] * 3, [0.0] * 4, True))
+        self._head = (None, b"")  # (frame, the count and the DELETEALL marker with zero numbers)
+
+    def head(self, frame, count, stamp_bytes):
+        """The array's count and its DELETEALL marker, written once per frame and patched."""
+        if self._head[0] != frame:
+            w = Writer()
+            w.u32(0)
+            w.marker((0, 0), frame, "", 0, 0, DELETEALL, [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0], [1.0] * 3,
+                     [0.0] * 4, False)
+            self._head = (frame, bytes(w.data))
+        head = bytearray(self._head[1])
+        head[0:4] = struct.pack("<I", count)
+        head[4:12] = stamp_bytes  # the DELETEALL's header stamp follows the count
+        return head
 
     def encode(self, seconds, frame, namespaces, ids, poses, sizes, colours):
         """namespaces (N,) str, ids (N,) int, poses (N, 7) xyz + xyzw, sizes (N, 3), colours
         (N, 4) RGBA: the MarkerArray's CDR bytes."""
-        stamp = split_stamp(seconds)
-        w = Writer()
-        w.u32(len(ids) + 1)
-        w.marker(stamp, frame, "", 0, 0, DELETEALL, [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0], [1.0] * 3,
-                 [0.0] * 4, False)
+        stamp_bytes = struct.pack("<iI", *split_stamp(seconds))
+        head = self.head(frame, len(ids) + 1, stamp_bytes)
         namespaces = np.asarray(namespaces, str)
         identity = (frame, namespaces.dtype.str, len(namespaces), namespaces.tobytes())  # no loop per body
-        self._elements.append_all(w, struct.pack("<iI", *stamp), ((frame, str(ns)) for ns in namespaces), {
+        elements = self._elements.elements(stamp_bytes, ((frame, str(ns)) for ns in namespaces), {
             "id": np.asarray(ids, "<i4").reshape(-1, 1), "pose": np.asarray(poses, "<f8"),
-            "scale": np.asarray(sizes, "<f8"), "color": np.asarray(colours, "<f4")}, identity)
-        return ENCAPSULATION + bytes(w.data)
+            "scale": np.asarray(sizes, "<f8"), "color": np.asarray(colours, "<f4")}, len(head) % 8, identity)
+        return b"".join((ENCAPSULATION, head, elements))
 
 
 class TransformEncoder:
@@ -225,15 +246,14 @@ class TransformEncoder:
         self._elements = TemplateEncoder(lambda w, key: w.transform((0, 0), key[0], key[1], [0.0] * 7))
 
     def encode(self, seconds, parents, children, poses):
-        stamp = split_stamp(seconds)
-        w = Writer()
-        w.u32(len(children))
+        count = struct.pack("<I", len(children))
         # The frames, not a pair per transform, tell a changed layout: two flat tuples compare
         # at C speed (the same string objects every message), and pairs are made only then.
         parents, children = tuple(parents), tuple(children)
-        self._elements.append_all(w, struct.pack("<iI", *stamp), zip(parents, children),
-                                  {"pose": np.asarray(poses, "<f8").reshape(-1, 7)}, (parents, children))
-        return ENCAPSULATION + bytes(w.data)
+        elements = self._elements.elements(struct.pack("<iI", *split_stamp(seconds)), zip(parents, children),
+                                           {"pose": np.asarray(poses, "<f8").reshape(-1, 7)}, len(count),
+                                           (parents, children))
+        return b"".join((ENCAPSULATION, count, elements))
 
 
 def clock(seconds):
@@ -268,7 +288,7 @@ def pose_array(seconds, frame, positions, quaternions):
     w.u32(len(positions))
     w.align(8)
     block = np.concatenate([positions, quaternions], axis=1).astype("<f8", copy=False)
-    return ENCAPSULATION + bytes(w.data) + block.tobytes()
+    return b"".join((ENCAPSULATION, w.data, block))
 
 
 def point_cloud(seconds, frame, fields, rows):
