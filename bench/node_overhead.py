@@ -95,7 +95,12 @@ def main():
     args = parser.parse_args()
     os.environ.setdefault("ROS_DOMAIN_ID", str(150 + os.getpid() % 50))
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    workspace = Path(tempfile.mkdtemp())
+    with tempfile.TemporaryDirectory(prefix="node_overhead_") as workspace:  # the bag is GBs at 10,000
+        measure(args, Path(workspace))
+
+
+def measure(args, workspace):
+    """One run in `workspace` (the scene and the bag); prints the figures as JSON."""
     if args.scene is None and args.awake:
         scene, frozen_at_start = workspace / "awake.yaml", 0
         awake_scene(args.boxes, scene)
