@@ -274,11 +274,12 @@ def test_foxglove_server_shares_the_ros_graph(ros):
         client.close()
 
 
-def test_twist_drives_the_car_and_the_timeout_stops_it(ros):
-    ros.listen(Odometry, "/odom")
+def drive_in_circles(ros):
+    """Twist at 20 Hz on cmd_vel, 3 m/s and 1 rad/s (a 3 m circle, clear of the playground),
+    until the returned event is cleared."""
     publisher = ros.client.create_publisher(Twist, "cmd_vel", 10)
     command = Twist()
-    command.linear.x, command.angular.z = 3.0, 1.0  # a 3 m circle, clear of the playground
+    command.linear.x, command.angular.z = 3.0, 1.0
     driving = threading.Event()
     driving.set()
 
@@ -287,6 +288,12 @@ def test_twist_drives_the_car_and_the_timeout_stops_it(ros):
             publisher.publish(command)
             time.sleep(0.05)
     threading.Thread(target=keep_publishing, daemon=True).start()
+    return driving
+
+
+def test_twist_drives_the_car_and_the_timeout_stops_it(ros):
+    ros.listen(Odometry, "/odom")
+    driving = drive_in_circles(ros)
     speed = lambda: ros.latest["/odom"].twist.twist.linear.x  # noqa: E731
     try:
         assert wait_for(lambda: "/odom" in ros.latest and abs(speed() - 3.0) < 0.3, timeout=20)
@@ -307,17 +314,7 @@ def test_the_turning_cars_imu_yaw_rate_agrees_with_odometry(ros):
     imu, odom = {}, {}
     ros.client.create_subscription(Imu, "/imu/data", lambda m: imu.__setitem__(stamp(m), m), 100)
     ros.client.create_subscription(Odometry, "/odom", lambda m: odom.__setitem__(stamp(m), m), 100)
-    publisher = ros.client.create_publisher(Twist, "cmd_vel", 10)
-    command = Twist()
-    command.linear.x, command.angular.z = 3.0, 1.0
-    driving = threading.Event()
-    driving.set()
-
-    def keep_publishing():
-        while driving.is_set():
-            publisher.publish(command)
-            time.sleep(0.05)
-    threading.Thread(target=keep_publishing, daemon=True).start()
+    driving = drive_in_circles(ros)
     turning = lambda: [t for t in set(imu) & set(odom) if odom[t].twist.twist.angular.z > 0.1]  # noqa: E731
     try:
         assert wait_for(lambda: len(turning()) >= 10, timeout=60)
