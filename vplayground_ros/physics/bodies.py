@@ -1,4 +1,4 @@
-"""Bodies as structure-of-arrays: one row (slot) per box, owned by the World.
+"""Bodies as structure-of-arrays: one row (slot) per body, owned by the World.
 
 A namedtuple of numpy arrays is what the compiled kernels receive; it keeps the kernels' argument
 lists short and every field named. Kernels unpack the arrays they need once, outside their loops:
@@ -17,8 +17,10 @@ BodyArrays = namedtuple("BodyArrays", [
                              # row is the static world (ground, mesh): always zero
     "mass",                  # (N,) kg (kept as given, so saving reproduces it exactly)
     "inv_mass",              # (N,) 1/kg
-    "inv_inertia",           # (N, 3) inverse inertia tensor in the body frame (diagonal for a box)
-    "half_extents",          # (N, 3) m
+    "inv_inertia",           # (N, 3) inverse principal inertia; the body frame is principal
+    "shape",                 # (N,) int64 shape code (physics.shapes)
+    "dimensions",            # (N, 3) the shape's numbers (physics.shapes.<shape>), m
+    "half_extents",          # (N, 3) m, of the shape's bounding box in the body frame
     "elasticity",            # (N,) coefficient of restitution
     "static_friction",       # (N,)
     "dynamic_friction",      # (N,)
@@ -48,7 +50,8 @@ def allocate_bodies(capacity):
     orientation[:, 3] = 1.0
     return BodyArrays(
         active=b(), position=f(3), orientation=orientation,
-        velocity=np.zeros((capacity + 1, 6)), mass=f(), inv_mass=f(), inv_inertia=f(3), half_extents=f(3),
+        velocity=np.zeros((capacity + 1, 6)), mass=f(), inv_mass=f(), inv_inertia=f(3),
+        shape=np.zeros(capacity, np.int64), dimensions=f(3), half_extents=f(3),
         elasticity=f(), static_friction=f(), dynamic_friction=f(), immovable=b(),
         allow_freezing=b(), frozen=b(), freeze_timer=f(), static_indexed=b(),
         external_impulse=f(3), external_angular_impulse=f(3), awake=b(), rotation=f(3, 3),
@@ -64,11 +67,3 @@ def grow_bodies(bodies, capacity):
     for field, old in zip(BodyArrays._fields, bodies):
         getattr(grown, field)[:n] = old[:n]  # velocity's static-world row stays last (zero)
     return grown
-
-
-def box_inverse_inertia(mass, half_extents):
-    """Inverse of the solid box's principal inertia m/12 (b^2 + c^2, ...), full edges a, b, c."""
-    size_sq = (2.0 * np.asarray(half_extents, dtype=float)) ** 2
-    inertia = mass / 12.0 * np.array((size_sq[1] + size_sq[2], size_sq[0] + size_sq[2],
-                                      size_sq[0] + size_sq[1]))
-    return 1.0 / inertia

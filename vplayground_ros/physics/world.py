@@ -10,7 +10,8 @@ from collections import namedtuple
 import numpy as np
 
 from . import specs
-from .bodies import allocate_bodies, box_inverse_inertia, grow_bodies
+from . import shapes
+from .bodies import allocate_bodies, grow_bodies
 from .broad_phase import allocate_broad_phase
 from .constants import CONTACT_MARGIN
 from .contact import allocate_contacts, index_manifolds
@@ -141,9 +142,10 @@ class World:
         b.active[slot] = True
         b.position[slot] = body["position"]
         b.orientation[slot] = body["quaternion"] if "quaternion" in body else rpy_to_quat(body.get("rpy", (0, 0, 0)))
-        b.half_extents[slot] = np.asarray(body["size"]) * 0.5
-        size = body["size"]
-        b.mass[slot] = body["mass"] if "mass" in body else body.get("density", specs.DEFAULT_DENSITY) * size[0] * size[1] * size[2]
+        shape = shapes.SHAPES[body["shape"]]
+        b.shape[slot] = shape.code
+        self._set_dimensions(slot, shape.module.dimensions(body))
+        b.mass[slot] = body["mass"] if "mass" in body else body.get("density", specs.DEFAULT_DENSITY) * self._volume(slot)
         self._set_fields(slot, body)
         self._names[slot] = name
         self._slots[name] = slot
@@ -285,11 +287,11 @@ class World:
             b.orientation[slot] = body["quaternion"]
         if "size" in body:
             b.half_extents[slot] = np.asarray(body["size"]) * 0.5
-        size = 2.0 * b.half_extents[slot]
+            b.dimensions[slot] = b.half_extents[slot]
         if "mass" in body:
             b.mass[slot] = body["mass"]
         elif "density" in body:
-            b.mass[slot] = body["density"] * float(np.prod(size))
+            b.mass[slot] = body["density"] * self._volume(slot)
         self._set_fields(slot, body)
         self.layout_version += 1  # sizes, masses, flags
         if not body.get("frozen", False):
@@ -630,7 +632,8 @@ class World:
         if "angular_velocity" in body:
             b.velocity[slot, 3:] = body["angular_velocity"]
         b.inv_mass[slot] = 1.0 / b.mass[slot]
-        b.inv_inertia[slot] = box_inverse_inertia(b.mass[slot], b.half_extents[slot])
+        shape = shapes.SHAPES[shapes.SHAPE_NAMES[int(b.shape[slot])]].module
+        b.inv_inertia[slot] = 1.0 / (b.mass[slot] * np.asarray(shape.unit_inertia(tuple(b.dimensions[slot]))))
         if b.immovable[slot]:
             b.velocity[slot] = 0.0
         if body.get("frozen", False) and not b.immovable[slot]:
@@ -640,6 +643,15 @@ class World:
             # Whatever changed, its static-index entry may no longer match.
             b.static_indexed[slot] = False
             self._broad.stale[0] += 1
+
+    def _set_dimensions(self, slot, dims):
+        b = self._bodies
+        b.dimensions[slot] = dims
+        b.half_extents[slot] = shapes.half_extents(int(b.shape[slot]), tuple(float(x) for x in dims))
+
+    def _volume(self, slot):
+        b = self._bodies
+        return shapes.SHAPES[shapes.SHAPE_NAMES[int(b.shape[slot])]].module.volume(tuple(b.dimensions[slot]))
 
     def _forget_contacts(self, slot):
         """Drops the warm-start impulses of the newest contacts of a slot that is edited or
