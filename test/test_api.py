@@ -39,7 +39,7 @@ def world():
     ({"elasticity": 1.5}, "body.elasticity: must be <= 1"),
     ({"static_friction": -0.1}, "body.static_friction: must be >= 0"),
     ({"immovable": "yes"}, "body.immovable: expected true or false"),
-    ({"shape": "sphere"}, "body.shape: unsupported shape"),
+    ({"shape": "cone"}, "body.shape: unsupported shape"),
     ({"name": "a"}, "already exists"),
     ({"name": "bad name!"}, "body.name: invalid name"),
     ({"rpy": [0, 0, 0], "quaternion": [0, 0, 0, 1]}, "either rpy or quaternion"),

@@ -23,13 +23,14 @@ def test_body_markers_round_trip(count):
     ids = np.arange(count) * 3 + 1
     poses = rng.normal(size=(count, 7))
     sizes, colours = rng.uniform(0.1, 3, (count, 3)), rng.uniform(0, 1, (count, 4)).astype(np.float32)
-    data = cdr.BodyMarkerEncoder().encode(12.25, "world", namespaces, ids, poses, sizes, colours)
+    types = rng.choice([Marker.CUBE, Marker.SPHERE, Marker.CYLINDER], count)
+    data = cdr.BodyMarkerEncoder().encode(12.25, "world", namespaces, types, ids, poses, sizes, colours)
     msg = deserialize_message(data, MarkerArray)
     assert len(msg.markers) == count + 1
     assert msg.markers[0].action == Marker.DELETEALL
     for k, m in enumerate(msg.markers[1:]):
         assert m.header.frame_id == "world" and stamp_of(m.header) == pytest.approx(12.25)
-        assert m.ns == namespaces[k] and m.id == ids[k] and m.type == Marker.CUBE
+        assert m.ns == namespaces[k] and m.id == ids[k] and m.type == types[k]
         assert [m.pose.position.x, m.pose.position.y, m.pose.position.z, m.pose.orientation.x,
                 m.pose.orientation.y, m.pose.orientation.z, m.pose.orientation.w] == list(poses[k])
         assert [m.scale.x, m.scale.y, m.scale.z] == list(sizes[k])
@@ -101,8 +102,13 @@ def test_a_marker_encoder_reused_follows_changed_namespaces():
     encoder = cdr.BodyMarkerEncoder()
     poses, sizes, colours = np.zeros((3, 7)), np.ones((3, 3)), np.ones((3, 4), np.float32)
     for namespaces in (["box", "box", "vehicle"], ["box", "immovable", "vehicle"], ["box", "box", "vehicle"]):
-        msg = deserialize_message(encoder.encode(1.0, "world", namespaces, [1, 2, 3], poses, sizes, colours), MarkerArray)
+        msg = deserialize_message(encoder.encode(1.0, "world", namespaces, [1] * 3, [1, 2, 3], poses, sizes, colours),
+                                  MarkerArray)
         assert [m.ns for m in msg.markers[1:]] == namespaces
+    for types in ([1, 1, 1], [1, 2, 1], [3, 2, 1]):  # a body of another shape in its place
+        msg = deserialize_message(encoder.encode(1.0, "world", namespaces, types, [1, 2, 3], poses, sizes, colours),
+                                  MarkerArray)
+        assert [m.type for m in msg.markers[1:]] == types
 
 
 def test_a_reused_encoder_writes_what_a_fresh_one_does():
@@ -121,11 +127,11 @@ def test_a_reused_encoder_writes_what_a_fresh_one_does():
     for seconds, p, c, ns in [(1.0, poses, colours, namespaces), (1.5, poses, colours, namespaces),
                               (2.0, moved, colours, namespaces), (2.5, signed, greyed, namespaces),
                               (3.0, signed, greyed, ["box", "immovable", "box", "box"]), (3.5, poses, colours, namespaces)]:
-        assert markers.encode(seconds, "world", ns, ids, p, sizes, c) == \
-            cdr.BodyMarkerEncoder().encode(seconds, "world", ns, ids, p, sizes, c)
+        assert markers.encode(seconds, "world", ns, [1] * 4, ids, p, sizes, c) == \
+            cdr.BodyMarkerEncoder().encode(seconds, "world", ns, [1] * 4, ids, p, sizes, c)
         children = [f"{n}_{k}" for k, n in enumerate(ns)]
         assert transforms.encode(seconds, ["world"] * 4, children, p) == \
             cdr.TransformEncoder().encode(seconds, ["world"] * 4, children, p)
-    msg = deserialize_message(markers.encode(4.0, "world", namespaces, ids, moved, sizes, greyed), MarkerArray)
+    msg = deserialize_message(markers.encode(4.0, "world", namespaces, [1] * 4, ids, moved, sizes, greyed), MarkerArray)
     assert msg.markers[0].header.stamp.sec == 4 and msg.markers[3].pose.position.x == moved[2, 0]
     assert msg.markers[2].color.r == pytest.approx(0.6)

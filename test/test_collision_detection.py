@@ -5,7 +5,7 @@ import pytest
 from vplayground_ros.physics import World
 from vplayground_ros.physics.math3d import rpy_to_quat
 from vplayground_ros.physics.narrow_phase import MAX_CLIP_POINTS, box_box
-from vplayground_ros.physics.world import quaternions_to_matrices
+from vplayground_ros.physics.math3d import quaternions_to_matrices
 
 
 def brute_force_pairs(world):

@@ -26,6 +26,7 @@ from hypothesis import strategies as st
 from vplayground_ros import api
 from vplayground_ros.api import Requests
 from vplayground_ros.physics import specs
+from vplayground_ros.physics.shapes import SHAPES
 from vplayground_ros.resources import find_shared
 from vplayground_ros.scene import MAX_PLAYGROUND_TRIANGLES, SceneError, load_world
 from vplayground_ros.simulation import Simulation
@@ -154,8 +155,10 @@ def bad_vector(length, low, high, low_open=False):
 
 BODY_BAD = {
     "name": BAD_NAMES,
-    "shape": st.one_of(st.text(max_size=20).filter(lambda s: s != "box"), NOT_NUMBERS),
+    "shape": st.one_of(st.text(max_size=20).filter(lambda s: s not in SHAPES), NOT_NUMBERS),
     "size": bad_vector(3, 0.0, specs.MAX_SIZE, low_open=True),
+    "radius": bad_number(0.0, 0.5 * specs.MAX_SIZE, low_open=True),
+    "length": bad_number(0.0, specs.MAX_SIZE),
     "position": st.one_of(bad_vector(3, -specs.MAX_COORDINATE, specs.MAX_COORDINATE),
                           st.tuples(st.floats(5e3, 1e6), st.floats(-1e3, 1e3), st.floats(0, 10)).map(list)),
     "rpy": bad_vector(3, -1e3, 1e3),

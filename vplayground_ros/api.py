@@ -24,6 +24,7 @@ import regex
 import yaml
 
 from .physics import specs
+from .physics.shapes import SHAPES
 from .resources import find_shared
 from .scene import YAML_LOADER, SceneError, load_world, world_to_scene
 from .physics.math3d import rpy_to_quat
@@ -642,7 +643,8 @@ def describe(world, name, vehicles=None):
     is_vehicle = name in (world.vehicle_names() if vehicles is None else vehicles)
     props = world.vehicle(name) if is_vehicle else world.body(name)
     body = world.body(name)
-    size = np.asarray(body["size"])
+    module = SHAPES[body["shape"]].module
+    size = 2.0 * np.asarray(module.half_extents(module.dimensions(body)))
     return {
         "name": name,
         "category": "vehicle" if is_vehicle else ("immovable" if body["immovable"] else "box"),
@@ -652,6 +654,7 @@ def describe(world, name, vehicles=None):
         "mass": body["mass"],
         "frozen": body["frozen"],
         "properties": props,
+        "shape": body["shape"],
         "bounds": {"size": size.tolist()},
     }
 
@@ -669,5 +672,6 @@ def describe_sensor(world, spec):
         "frame": "world",
         "pose": {"position": mount[:3, 3].tolist(), "orientation": matrix_to_quaternion(mount[:3, :3]).tolist()},
         "properties": dict(spec),
+        "shape": "box",
         "bounds": {"size": [SENSOR_SIZE] * 3},
     }

@@ -206,11 +206,11 @@ def spread(starts, count):
 
 
 class BodyMarkerEncoder:
-    """~/bodies/markers: DELETEALL, then one CUBE per body."""
+    """~/bodies/markers: DELETEALL, then the bodies' shapes (a marker type each)."""
 
     def __init__(self):
         self._elements = TemplateEncoder(lambda w, key: w.marker(
-            (0, 0), key[0], key[1], 0, CUBE, 0, [0.0] * 7, [0.0] * 3, [0.0] * 4, True))
+            (0, 0), key[0], key[1], 0, key[2], 0, [0.0] * 7, [0.0] * 3, [0.0] * 4, True))
         self._head = (None, b"")  # (frame, the count and the DELETEALL marker with zero numbers)
 
     def head(self, frame, count, stamp_bytes):
@@ -226,14 +226,15 @@ class BodyMarkerEncoder:
         head[4:12] = stamp_bytes  # the DELETEALL's header stamp follows the count
         return head
 
-    def encode(self, seconds, frame, namespaces, ids, poses, sizes, colours):
-        """namespaces (N,) str, ids (N,) int, poses (N, 7) xyz + xyzw, sizes (N, 3), colours
-        (N, 4) RGBA: the MarkerArray's CDR bytes."""
+    def encode(self, seconds, frame, namespaces, types, ids, poses, sizes, colours):
+        """namespaces (N,) str, types (N,) int Marker types, ids (N,) int, poses (N, 7) xyz +
+        xyzw, sizes (N, 3), colours (N, 4) RGBA: the MarkerArray's CDR bytes."""
         stamp_bytes = struct.pack("<iI", *split_stamp(seconds))
         head = self.head(frame, len(ids) + 1, stamp_bytes)
-        namespaces = np.asarray(namespaces, str)
-        identity = (frame, namespaces.dtype.str, len(namespaces), namespaces.tobytes())  # no loop per body
-        elements = self._elements.elements(stamp_bytes, ((frame, str(ns)) for ns in namespaces), {
+        namespaces, types = np.asarray(namespaces, str), np.asarray(types, np.int32)
+        identity = (frame, namespaces.dtype.str, len(namespaces), namespaces.tobytes(),
+                    types.tobytes())  # no loop per body
+        elements = self._elements.elements(stamp_bytes, ((frame, str(ns), int(t)) for ns, t in zip(namespaces, types)), {
             "id": np.asarray(ids, "<i4").reshape(-1, 1), "pose": np.asarray(poses, "<f8"),
             "scale": np.asarray(sizes, "<f8"), "color": np.asarray(colours, "<f4")}, len(head) % 8, identity)
         return b"".join((ENCAPSULATION, head, elements))

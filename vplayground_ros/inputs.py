@@ -13,7 +13,7 @@ import yaml
 
 from .interfaces import decoder
 from .physics.math3d import rpy_to_quat
-from .physics.world import quaternions_to_matrices
+from .physics.math3d import quaternions_to_matrices
 
 Subscription = namedtuple("Subscription", "key name type")
 SUBSCRIPTIONS = [

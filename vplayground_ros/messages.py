@@ -12,7 +12,8 @@ import numpy as np
 
 from . import cdr
 from .interfaces import encode
-from .physics.world import quaternions_to_matrices
+from .physics import shapes
+from .physics.math3d import quaternions_to_matrices
 
 WHEEL_NAMES = ("front_left", "front_right", "rear_left", "rear_right")
 COLOURS = {  # category -> RGBA
@@ -24,9 +25,10 @@ COLOURS = {  # category -> RGBA
     "playground": (0.55, 0.60, 0.65, 1.0),
     "contact": (1.0, 0.1, 0.1, 1.0),
 }
-# visualization_msgs/Marker types and actions.
-CUBE, CYLINDER, LINE_LIST, CUBE_LIST, SPHERE_LIST, TRIANGLE_LIST = 1, 3, 5, 6, 7, 11
+# visualization_msgs/Marker types and actions (a capsule's own entry is its middle part).
+CUBE, SPHERE, CYLINDER, LINE_LIST, CUBE_LIST, SPHERE_LIST, TRIANGLE_LIST = 1, 2, 3, 5, 6, 7, 11
 ADD, DELETEALL = 0, 3
+CAPSULE_MARKER = CYLINDER
 IDENTITY = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)  # pose: xyz + xyzw
 FLOAT32, INT32 = 7, 5  # sensor_msgs/PointField datatypes
 
@@ -90,19 +92,50 @@ def categories(snapshot):
     return kinds
 
 
+# The marker that draws each shape; a capsule is its cylinder plus a SPHERE on each end, whose
+# ids are the body's with CAPSULE_END_ID_BITS set (body ids stay far below them).
+SHAPE_MARKER_TYPES = np.array([CUBE, SPHERE, CAPSULE_MARKER, CYLINDER], np.int32)
+CAPSULE_END_ID_BITS = (1 << 29, 1 << 30)
+
+
+def shape_markers(shape_codes, dimensions, poses, ids):
+    """The markers that draw bodies: (body row of each marker, type, id, pose (M, 7), scale
+    (M, 3)), vectorised (no Python loop per body: this runs at marker_rate over thousands)."""
+    r, half = dimensions[:, 0], dimensions[:, 1]
+    scales = np.where((shape_codes == shapes.BOX)[:, None], 2.0 * dimensions,
+                      np.stack([2.0 * r, 2.0 * r, np.where(shape_codes == shapes.SPHERE, 2.0 * r, 2.0 * half)], 1))
+    rows = np.arange(len(shape_codes))
+    types, marker_ids = SHAPE_MARKER_TYPES[shape_codes], np.asarray(ids, np.int32)
+    capsules = np.nonzero(shape_codes == shapes.CAPSULE)[0]
+    if len(capsules) == 0:
+        return rows, types, marker_ids, poses, scales
+    axis = quaternions_to_matrices(poses[capsules, 3:])[:, :, 2] * half[capsules, None]
+    ends = [np.concatenate([poses[capsules, :3] + sign * axis, poses[capsules, 3:]], axis=1) for sign in (1.0, -1.0)]
+    diameter = np.repeat(2.0 * r[capsules, None], 3, axis=1)
+    return (np.concatenate([rows, capsules, capsules]),
+            np.concatenate([types, np.full(2 * len(capsules), SPHERE, np.int32)]),
+            np.concatenate([marker_ids, marker_ids[capsules] | CAPSULE_END_ID_BITS[0],
+                            marker_ids[capsules] | CAPSULE_END_ID_BITS[1]]),
+            np.concatenate([poses, *ends]), np.concatenate([scales, diameter, diameter]))
+
+
 def body_markers(snapshot, frame, ids, encoder, car=None):
-    """~/bodies/markers: DELETEALL, then one CUBE per body (ns = category, ids (N,) stable per
-    name, frozen grey), but for the driven `car`: ~/car/markers draws it with its wheels, and
-    two markers at one place would show whichever colour the viewer draws last."""
+    """~/bodies/markers: DELETEALL, then each body's shape (shape_markers; ns = category, ids
+    (N,) stable per name, frozen grey), but for the driven `car`: ~/car/markers draws it with
+    its wheels, and two markers at one place would show whichever colour the viewer draws
+    last."""
     s = snapshot.state
     kinds = categories(snapshot)
     colours = CATEGORY_COLOURS[np.where(s["frozen"], FROZEN, kinds)]
     poses = np.concatenate([s["positions"], s["quaternions"]], axis=1)
-    sizes = s["sizes"]
+    codes, dimensions = s["shapes"], s["dimensions"]
     if car is not None:
         drawn = np.arange(len(kinds)) != snapshot.names.index(car)
-        kinds, ids, colours, poses, sizes = kinds[drawn], ids[drawn], colours[drawn], poses[drawn], sizes[drawn]
-    return encoder.encode(snapshot.time, frame, CATEGORIES[kinds], ids, poses, sizes, colours)
+        kinds, ids, colours, poses = kinds[drawn], ids[drawn], colours[drawn], poses[drawn]
+        codes, dimensions = codes[drawn], dimensions[drawn]
+    rows, types, marker_ids, poses, scales = shape_markers(codes, dimensions, poses, ids)
+    return encoder.encode(snapshot.time, frame, CATEGORIES[kinds[rows]], types, marker_ids, poses, scales,
+                          colours[rows])
 
 
 def marker_array(seconds, frame, markers):

@@ -16,7 +16,7 @@ from .mesh_files import MeshError, read_obj, read_with_trimesh
 from .physics import World
 from .physics import specs
 from .physics.math3d import rpy_to_quat
-from .physics.world import quaternions_to_matrices
+from .physics.math3d import quaternions_to_matrices
 from .resources import find_shared
 from .sensors import validate_sensors
 

@@ -24,7 +24,7 @@ from .physics import specs
 from .physics.contact import GROUND, PLAYGROUND
 from .physics.math3d import rpy_to_quat
 from .physics.ray_batch import NOTHING
-from .physics.world import quaternions_to_matrices
+from .physics.math3d import quaternions_to_matrices
 
 TYPES = ("lidar_2d", "lidar_3d", "depth_camera", "camera", "imu")
 COMMON_KEYS = {"name", "type", "parent", "pose", "rate"}

@@ -4,10 +4,13 @@ this one table, so a call behaves the same whichever way it comes in.
 """
 from collections import namedtuple
 
+import numpy as np
 import yaml
 
+from . import messages
 from .api import MAP_SUCCESS
 from .messages import header
+from .physics.shapes import SHAPES
 
 Service = namedtuple("Service", "name type handler")
 
@@ -77,14 +80,27 @@ def entity_marker(runtime, name, description):
     shape as controls[0].markers[0]."""
     snap = runtime.sim.snapshot
     position, orientation = description["pose"]["position"], description["pose"]["orientation"]
-    size = [float(v) for v in description["bounds"]["size"]]
     return {
         "header": header(snap.time, runtime.parameters["world_frame"]),
         "name": name,
         "description": yaml.safe_dump(description, sort_keys=False),
         "pose": {"position": dict(zip("xyz", map(float, position))),
                  "orientation": dict(zip("xyzw", map(float, orientation)))},
-        "controls": [{"name": "shape", "always_visible": True, "markers": [{
-            "type": 1, "action": 0,  # CUBE, ADD
-            "pose": {"orientation": {"w": 1.0}}, "scale": dict(zip("xyz", size))}]}],
+        "controls": [{"name": "shape", "always_visible": True, "markers": shape_markers(description)}],
     }
+
+
+def shape_markers(description):
+    """The markers that draw an entity in its own frame (messages.shape_markers: a capsule is a
+    cylinder and two spheres; a sensor a small cube)."""
+    shape = description["shape"]
+    if shape == "box":
+        dimensions = 0.5 * np.asarray(description["bounds"]["size"], float)
+    else:
+        module = SHAPES[shape].module
+        dimensions = np.asarray(module.dimensions(description["properties"]), float)
+    _, types, _, poses, scales = messages.shape_markers(
+        np.array([SHAPES[shape].code]), dimensions[None], np.array([[0.0] * 6 + [1.0]]), [0])
+    return [{"type": int(t), "action": 0,  # ADD
+             "pose": {"position": dict(zip("xyz", map(float, pose[:3]))), "orientation": dict(zip("xyzw", map(float, pose[3:])))},
+             "scale": dict(zip("xyz", map(float, scale)))} for t, pose, scale in zip(types, poses, scales)]

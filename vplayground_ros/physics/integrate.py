@@ -9,6 +9,7 @@ from numba import njit
 from .broad_phase import object_level
 from .constants import CONTACT_MARGIN
 from .math3d import integrate_orientation, quat_to_matrix
+from .shapes import world_extent
 
 
 @njit(cache=True, nogil=True)
@@ -40,14 +41,15 @@ def update_bodies(bodies, live, dt, root_size, depth):
             inv_i[:, :] = 0.0
         h = bodies.half_extents[i]
         speed = np.sqrt(velocity[i, 0] ** 2 + velocity[i, 1] ** 2 + velocity[i, 2] ** 2)
-        # Corners sweep at most |w| |h| dt by rotation.
+        # Surface points sweep at most |w| |h| dt by rotation (h: the bounding box's half extents).
         spin = (np.sqrt(velocity[i, 3] ** 2 + velocity[i, 4] ** 2 + velocity[i, 5] ** 2)
                 * np.sqrt(h[0] ** 2 + h[1] ** 2 + h[2] ** 2))
         bodies.speculative_reach[i] = (speed + spin) * dt if awake else 0.0
         # Half the margin on each side: two bounds meet once the boxes are CONTACT_MARGIN apart.
         grow = spin * dt + 0.5 * CONTACT_MARGIN
+        dims = (bodies.dimensions[i, 0], bodies.dimensions[i, 1], bodies.dimensions[i, 2])
         for e in range(3):
-            extent = abs(r[e, 0]) * h[0] + abs(r[e, 1]) * h[1] + abs(r[e, 2]) * h[2] + grow
+            extent = world_extent(bodies.shape[i], dims, r, e) + grow
             step = velocity[i, e] * dt
             bodies.aabb_min[i, e] = position[i, e] - extent + min(step, 0.0)
             bodies.aabb_max[i, e] = position[i, e] + extent + max(step, 0.0)

@@ -37,6 +37,16 @@ def integrate_orientation(q, omega, dt):
     q[0], q[1], q[2], q[3] = nx * inv, ny * inv, nz * inv, nw * inv
 
 
+def quaternions_to_matrices(q):
+    """(N, 4) xyzw -> (N, 3, 3), vectorised (the compiled kernels use quat_to_matrix)."""
+    x, y, z, w = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+    ], -2)
+
+
 def rpy_to_quat(rpy):
     """Roll, pitch, yaw (fixed axes X, Y, Z; REP-103) to an (x, y, z, w) quaternion."""
     r, p, y = (0.5 * float(a) for a in rpy)

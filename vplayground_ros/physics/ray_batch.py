@@ -18,7 +18,7 @@ from numba import njit, prange
 
 from .contact import GROUND, PLAYGROUND
 from .math3d import quat_to_matrix
-from .raycast import NO_HIT, ray_box, ray_triangle
+from .raycast import NO_HIT, ray_body, ray_triangle
 
 # Numba's OpenMP threads spin after each parallel batch by default: on a machine shared with the
 # node's other threads (or other processes) that spinning took several times the casting's own
@@ -212,22 +212,23 @@ def build_ray_grid(active, position, orientation, half_extents, triangles, tri_m
 
 
 @njit(cache=True, nogil=True, inline="always")
-def test_item(item, o, d, limit, excluded, position, rotation, half_extents, triangles, normals):
+def test_item(item, o, d, limit, excluded, position, rotation, half_extents, shape, dimensions,
+              triangles, normals):
     """(t, what, normal) of grid item `item` (a body slot, or capacity + a triangle) if the ray
     hits it nearer than `limit`, else t NO_HIT."""
     capacity = len(excluded)
     if item < capacity:
         if excluded[item]:
             return NO_HIT, item, (0.0, 0.0, 0.0)
-        # Most boxes a ray meets in its cells it passes by: the bounding sphere rules those out
-        # without the slab test's three divisions (with a margin for the rounding of a far box).
+        # Most bodies a ray meets in its cells it passes by: the bounding sphere rules those out
+        # without the exact test (with a margin for the rounding of a far body).
         vx, vy, vz = position[item, 0] - o[0], position[item, 1] - o[1], position[item, 2] - o[2]
         along = vx * d[0] + vy * d[1] + vz * d[2]
         h = (half_extents[item, 0], half_extents[item, 1], half_extents[item, 2])
         radius2, away2 = h[0] * h[0] + h[1] * h[1] + h[2] * h[2], vx * vx + vy * vy + vz * vz
         if away2 - along * along > radius2 + 1e-9 * (radius2 + away2):
             return NO_HIT, item, (0.0, 0.0, 0.0)
-        t, face = ray_box(o, d, limit, position, rotation, half_extents, item)
+        t, face = ray_body(o, d, limit, position, rotation, half_extents, shape, dimensions, item)
         return t, item, face
     tri = item - capacity
     t = ray_triangle(o, d, limit, triangles, normals, tri)
@@ -263,8 +264,8 @@ def axis_step(d):
 # inf), which cost the walk a branch each.
 @njit(cache=True, nogil=True, error_model="numpy")
 def cast_chunk(start, stop, origins, directions, max_range, excluded, grid, position, half_extents,
-               triangles, normals, ground_enabled, ground_height, row_of_slot, distance, point,
-               normal, hit):
+               shape, dimensions, triangles, normals, ground_enabled, ground_height, row_of_slot,
+               distance, point, normal, hit):
     """cast_ray_batch for rays start..stop; returns how many of them were invalid (a zero or
     non-finite direction, a non-finite origin, a NaN range): those are left unwritten."""
     rotation, lower, cell, dims = grid.rotation, grid.lower, grid.cell_size[0], grid.dims
@@ -296,7 +297,7 @@ def cast_chunk(start, stop, origins, directions, max_range, excluded, grid, posi
         limit = min(best, reach)
         for k in range(len(wide)):
             t, obj, face = test_item(wide[k], o, d, limit, excluded, position, rotation,
-                                     half_extents, triangles, normals)
+                                     half_extents, shape, dimensions, triangles, normals)
             if t < limit:
                 best, limit, what, n = t, t, obj, face
         # The ray's part inside the grid box, [t0, t1]. Per axis the direction of travel and
@@ -356,7 +357,7 @@ def cast_chunk(start, stop, origins, directions, max_range, excluded, grid, posi
                     continue  # its nearest hit, if any nearer than the limit then, is counted
                 tested_by[item] = i
                 t, obj, face = test_item(item, o, d, limit, excluded, position, rotation,
-                                         half_extents, triangles, normals)
+                                         half_extents, shape, dimensions, triangles, normals)
                 if t < limit:
                     best, limit, what, n = t, t, obj, face
             cell_exit = min(next_x, next_y, next_z)
@@ -389,8 +390,8 @@ def cast_chunk(start, stop, origins, directions, max_range, excluded, grid, posi
 
 
 @njit(cache=True, nogil=True, parallel=True, error_model="numpy")
-def cast_ray_batch(origins, directions, max_range, excluded, grid, position, half_extents,
-                   triangles, normals, ground_enabled, ground_height, row_of_slot, distance, point,
+def cast_ray_batch(origins, directions, max_range, excluded, grid, position, half_extents, shape,
+                   dimensions, triangles, normals, ground_enabled, ground_height, row_of_slot, distance, point,
                    normal, hit):
     """Nearest hit of each ray origins[i] + t directions[i] (normalised here), 0 <= t <=
     max_range[i] (origins or max_range may have one row for all rays), with the ground, the
@@ -402,7 +403,8 @@ def cast_ray_batch(origins, directions, max_range, excluded, grid, position, hal
     for chunk in prange(chunks):
         invalid[chunk] = cast_chunk(chunk * RAY_CHUNK, min(len(directions), (chunk + 1) * RAY_CHUNK),
                                     origins, directions, max_range, excluded, grid, position,
-                                    half_extents, triangles, normals, ground_enabled, ground_height,
+                                    half_extents, shape, dimensions, triangles, normals,
+                                    ground_enabled, ground_height,
                                     row_of_slot, distance, point, normal, hit)
     return invalid.sum()
 
@@ -454,7 +456,7 @@ class RayScene:
         g = self._ground
         invalid = cast_ray_batch(origins, directions, max_range, excluded, self._grid,
                                  self._bodies.position, self._bodies.half_extents,
-                                 self._playground.triangles, self._playground.normals, g is not None,
+                                 self._bodies.shape, self._bodies.dimensions, self._playground.triangles, self._playground.normals, g is not None,
                                  float(g["height"]) if g else 0.0, self._row_of_slot, *out)
         if invalid:
             raise ValueError(f"cast_rays: {invalid} rays with a zero or non-finite direction, a "

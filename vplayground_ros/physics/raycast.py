@@ -1,8 +1,9 @@
 """Ray casts (the wheels' contact with the world): against the ground plane, the playground's
-triangles and the boxes, each found through the octree rather than by testing everything."""
+triangles and the bodies, each found through the octree rather than by testing everything."""
 import numpy as np
 from numba import njit
 
+from . import shapes
 from .broad_phase import cell_box, object_level, query_index
 from .contact import GROUND, PLAYGROUND
 
@@ -40,6 +41,29 @@ def ray_box(origin, direction, reach, position, rotation, half_extents, j):
     if axis_in < 0:
         return NO_HIT, (0.0, 0.0, 0.0)  # the origin is inside the box
     return t_in, (r[j, 0, axis_in] * sign_in, r[j, 1, axis_in] * sign_in, r[j, 2, axis_in] * sign_in)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def ray_body(origin, direction, reach, position, rotation, half_extents, shape, dimensions, j):
+    """The ray against body j of any shape: (distance, outward normal in the world), NO_HIT
+    when it misses or starts inside. Boxes take the slab test in world terms; the other shapes
+    are asked in their own frame (physics.shapes.ray)."""
+    if shape[j] == shapes.BOX:
+        return ray_box(origin, direction, reach, position, rotation, half_extents, j)
+    r = rotation
+    v = (origin[0] - position[j, 0], origin[1] - position[j, 1], origin[2] - position[j, 2])
+    o = (v[0] * r[j, 0, 0] + v[1] * r[j, 1, 0] + v[2] * r[j, 2, 0],
+         v[0] * r[j, 0, 1] + v[1] * r[j, 1, 1] + v[2] * r[j, 2, 1],
+         v[0] * r[j, 0, 2] + v[1] * r[j, 1, 2] + v[2] * r[j, 2, 2])
+    d = (direction[0] * r[j, 0, 0] + direction[1] * r[j, 1, 0] + direction[2] * r[j, 2, 0],
+         direction[0] * r[j, 0, 1] + direction[1] * r[j, 1, 1] + direction[2] * r[j, 2, 1],
+         direction[0] * r[j, 0, 2] + direction[1] * r[j, 1, 2] + direction[2] * r[j, 2, 2])
+    t, n = shapes.ray(shape[j], (dimensions[j, 0], dimensions[j, 1], dimensions[j, 2]), o, d, reach)
+    if t == NO_HIT:
+        return NO_HIT, (0.0, 0.0, 0.0)
+    return t, (r[j, 0, 0] * n[0] + r[j, 0, 1] * n[1] + r[j, 0, 2] * n[2],
+               r[j, 1, 0] * n[0] + r[j, 1, 1] * n[1] + r[j, 1, 2] * n[2],
+               r[j, 2, 0] * n[0] + r[j, 2, 1] * n[1] + r[j, 2, 2] * n[2])
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -91,8 +115,8 @@ def cast_ray(origin, direction, reach, exclude, query_id, bodies, broad, playgro
             j = broad.scratch[m]
             if j == exclude or not bodies.active[j]:
                 continue
-            t, normal = ray_box(origin, direction, reach, bodies.position, bodies.rotation,
-                                bodies.half_extents, j)
+            t, normal = ray_body(origin, direction, reach, bodies.position, bodies.rotation,
+                                 bodies.half_extents, bodies.shape, bodies.dimensions, j)
             if t < best:
                 best, hit, best_normal = t, j, normal
     if len(playground.triangles):

@@ -8,6 +8,8 @@ import math
 import re
 import reprlib
 
+from .shapes import SHAPES
+
 NAME_PATTERN = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]{0,63}$")
 
 DEFAULT_SETTINGS = {
@@ -21,7 +23,7 @@ DEFAULT_SETTINGS = {
 DEFAULT_GROUND = {"height": 0.0, "elasticity": 0.1, "static_friction": 0.8, "dynamic_friction": 0.6}
 DEFAULT_DENSITY = 500.0
 BODY_DEFAULTS = {
-    "shape": "box", "size": [1.0, 1.0, 1.0], "position": [0.0, 0.0, 0.0],
+    "shape": "box", "position": [0.0, 0.0, 0.0],
     "linear_velocity": [0.0, 0.0, 0.0], "angular_velocity": [0.0, 0.0, 0.0],
     "elasticity": 0.2, "static_friction": 0.6, "dynamic_friction": 0.4,
     "immovable": False, "allow_freezing": True, "frozen": False,
@@ -186,9 +188,11 @@ PLACEMENT = {
     "angular_velocity": lambda value, p: vector(value, p, 3, -MAX_SPEED, MAX_SPEED),
 }
 
-BODY_KEYS = {"name", "shape", "size", "position", "rpy", "quaternion", "linear_velocity",
+# The keys that size a body, by shape (each shape module's SPEC_KEYS and DEFAULTS).
+DIMENSION_KEYS = {key for shape in SHAPES.values() for key in shape.module.SPEC_KEYS}
+BODY_KEYS = {"name", "shape", "position", "rpy", "quaternion", "linear_velocity",
              "angular_velocity", "density", "mass", "elasticity", "static_friction",
-             "dynamic_friction", "immovable", "allow_freezing", "frozen"}
+             "dynamic_friction", "immovable", "allow_freezing", "frozen"} | DIMENSION_KEYS
 
 
 def validate_body_fields(raw, path, allowed=BODY_KEYS):
@@ -200,11 +204,15 @@ def validate_body_fields(raw, path, allowed=BODY_KEYS):
         if key in PLACEMENT:
             out[key] = PLACEMENT[key](value, p)
         elif key == "shape":
-            if value != "box":
-                raise SpecError(p, f"unsupported shape {quote(value)} (supported: box)")
+            if not isinstance(value, str) or value not in SHAPES:
+                raise SpecError(p, f"unsupported shape {quote(value)} (supported: {', '.join(SHAPES)})")
             out[key] = value
         elif key == "size":
             out[key] = vector(value, p, 3, 0.0, MAX_SIZE, low_open=True)
+        elif key == "radius":
+            out[key] = number(value, p, 0.0, 0.5 * MAX_SIZE, low_open=True)
+        elif key == "length":
+            out[key] = number(value, p, 0.0, MAX_SIZE)
         elif key in ("density", "mass"):
             out[key] = number(value, p, 0.0, 1.0e12, low_open=True)
         elif key == "elasticity":
@@ -218,9 +226,23 @@ def validate_body_fields(raw, path, allowed=BODY_KEYS):
     return out
 
 
+def check_dimension_keys(shape, body, path):
+    """Refuses dimension keys that the shape does not have (a sphere's `size`), and a cylinder
+    of no length (a capsule of length 0 is a sphere, a disc of no thickness has no volume)."""
+    own = SHAPES[shape].module.SPEC_KEYS
+    for key in sorted(DIMENSION_KEYS & set(body)):
+        if key not in own:
+            raise SpecError(child(path, key), f"a {shape} has no {key} (its keys: {', '.join(own)})")
+    if shape == "cylinder" and body.get("length", 1.0) <= 0.0:
+        raise SpecError(child(path, "length"), f"must be > 0 for a cylinder, got {body['length']:g}")
+
+
 def validate_body(raw, path="body"):
-    """A complete body spec: the given keys over BODY_DEFAULTS (name stays optional)."""
-    return {**BODY_DEFAULTS, **validate_body_fields(raw, path)}
+    """A complete body spec: the given keys over BODY_DEFAULTS and the shape's DEFAULTS (name
+    stays optional)."""
+    body = {**BODY_DEFAULTS, **validate_body_fields(raw, path)}
+    check_dimension_keys(body["shape"], body, path)
+    return {**SHAPES[body["shape"]].module.DEFAULTS, **body}
 
 
 WHEEL_DEFAULTS = {

@@ -35,16 +35,6 @@ ROOT_PADDING = 4.0
 MIN_ROOT_SIZE = 16.0
 
 
-def quaternions_to_matrices(q):
-    """(N, 4) xyzw -> (N, 3, 3), vectorised (the compiled kernel has its own per-body version)."""
-    x, y, z, w = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
-        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
-        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
-    ], -2)
-
-
 def compact_bits(code):
     """Every third bit of a Morton code, packed (the inverse of broad_phase.spread_bits)."""
     code = np.asarray(code, dtype=np.int64) & 0x09249249
@@ -69,15 +59,17 @@ for _array in NO_CONTACTS.values():
     _array.flags.writeable = False
 
 
+BodyShape = namedtuple("BodyShape", "name module dimensions fields")
+
+
 def gather(array, rows):
     """array[rows] as a new array; rows: a Layout's rows (a slice or slot indices)."""
     return array[rows].copy() if isinstance(rows, slice) else array.take(rows, axis=0)
 
 
-def box_bounds(position, orientation, half_extents):
-    """World AABBs (min, max) of boxes, (N, 3) each."""
-    extent = np.einsum("nij,nj->ni", np.abs(quaternions_to_matrices(orientation)), half_extents)
-    return position - extent, position + extent
+def body_bounds(b, slots):
+    """World AABBs (min, max), (N, 3) each, of the bodies in `slots`."""
+    return shapes.bounds(b.shape[slots], b.dimensions[slots], b.position[slots], b.orientation[slots])
 
 
 class World:
@@ -274,6 +266,8 @@ class World:
         unless the edit freezes it (`frozen=True`)."""
         slot = self._slot(name)
         body = specs.validate_body_fields(fields, name, specs.BODY_KEYS - {"name", "shape"})
+        shape = self._shape(slot)
+        specs.check_dimension_keys(shape.name, {**shape.fields, **body}, name)
         if "position" in body:
             self.check_inside(body["position"], f"{name}.position")
         self._wake_touching(slot)
@@ -285,9 +279,8 @@ class World:
             b.orientation[slot] = rpy_to_quat(body["rpy"])
         if "quaternion" in body:
             b.orientation[slot] = body["quaternion"]
-        if "size" in body:
-            b.half_extents[slot] = np.asarray(body["size"]) * 0.5
-            b.dimensions[slot] = b.half_extents[slot]
+        if shape.fields.keys() & body.keys():
+            self._set_dimensions(slot, shape.module.dimensions({**shape.fields, **body}))
         if "mass" in body:
             b.mass[slot] = body["mass"]
         elif "density" in body:
@@ -317,8 +310,8 @@ class World:
         doomed[slots] = True
         sleepers = np.nonzero(b.active & b.frozen & ~doomed)[0]
         if len(sleepers):
-            lo, hi = box_bounds(b.position[slots], b.orientation[slots], b.half_extents[slots])
-            s_lo, s_hi = box_bounds(b.position[sleepers], b.orientation[sleepers], b.half_extents[sleepers])
+            lo, hi = body_bounds(b, slots)
+            s_lo, s_hi = body_bounds(b, sleepers)
             touched = np.zeros(len(sleepers), dtype=bool)
             rows = max(1, 4_000_000 // len(sleepers))  # pair tests per pass, bounding the memory
             for k in range(0, len(slots), rows):
@@ -541,9 +534,11 @@ class World:
 
     def body_properties(self):
         """What only adding, removing and editing change (see layout_version), one row per
-        body (copies): sizes (full edges), masses, immovable."""
+        body (copies): shapes (codes of physics.shapes), dimensions (each shape's three
+        numbers), sizes (full edges of the body-frame bounding box), masses, immovable."""
         b, rows = self._bodies, self._current_layout().rows
-        return {"sizes": 2.0 * gather(b.half_extents, rows), "masses": gather(b.mass, rows),
+        return {"shapes": gather(b.shape, rows), "dimensions": gather(b.dimensions, rows),
+                "sizes": 2.0 * gather(b.half_extents, rows), "masses": gather(b.mass, rows),
                 "immovable": gather(b.immovable, rows)}
 
     def contacts(self):
@@ -572,9 +567,9 @@ class World:
         """Everything a scene file holds about one body (the SPEC 3 keys), as plain Python."""
         slot = self._slot(name)
         b = self._bodies
+        shape = self._shape(slot)
         return {
-            "name": name, "shape": "box",
-            "size": (2.0 * b.half_extents[slot]).tolist(),
+            "name": name, "shape": shape.name, **shape.fields,
             "position": b.position[slot].tolist(),
             "quaternion": b.orientation[slot].tolist(),
             "linear_velocity": b.velocity[slot, :3].tolist(),
@@ -632,8 +627,8 @@ class World:
         if "angular_velocity" in body:
             b.velocity[slot, 3:] = body["angular_velocity"]
         b.inv_mass[slot] = 1.0 / b.mass[slot]
-        shape = shapes.SHAPES[shapes.SHAPE_NAMES[int(b.shape[slot])]].module
-        b.inv_inertia[slot] = 1.0 / (b.mass[slot] * np.asarray(shape.unit_inertia(tuple(b.dimensions[slot]))))
+        shape = self._shape(slot)
+        b.inv_inertia[slot] = 1.0 / (b.mass[slot] * np.asarray(shape.module.unit_inertia(shape.dimensions)))
         if b.immovable[slot]:
             b.velocity[slot] = 0.0
         if body.get("frozen", False) and not b.immovable[slot]:
@@ -649,9 +644,16 @@ class World:
         b.dimensions[slot] = dims
         b.half_extents[slot] = shapes.half_extents(int(b.shape[slot]), tuple(float(x) for x in dims))
 
+    def _shape(self, slot):
+        """The body's shape: name, module, dimensions and their spec keys (`size: [...]`)."""
+        name = shapes.SHAPE_NAMES[int(self._bodies.shape[slot])]
+        module = shapes.SHAPES[name].module
+        dims = tuple(float(x) for x in self._bodies.dimensions[slot])
+        return BodyShape(name, module, dims, module.spec_fields(dims))
+
     def _volume(self, slot):
-        b = self._bodies
-        return shapes.SHAPES[shapes.SHAPE_NAMES[int(b.shape[slot])]].module.volume(tuple(b.dimensions[slot]))
+        shape = self._shape(slot)
+        return shape.module.volume(shape.dimensions)
 
     def _forget_contacts(self, slot):
         """Drops the warm-start impulses of the newest contacts of a slot that is edited or
@@ -678,8 +680,8 @@ class World:
         sleepers = sleepers[sleepers != slot]
         if len(sleepers) == 0:
             return
-        lo, hi = box_bounds(b.position[[slot]], b.orientation[[slot]], b.half_extents[[slot]])
-        s_lo, s_hi = box_bounds(b.position[sleepers], b.orientation[sleepers], b.half_extents[sleepers])
+        lo, hi = body_bounds(b, [slot])
+        s_lo, s_hi = body_bounds(b, sleepers)
         touching = np.all((s_lo <= hi + CONTACT_MARGIN) & (lo - CONTACT_MARGIN <= s_hi), axis=1)
         for other in sleepers[touching]:
             self._wake(other)
@@ -688,7 +690,7 @@ class World:
         if self._root is None:
             return
         b = self._bodies
-        lo, hi = box_bounds(b.position[[slot]], b.orientation[[slot]], b.half_extents[[slot]])
+        lo, hi = body_bounds(b, [slot])
         root_min, size = self._root
         if np.any(lo < root_min) or np.any(hi > root_min + size):
             self._root = None
@@ -701,7 +703,7 @@ class World:
         b, mesh = self._bodies, self._playground
         lows, highs = [np.zeros((1, 3))], [np.zeros((1, 3))]
         if len(slots):
-            lo, hi = box_bounds(b.position[slots], b.orientation[slots], b.half_extents[slots])
+            lo, hi = body_bounds(b, slots)
             lows.append(lo)
             highs.append(hi)
         if len(mesh.triangles):

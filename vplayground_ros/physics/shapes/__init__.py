@@ -9,7 +9,10 @@ row in SHAPES and in each dispatcher below.
 """
 from collections import namedtuple
 
+import numpy as np
 from numba import njit
+
+from ..math3d import quat_to_matrix
 
 from . import box, capsule, cylinder, sphere
 from .geometry import NO_HIT, unit_or
@@ -35,6 +38,34 @@ def half_extents(kind, dims):
     if kind == CAPSULE:
         return capsule.half_extents(dims)
     return cylinder.half_extents(dims)
+
+
+@njit(cache=True, nogil=True)
+def world_extent(kind, dims, r, e):
+    """Half the extent along world axis e of the shape turned by rotation r (3x3, columns the
+    body axes): the exact bounding box, not the box around the body-frame one."""
+    if kind == BOX:
+        return abs(r[e, 0]) * dims[0] + abs(r[e, 1]) * dims[1] + abs(r[e, 2]) * dims[2]
+    if kind == SPHERE:
+        return dims[0]
+    if kind == CAPSULE:
+        return abs(r[e, 2]) * dims[1] + dims[0]
+    return abs(r[e, 2]) * dims[1] + dims[0] * np.sqrt(max(1.0 - r[e, 2] * r[e, 2], 0.0))
+
+
+@njit(cache=True, nogil=True)
+def bounds(kinds, dimensions, positions, orientations):
+    """World bounding boxes (min, max), (N, 3) each, of N bodies."""
+    n = len(kinds)
+    lo, hi = np.empty((n, 3)), np.empty((n, 3))
+    r = np.empty((3, 3))
+    for i in range(n):
+        quat_to_matrix(orientations[i], r)
+        dims = (dimensions[i, 0], dimensions[i, 1], dimensions[i, 2])
+        for e in range(3):
+            extent = world_extent(kinds[i], dims, r, e)
+            lo[i, e], hi[i, e] = positions[i, e] - extent, positions[i, e] + extent
+    return lo, hi
 
 
 @njit(cache=True, nogil=True)

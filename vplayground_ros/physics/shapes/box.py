@@ -7,6 +7,7 @@ from numba import njit
 from .geometry import NO_HIT, axis_vector
 
 SPEC_KEYS = ("size",)
+DEFAULTS = {"size": [1.0, 1.0, 1.0]}
 
 
 def dimensions(spec):

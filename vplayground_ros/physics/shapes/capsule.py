@@ -8,6 +8,7 @@ from numba import njit
 from .geometry import NO_HIT, ray_side, ray_sphere, unit_or
 
 SPEC_KEYS = ("radius", "length")
+DEFAULTS = {"radius": 0.25, "length": 0.5}
 
 # A capsule lies flat on a surface (its side gives a two-point face) while its axis is within
 # this sine of the surface's plane; steeper, one hemisphere touches alone.

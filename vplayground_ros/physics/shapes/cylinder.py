@@ -9,6 +9,7 @@ from numba import njit
 from .geometry import NO_HIT, ray_side, unit_or
 
 SPEC_KEYS = ("radius", "length")
+DEFAULTS = {"radius": 0.5, "length": 1.0}
 
 CAP_POINTS = 8
 

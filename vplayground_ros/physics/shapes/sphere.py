@@ -6,6 +6,7 @@ from numba import njit
 from .geometry import NO_HIT, ray_sphere, unit_or
 
 SPEC_KEYS = ("radius",)
+DEFAULTS = {"radius": 0.5}
 
 
 def dimensions(spec):
