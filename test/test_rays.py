@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 
 from vplayground_ros.physics import World
-from vplayground_ros.physics.contact import GROUND, PLAYGROUND
-from vplayground_ros.physics.ray_batch import NOTHING
+from vplayground_ros.physics.ids import GROUND, NOTHING, PLAYGROUND
 from vplayground_ros.scene import load_world
 
 

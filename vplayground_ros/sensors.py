@@ -21,9 +21,8 @@ import numpy as np
 
 from .messages import CATEGORY_COLOURS, COLOURS, FROZEN, IMMOVABLE, VEHICLE, BOX
 from .physics import specs
-from .physics.contact import GROUND, PLAYGROUND
+from .physics.ids import GROUND, NOTHING, PLAYGROUND
 from .physics.math3d import rpy_to_quat
-from .physics.ray_batch import NOTHING
 from .physics.math3d import quaternions_to_matrices
 
 TYPES = ("lidar_2d", "lidar_3d", "depth_camera", "camera", "imu")

@@ -74,6 +74,31 @@ def level_offset(level):
     return ((1 << (3 * level)) - 1) // 7
 
 
+def compact_bits(code):
+    """Every third bit of Morton codes (numpy), packed: the inverse of spread_bits."""
+    code = np.asarray(code, dtype=np.int64) & 0x09249249
+    code = (code | (code >> 2)) & 0x030C30C3
+    code = (code | (code >> 4)) & 0x0300F00F
+    code = (code | (code >> 8)) & 0x030000FF
+    code = (code | (code >> 16)) & 0x000003FF
+    return code
+
+
+def cell_centres(keys, depth, root_min, root_size):
+    """The cells of index keys, [(level, centres (K, 3), edge)] per occupied level (numpy; for
+    drawing the octree)."""
+    cells = []
+    for level in range(depth + 1):
+        offset = level_offset(level)
+        codes = keys[(keys >= offset) & (keys < offset + (1 << (3 * level)))] - offset
+        if len(codes) == 0:
+            continue
+        xyz = np.stack([compact_bits(codes >> axis) for axis in range(3)], axis=1)
+        edge = root_size / (1 << level)
+        cells.append((level, root_min + (xyz + 0.5) * edge, edge))
+    return cells
+
+
 @njit(cache=True, nogil=True)
 def spread_bits(v):
     """Inserts two zero bits after each of the low 10 bits of v (Morton interleave)."""

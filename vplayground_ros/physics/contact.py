@@ -1,7 +1,7 @@
 """Contact points and manifolds of one step, and the warm start from the step before.
 
 A manifold is the set of (at most 4) points between two objects; its points are contiguous.
-`body_b` is a body slot, or GROUND / PLAYGROUND for the static world. Normals point from A to B,
+`body_b` is a body slot, or GROUND / PLAYGROUND for the static world (physics.ids). Normals point from A to B,
 `depth` is penetration (negative: a speculative contact still that far apart).
 """
 from collections import namedtuple
@@ -10,9 +10,6 @@ import numpy as np
 from numba import njit
 
 from .constants import WARM_START_MATCH_DISTANCE
-
-GROUND = -1
-PLAYGROUND = -2
 
 # A solver row: the unit direction d, the lever arms r_A x d and r_B x d, and the angular
 # responses I_A^-1 (r_A x d) and I_B^-1 (r_B x d), 3 each: 15 numbers instead of a 12-wide
@@ -80,7 +77,7 @@ def allocate_contacts(points, manifolds):
 
 @njit(cache=True, nogil=True)
 def pair_key(a, b):
-    """a is a body slot; b a body slot, GROUND, or -(3 + triangle) for a playground triangle."""
+    """a is a body slot; b a body slot, GROUND, or a playground triangle's ids.triangle_key."""
     return a * (1 << 32) + (b + (1 << 31))
 
 

@@ -12,14 +12,16 @@ from .constants import WAKE_SPEED_FACTOR
 
 @njit(cache=True, nogil=True)
 def wake_body(bodies, i):
-    """Returns True when the body leaves a stale entry in the static index (skipped by queries,
-    counted towards the next rebuild)."""
+    """Wakes body i (in a step, or between steps by the World). Returns True when it leaves a
+    stale entry in the static index (skipped by queries, counted towards the next rebuild); an
+    immovable body never moves, so it stays indexed."""
     bodies.frozen[i] = False
     bodies.freeze_timer[i] = 0.0
     bodies.awake[i] = not bodies.immovable[i]
-    was_indexed = bodies.static_indexed[i]
+    if not bodies.static_indexed[i] or bodies.immovable[i]:
+        return False
     bodies.static_indexed[i] = False
-    return was_indexed
+    return True
 
 
 @njit(cache=True, nogil=True)

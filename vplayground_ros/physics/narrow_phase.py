@@ -10,7 +10,7 @@ import numpy as np
 from numba import njit
 
 from .constants import CONTACT_MARGIN, EDGE_AXIS_TOLERANCE, SEAM_TOLERANCE
-from .contact import GROUND, PLAYGROUND
+from .ids import GROUND, PLAYGROUND, triangle_key
 
 MAX_CLIP_POINTS = 8
 FACE_AXIS_TOLERANCE = 1e-3  # B's face must beat A's by this to become the reference (no flip-flop)
@@ -434,8 +434,8 @@ def collide(contacts, bodies, broad, playground, ground_enabled, ground_height, 
                                 scratch_point, scratch_depth)
         elif job < body_pairs + mesh_pairs:
             a, t = broad.playground_body[job - body_pairs], broad.playground_triangle[job - body_pairs]
-            # Each triangle is its own manifold (warm-start key -(3 + t)); all are the PLAYGROUND.
-            b, key_b = PLAYGROUND, -3 - t
+            # Each triangle is its own manifold (its own warm-start key); all are the PLAYGROUND.
+            b, key_b = PLAYGROUND, triangle_key(t)
             n, normal = box_triangle(vector3(position, a), matrix3(rotation, a),
                                      vector3(half_extents, a), matrix3(playground.triangles, t),
                                      vector3(playground.normals, t), CONTACT_MARGIN + reach[a],

@@ -16,7 +16,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit, prange
 
-from .contact import GROUND, PLAYGROUND
+from .ids import GROUND, NOTHING, PLAYGROUND
 from .math3d import quat_to_matrix
 from .raycast import NO_HIT, ray_body, ray_triangle
 
@@ -27,7 +27,6 @@ from .raycast import NO_HIT, ray_body, ray_triangle
 # setting it here, after importing Numba, is in time.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-NOTHING = -3  # what a ray that hits nothing reports (GROUND -1 and PLAYGROUND -2 otherwise)
 
 # A cell's edge is this many times the median object's size (the longest edge of its bounding
 # box, bodies and triangles alike): an object then spans a few cells and a cell holds a few

@@ -5,7 +5,7 @@ from numba import njit
 
 from . import shapes
 from .broad_phase import cell_box, object_level, query_index
-from .contact import GROUND, PLAYGROUND
+from .ids import GROUND, PLAYGROUND
 
 NO_HIT = np.inf
 

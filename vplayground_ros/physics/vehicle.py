@@ -24,6 +24,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
+from .ids import wheel_query
 from .raycast import NO_HIT, cast_ray
 
 WHEELS = 4
@@ -152,7 +153,7 @@ def drive_vehicles(vehicles, bodies, broad, playground, ground_enabled, ground_h
                      position[c, 1] + r[1, 0] * m[0] + r[1, 1] * m[1] + r[1, 2] * m[2],
                      position[c, 2] + r[2, 0] * m[0] + r[2, 1] * m[1] + r[2, 2] * m[2])
             reach = vehicles.spring_length[v, w] + vehicles.radius[v, w]
-            t, hit, normal = cast_ray(mount, down, reach, c, -10 - WHEELS * v - w, bodies, broad,
+            t, hit, normal = cast_ray(mount, down, reach, c, wheel_query(v, w, WHEELS), bodies, broad,
                                       playground, ground_enabled, ground_height, root_min,
                                       root_size, depth)
             vehicles.in_contact[v, w] = t != NO_HIT

@@ -12,9 +12,10 @@ import numpy as np
 from . import specs
 from . import shapes
 from .bodies import allocate_bodies, grow_bodies
-from .broad_phase import allocate_broad_phase
+from .broad_phase import allocate_broad_phase, cell_centres
 from .constants import CONTACT_MARGIN
 from .contact import allocate_contacts, index_manifolds
+from .freezing import wake_body
 from .math3d import rpy_to_quat
 from .pipeline import (DONE, GROW_CONTACTS, GROW_INDEX, GROW_PAIRS, STAGES, STAT_FROZEN,
                        STAT_PAIRS, STAT_POINTS, STAT_TRIANGLES, STAT_WOKEN, Settings, step_world)
@@ -33,16 +34,6 @@ WORLD_RADIUS = 2000.0
 # The root cube reaches this far past the bodies it was fitted to, and is at least this large.
 ROOT_PADDING = 4.0
 MIN_ROOT_SIZE = 16.0
-
-
-def compact_bits(code):
-    """Every third bit of a Morton code, packed (the inverse of broad_phase.spread_bits)."""
-    code = np.asarray(code, dtype=np.int64) & 0x09249249
-    code = (code | (code >> 2)) & 0x030C30C3
-    code = (code | (code >> 4)) & 0x0300F00F
-    code = (code | (code >> 8)) & 0x030000FF
-    code = (code | (code >> 16)) & 0x000003FF
-    return code
 
 
 # Which bodies there are, in row order, and what depends only on that: rebuilt when
@@ -270,8 +261,8 @@ class World:
         specs.check_dimension_keys(shape.name, {**shape.fields, **body}, name)
         if "position" in body:
             self.check_inside(body["position"], f"{name}.position")
-        self._wake_touching(slot)
-        self._forget_contacts(slot)
+        self._wake_touching([slot])
+        self._forget_contacts([slot])
         b = self._bodies
         if "position" in body:
             b.position[slot] = body["position"]
@@ -292,10 +283,7 @@ class World:
         self._check_root(slot)
 
     def remove_body(self, name):
-        slot = self._slot(name)
-        self._wake_touching(slot)
-        self._forget_contacts(slot)
-        self._release(name, slot)
+        self.remove_bodies([name])
 
     def remove_bodies(self, names):
         """Removes many bodies at once; a KeyError for an unknown name removes none. What they
@@ -305,27 +293,8 @@ class World:
         slots = np.array([self._slot(name) for name in names], dtype=np.int64)
         if len(slots) == 0:
             return
-        b = self._bodies
-        doomed = np.zeros(len(b.active), dtype=bool)
-        doomed[slots] = True
-        sleepers = np.nonzero(b.active & b.frozen & ~doomed)[0]
-        if len(sleepers):
-            lo, hi = body_bounds(b, slots)
-            s_lo, s_hi = body_bounds(b, sleepers)
-            touched = np.zeros(len(sleepers), dtype=bool)
-            rows = max(1, 4_000_000 // len(sleepers))  # pair tests per pass, bounding the memory
-            for k in range(0, len(slots), rows):
-                overlap = np.all((s_lo[None] <= hi[k:k + rows, None] + CONTACT_MARGIN)
-                                 & (lo[k:k + rows, None] - CONTACT_MARGIN <= s_hi[None]), axis=2)
-                touched |= overlap.any(axis=0)
-            for other in sleepers[touched]:
-                self._wake(other)
-        c = self._contacts[0]
-        n = int(c.count[0])
-        body_b = c.body_b[:n]
-        involved = doomed[c.body_a[:n]] | ((body_b >= 0) & doomed[np.maximum(body_b, 0)])
-        c.impulse[:n][involved] = 0.0
-        c.friction_world[:n][involved] = 0.0
+        self._wake_touching(slots)
+        self._forget_contacts(slots)
         for name, slot in zip(names, slots):
             self._release(name, int(slot))
 
@@ -491,20 +460,9 @@ class World:
         drawing (the 2008 program could show its octree)."""
         if self._root is None:
             return []
-        root_min, root_size = self._root
         keys = [index.keys[:index.count[0]] for index in
                 (self._broad.moving, self._broad.static, self._playground.index)]
-        keys = np.unique(np.concatenate(keys))
-        cells = []
-        for level in range(self.settings["octree_depth"] + 1):
-            offset = ((1 << (3 * level)) - 1) // 7
-            codes = keys[(keys >= offset) & (keys < offset + (1 << (3 * level)))] - offset
-            if len(codes) == 0:
-                continue
-            xyz = np.stack([compact_bits(codes >> axis) for axis in range(3)], axis=1)
-            edge = root_size / (1 << level)
-            cells.append((level, root_min + (xyz + 0.5) * edge, edge))
-        return cells
+        return cell_centres(np.unique(np.concatenate(keys)), self.settings["octree_depth"], *self._root)
 
     def ray_scene(self):
         """What rays can hit now (every body, the playground, the ground), for casting any
@@ -655,35 +613,40 @@ class World:
         shape = self._shape(slot)
         return shape.module.volume(shape.dimensions)
 
-    def _forget_contacts(self, slot):
-        """Drops the warm-start impulses of the newest contacts of a slot that is edited or
+    def _forget_contacts(self, slots):
+        """Drops the warm-start impulses of the newest contacts of slots that are edited or
         removed: they belong to geometry that no longer exists."""
+        b = self._bodies
+        changed = np.zeros(len(b.active), dtype=bool)
+        changed[slots] = True
         c = self._contacts[0]
         n = int(c.count[0])
-        involved = (c.body_a[:n] == slot) | (c.body_b[:n] == slot)
+        body_b = c.body_b[:n]
+        involved = changed[c.body_a[:n]] | ((body_b >= 0) & changed[np.maximum(body_b, 0)])
         c.impulse[:n][involved] = 0.0
         c.friction_world[:n][involved] = 0.0
 
     def _wake(self, slot):
-        b = self._bodies
-        b.frozen[slot] = False
-        b.freeze_timer[slot] = 0.0
-        if b.static_indexed[slot] and not b.immovable[slot]:
-            b.static_indexed[slot] = False
-            self._broad.stale[0] += 1
+        self._broad.stale[0] += wake_body(self._bodies, slot)
 
-    def _wake_touching(self, slot):
-        """Wakes the frozen bodies whose bounds touch this body's (what rests on it or leans on
-        it), before the body moves, changes or goes."""
+    def _wake_touching(self, slots):
+        """Wakes the frozen bodies (other than `slots`) whose bounds touch those of `slots`
+        (what rests on them or leans on them), before they move, change or go."""
         b = self._bodies
-        sleepers = np.nonzero(b.active & b.frozen)[0]
-        sleepers = sleepers[sleepers != slot]
+        changed = np.zeros(len(b.active), dtype=bool)
+        changed[slots] = True
+        sleepers = np.nonzero(b.active & b.frozen & ~changed)[0]
         if len(sleepers) == 0:
             return
-        lo, hi = body_bounds(b, [slot])
+        lo, hi = body_bounds(b, slots)
         s_lo, s_hi = body_bounds(b, sleepers)
-        touching = np.all((s_lo <= hi + CONTACT_MARGIN) & (lo - CONTACT_MARGIN <= s_hi), axis=1)
-        for other in sleepers[touching]:
+        touched = np.zeros(len(sleepers), dtype=bool)
+        rows = max(1, 4_000_000 // len(sleepers))  # pair tests per pass, bounding the memory
+        for k in range(0, len(slots), rows):
+            overlap = np.all((s_lo[None] <= hi[k:k + rows, None] + CONTACT_MARGIN)
+                             & (lo[k:k + rows, None] - CONTACT_MARGIN <= s_hi[None]), axis=2)
+            touched |= overlap.any(axis=0)
+        for other in sleepers[touched]:
             self._wake(other)
 
     def _check_root(self, slot):
