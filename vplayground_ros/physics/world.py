@@ -12,7 +12,7 @@ import numpy as np
 from . import specs
 from . import shapes
 from .bodies import allocate_bodies, grow_bodies
-from .broad_phase import allocate_broad_phase, cell_centres
+from .broad_phase import allocate_broad_phase
 from .constants import CONTACT_MARGIN
 from .contact import allocate_contacts, index_manifolds
 from .freezing import wake_body
@@ -20,10 +20,8 @@ from .math3d import rpy_to_quat
 from .pipeline import (DONE, GROW_CONTACTS, GROW_INDEX, GROW_PAIRS, STAGES, STAT_FROZEN,
                        STAT_PAIRS, STAT_POINTS, STAT_TRIANGLES, STAT_WOKEN, Settings, step_world)
 from .playground import EMPTY_PLAYGROUND_ARGS, index_playground, make_playground
-from .ray_batch import RayScene
-from .vehicle import allocate_vehicles, grow_vehicles
-
-DEFAULT_COMMAND_TIMEOUT = 1.2  # s: SPEC 6.4 cmd_vel_timeout
+from .queries import WorldQueries
+from .vehicle_registry import DEFAULT_COMMAND_TIMEOUT, VehicleRegistry
 
 # Bodies farther than this from the world's centre (the playground's middle, else the origin)
 # have left the world (they fell off the edge or were flung away) and are removed, as are bodies
@@ -42,20 +40,7 @@ MIN_ROOT_SIZE = 16.0
 # names, vehicle_names: tuples; row_of_slot: (capacity,) each slot's row (-1 for free slots).
 Layout = namedtuple("Layout", "version slots rows names vehicle_names row_of_slot")
 
-# contacts() of a step without any (a world at rest: frozen bodies make none), which the node
-# asks for after every batch. Read-only, so sharing the arrays is safe.
-NO_CONTACTS = {"points": np.zeros((0, 3)), "normals": np.zeros((0, 3)), "depths": np.zeros(0),
-               "impulses": np.zeros(0), "body_a": np.zeros(0, np.int64), "body_b": np.zeros(0, np.int64)}
-for _array in NO_CONTACTS.values():
-    _array.flags.writeable = False
-
-
 BodyShape = namedtuple("BodyShape", "name module dimensions fields")
-
-
-def gather(array, rows):
-    """array[rows] as a new array; rows: a Layout's rows (a slice or slot indices)."""
-    return array[rows].copy() if isinstance(rows, slice) else array.take(rows, axis=0)
 
 
 def body_bounds(b, slots):
@@ -63,8 +48,10 @@ def body_bounds(b, slots):
     return shapes.bounds(b.shape[slots], b.dimensions[slots], b.position[slots], b.orientation[slots])
 
 
-class World:
-    """A world of boxes on an optional ground plane. See SPEC 4 for the contract."""
+class World(WorldQueries):
+    """A world of bodies on an optional ground plane, with an optional playground mesh and
+    vehicles: bodies by name, their arrays, step(). See SPEC 4 for the contract; what it can
+    be asked is in queries.py."""
 
     def __init__(self, settings=None, ground=specs.DEFAULT_GROUND, capacity=64):
         self.settings = specs.validate_settings(settings)
@@ -84,9 +71,7 @@ class World:
         # Slots whose state may have changed since remove_escaped last checked them (frozen and
         # immovable bodies do not move).
         self._unchecked = np.ones(capacity, dtype=bool)
-        self._vehicles = {}  # name -> validated vehicle spec; the chassis is the body of that name
-        self._vehicle_rows = {}  # name -> row of the vehicle arrays
-        self._vehicle_arrays = allocate_vehicles(2)
+        self._vehicles = VehicleRegistry()  # the chassis of each is the body of its name
         self._broad = allocate_broad_phase(capacity, 4 * capacity)
         # [newest, scratch]: the newest step's contacts, and the buffer the next step fills.
         self._contacts = [allocate_contacts(16 * capacity, 4 * capacity) for _ in range(2)]
@@ -150,25 +135,7 @@ class World:
         for key in ("rpy", "quaternion", "linear_velocity", "angular_velocity"):
             if key in vehicle:
                 chassis[key] = vehicle[key]
-        slot = self._slots[self.add_body(chassis)]
-        rows = self._vehicle_arrays
-        free = np.nonzero(~rows.active)[0]
-        if len(free) == 0:
-            self._vehicle_arrays = rows = grow_vehicles(rows, 2 * len(rows.active))
-            free = np.nonzero(~rows.active)[0]
-        row = int(free[0])
-        rows.active[row], rows.chassis[row] = True, slot
-        rows.engine_power[row] = vehicle["engine_power"]
-        rows.brake_power[row] = vehicle["brake_power"]
-        rows.max_steer[row] = vehicle["max_steer"]
-        self._load_wheels(row, wheels)
-        for field in ("command_speed", "command_yaw_rate", "command_age", "speed_integral",
-                      "throttle", "brake", "steer", "steer_angle", "spin_angle", "spin_rate",
-                      "compression", "in_contact"):
-            getattr(rows, field)[row] = 0
-        rows.command_timeout[row] = DEFAULT_COMMAND_TIMEOUT
-        self._vehicles[name] = {**vehicle, "name": name}
-        self._vehicle_rows[name] = row
+        self._vehicles.add(name, vehicle, self._slots[self.add_body(chassis)])
         self.layout_version += 1
         return name
 
@@ -176,78 +143,28 @@ class World:
         """Changes only the given vehicle keys: engine_power, brake_power, max_steer, and wheels
         as {index: {wheel keys}} (0-3: front-left, front-right, rear-left, rear-right). The
         chassis is edited as a body (edit_body)."""
-        row = self._vehicle_row(name)
-        edit = specs.validate_vehicle_edit(fields, name)
-        spec = self._vehicles[name]
-        rows = self._vehicle_arrays
-        for key in ("engine_power", "brake_power", "max_steer"):
-            if key in edit:
-                spec[key] = edit[key]
-                getattr(rows, key)[row] = edit[key]
-        for index, wheel in edit.get("wheels", {}).items():
-            spec["wheels"][index] = {**spec["wheels"][index], **wheel}
-        self._load_wheels(row, spec["wheels"])
+        self._vehicles.edit(name, fields)
         self._wake(self._slots[name])
 
     def drive(self, name, speed, yaw_rate, timeout=DEFAULT_COMMAND_TIMEOUT):
         """Twist command for vehicle `name`: wanted forward speed (m/s, negative reverses) and
         yaw rate (rad/s, counter-clockwise positive). After `timeout` seconds of simulated time
         without a new command the car brakes to a stop."""
-        row = self._vehicle_row(name)
-        speed = specs.number(speed, "speed", -specs.MAX_SPEED, specs.MAX_SPEED)
-        yaw_rate = specs.number(yaw_rate, "yaw_rate", -specs.MAX_SPEED, specs.MAX_SPEED)
-        timeout = specs.number(timeout, "timeout", 0.0, 1.0e6, low_open=True)
-        rows = self._vehicle_arrays
-        rows.command_speed[row], rows.command_yaw_rate[row] = speed, yaw_rate
-        rows.command_age[row], rows.command_timeout[row] = 0.0, timeout
-        if speed or yaw_rate:
+        if self._vehicles.drive(name, speed, yaw_rate, timeout):
             self._wake(self._slots[name])
 
     def vehicle_state(self, name):
         """What the car is doing: applied controls and per-wheel state (arrays of 4, wheels
         front-left, front-right, rear-left, rear-right)."""
-        row = self._vehicle_row(name)
-        v = self._vehicle_arrays
-        return {
-            "command_speed": float(v.command_speed[row]),
-            "command_yaw_rate": float(v.command_yaw_rate[row]),
-            "command_age": float(v.command_age[row]),
-            "throttle": float(v.throttle[row]), "brake": float(v.brake[row]),
-            "steer": float(v.steer[row]),
-            "steer_angle": v.steer_angle[row].copy(), "spin_angle": v.spin_angle[row].copy(),
-            "spin_rate": v.spin_rate[row].copy(), "compression": v.compression[row].copy(),
-            "in_contact": v.in_contact[row].copy(), "contact_point": v.contact_point[row].copy(),
-        }
-
-    def _load_wheels(self, row, wheels):
-        rows = self._vehicle_arrays
-        for w, wheel in enumerate(wheels):
-            rows.mount[row, w] = wheel["mount"]
-            for field, key in (("radius", "radius"), ("power_gain", "power_gain"),
-                               ("steered", "steered"), ("stiffness", "spring_stiffness"),
-                               ("damper", "damper"), ("spring_length", "spring_length"),
-                               ("static_friction", "static_friction"),
-                               ("dynamic_friction", "dynamic_friction")):
-                getattr(rows, field)[row, w] = wheel[key]
-        # Wheels are front-left, front-right, rear-left, rear-right (SPEC 3).
-        rows.rear_axle[row] = 0.5 * (wheels[2]["mount"][0] + wheels[3]["mount"][0])
-        rows.wheelbase[row] = 0.5 * (wheels[0]["mount"][0] + wheels[1]["mount"][0]) - rows.rear_axle[row]
-
-    def _vehicle_row(self, name):
-        try:
-            return self._vehicle_rows[name]
-        except (KeyError, TypeError):
-            raise KeyError(f"no vehicle named {name!r}") from None
+        return self._vehicles.state(name)
 
     def vehicle_names(self):
         return list(self._current_layout().vehicle_names)
 
     def vehicle(self, name):
         """The vehicle's spec with its chassis' current pose (what a scene file holds)."""
-        if name not in self._vehicles:
-            raise KeyError(f"no vehicle named {name!r}")
+        spec = {k: v for k, v in self._vehicles.spec(name).items() if k not in ("rpy", "quaternion")}
         chassis = self.body(name)
-        spec = {k: v for k, v in self._vehicles[name].items() if k not in ("rpy", "quaternion")}
         state = ("position", "quaternion", "linear_velocity", "angular_velocity")
         return {**spec, **{key: chassis[key] for key in state}}
 
@@ -310,8 +227,7 @@ class World:
         b.external_impulse[slot] = 0.0
         b.external_angular_impulse[slot] = 0.0
         del self._slots[name]
-        if self._vehicles.pop(name, None) is not None:
-            self._vehicle_arrays.active[self._vehicle_rows.pop(name)] = False
+        self._vehicles.remove(name)
         self._names[slot] = None
         self.layout_version += 1
         heapq.heappush(self._free, slot)
@@ -396,11 +312,6 @@ class World:
         self.wake_all()
         return dropped
 
-    @property
-    def playground_triangles(self):
-        """(T, 3, 3) the playground's triangles (a copy)."""
-        return self._playground.triangles.copy()
-
     # ------------------------------------------------------------------ stepping
     def step(self, n=1):
         """Runs n whole steps of 1/steps_per_second inside compiled code."""
@@ -428,7 +339,7 @@ class World:
             settings = self._kernel_settings()
             started = time.thread_time()
             steps, status = step_world(n - done, self._bodies, self._playground,
-                                       self._vehicle_arrays, settings,
+                                       self._vehicles.arrays, settings,
                                        self._broad, newest, scratch, counters, self._stage_ns,
                                        self.profiling)
             self.engine_cpu_seconds += time.thread_time() - started
@@ -449,97 +360,6 @@ class World:
         for key, index in (("woken", STAT_WOKEN), ("frozen", STAT_FROZEN), ("pairs", STAT_PAIRS),
                            ("points", STAT_POINTS), ("triangles", STAT_TRIANGLES)):
             self.stats[key] += int(counters[index])
-
-    def stage_seconds(self):
-        """CPU seconds spent in each stage of the step while `profiling` was on."""
-        return {stage: float(ns) * 1e-9 for stage, ns in zip(STAGES, self._stage_ns)}
-
-    # ------------------------------------------------------------------ queries
-    def octree_cells(self):
-        """The occupied octree cells of the last step, [(level, centres (K, 3), edge)], for
-        drawing (the 2008 program could show its octree)."""
-        if self._root is None:
-            return []
-        keys = [index.keys[:index.count[0]] for index in
-                (self._broad.moving, self._broad.static, self._playground.index)]
-        return cell_centres(np.unique(np.concatenate(keys)), self.settings["octree_depth"], *self._root)
-
-    def ray_scene(self):
-        """What rays can hit now (every body, the playground, the ground), for casting any
-        number of batches at this instant: RayScene.cast(origins, directions, max_range,
-        exclude). Stale once the world steps or changes."""
-        return RayScene(self._bodies, self._playground, self.ground, dict(self._slots))
-
-    def cast_rays(self, origins, directions, max_range, exclude=()):
-        """RayHits (distance, point, normal, body row or GROUND/PLAYGROUND/NOTHING) of a batch
-        of rays (origins (R, 3) or one point for all), ignoring the bodies named in `exclude`.
-        See ray_scene() for several batches."""
-        return self.ray_scene().cast(origins, directions, max_range, exclude)
-
-    def state(self):
-        """One row per body, in body_names() order (copies): motion_state() and
-        body_properties() together."""
-        return {**self.motion_state(), **self.body_properties()}
-
-    def motion_state(self):
-        """What stepping changes, one row per body (copies): positions, quaternions,
-        linear_velocities, angular_velocities, frozen."""
-        b, rows = self._bodies, self._current_layout().rows
-        position, orientation, velocity, frozen = (gather(array, rows) for array in
-                                                   (b.position, b.orientation, b.velocity, b.frozen))
-        return {"positions": position, "quaternions": orientation,
-                "linear_velocities": velocity[:, :3], "angular_velocities": velocity[:, 3:], "frozen": frozen}
-
-    def body_properties(self):
-        """What only adding, removing and editing change (see layout_version), one row per
-        body (copies): shapes (codes of physics.shapes), dimensions (each shape's three
-        numbers), sizes (full edges of the body-frame bounding box), masses, immovable."""
-        b, rows = self._bodies, self._current_layout().rows
-        return {"shapes": gather(b.shape, rows), "dimensions": gather(b.dimensions, rows),
-                "sizes": 2.0 * gather(b.half_extents, rows), "masses": gather(b.mass, rows),
-                "immovable": gather(b.immovable, rows)}
-
-    def contacts(self):
-        """The newest step's contact points; body_a/body_b are rows of state(), -1 the ground,
-        -2 the playground. Normals point from A to B; impulses are N s (collision + contact)."""
-        c = self._contacts[0]
-        n = int(c.count[0])
-        if n == 0:
-            return dict(NO_CONTACTS)
-        active = self._bodies.active
-        row_of_slot = self._current_layout().row_of_slot
-        a, b = c.body_a[:n], c.body_b[:n]
-        # Bodies removed since that step take their contacts with them.
-        keep = np.nonzero(active[a] & ((b < 0) | active[np.maximum(b, 0)]))[0]
-        a, b = a[keep], b[keep]
-        return {
-            "points": c.point[keep],
-            "normals": c.normal[keep],
-            "depths": c.depth[keep],
-            "impulses": c.collision_impulse[keep] + c.impulse[keep] + c.support_impulse[keep],
-            "body_a": row_of_slot[a],
-            "body_b": np.where(b >= 0, row_of_slot[np.maximum(b, 0)], b),
-        }
-
-    def body(self, name):
-        """Everything a scene file holds about one body (the SPEC 3 keys), as plain Python."""
-        slot = self._slot(name)
-        b = self._bodies
-        shape = self._shape(slot)
-        return {
-            "name": name, "shape": shape.name, **shape.fields,
-            "position": b.position[slot].tolist(),
-            "quaternion": b.orientation[slot].tolist(),
-            "linear_velocity": b.velocity[slot, :3].tolist(),
-            "angular_velocity": b.velocity[slot, 3:].tolist(),
-            "mass": float(b.mass[slot]),
-            "elasticity": float(b.elasticity[slot]),
-            "static_friction": float(b.static_friction[slot]),
-            "dynamic_friction": float(b.dynamic_friction[slot]),
-            "immovable": bool(b.immovable[slot]),
-            "allow_freezing": bool(b.allow_freezing[slot]),
-            "frozen": bool(b.frozen[slot]),
-        }
 
     # ------------------------------------------------------------------ internals
     def _active_slots(self):

@@ -1,0 +1,121 @@
+"""What a World can be asked without changing it: its bodies' state and properties by row,
+the newest contacts, one body's spec, rays, the octree's cells, the step's stage times.
+
+A mixin of World (world.py holds the bodies, their names and step()); these read its arrays
+between steps, never while it steps.
+"""
+
+import numpy as np
+
+from .broad_phase import cell_centres
+from .pipeline import STAGES
+from .ray_batch import RayScene
+
+# contacts() of a step without any (a world at rest: frozen bodies make none), which the node
+# asks for after every batch. Read-only, so sharing the arrays is safe.
+NO_CONTACTS = {"points": np.zeros((0, 3)), "normals": np.zeros((0, 3)), "depths": np.zeros(0),
+               "impulses": np.zeros(0), "body_a": np.zeros(0, np.int64), "body_b": np.zeros(0, np.int64)}
+for _array in NO_CONTACTS.values():
+    _array.flags.writeable = False
+
+
+def gather(array, rows):
+    """array[rows] as a new array; rows: a Layout's rows (a slice or slot indices)."""
+    return array[rows].copy() if isinstance(rows, slice) else array.take(rows, axis=0)
+
+
+class WorldQueries:
+    def octree_cells(self):
+        """The occupied octree cells of the last step, [(level, centres (K, 3), edge)], for
+        drawing (the 2008 program could show its octree)."""
+        if self._root is None:
+            return []
+        keys = [index.keys[:index.count[0]] for index in
+                (self._broad.moving, self._broad.static, self._playground.index)]
+        return cell_centres(np.unique(np.concatenate(keys)), self.settings["octree_depth"], *self._root)
+
+    def ray_scene(self):
+        """What rays can hit now (every body, the playground, the ground), for casting any
+        number of batches at this instant: RayScene.cast(origins, directions, max_range,
+        exclude). Stale once the world steps or changes."""
+        return RayScene(self._bodies, self._playground, self.ground, dict(self._slots))
+
+    def cast_rays(self, origins, directions, max_range, exclude=()):
+        """RayHits (distance, point, normal, body row or GROUND/PLAYGROUND/NOTHING) of a batch
+        of rays (origins (R, 3) or one point for all), ignoring the bodies named in `exclude`.
+        See ray_scene() for several batches."""
+        return self.ray_scene().cast(origins, directions, max_range, exclude)
+
+    def state(self):
+        """One row per body, in body_names() order (copies): motion_state() and
+        body_properties() together."""
+        return {**self.motion_state(), **self.body_properties()}
+
+    def motion_state(self):
+        """What stepping changes, one row per body (copies): positions, quaternions,
+        linear_velocities, angular_velocities, frozen."""
+        b, rows = self._bodies, self._current_layout().rows
+        position, orientation, velocity, frozen = (gather(array, rows) for array in
+                                                   (b.position, b.orientation, b.velocity, b.frozen))
+        return {"positions": position, "quaternions": orientation,
+                "linear_velocities": velocity[:, :3], "angular_velocities": velocity[:, 3:], "frozen": frozen}
+
+    def body_properties(self):
+        """What only adding, removing and editing change (see layout_version), one row per
+        body (copies): shapes (codes of physics.shapes), dimensions (each shape's three
+        numbers), sizes (full edges of the body-frame bounding box), masses, immovable."""
+        b, rows = self._bodies, self._current_layout().rows
+        return {"shapes": gather(b.shape, rows), "dimensions": gather(b.dimensions, rows),
+                "sizes": 2.0 * gather(b.half_extents, rows), "masses": gather(b.mass, rows),
+                "immovable": gather(b.immovable, rows)}
+
+    def contacts(self):
+        """The newest step's contact points; body_a/body_b are rows of state(), -1 the ground,
+        -2 the playground. Normals point from A to B; impulses are N s (collision + contact)."""
+        c = self._contacts[0]
+        n = int(c.count[0])
+        if n == 0:
+            return dict(NO_CONTACTS)
+        active = self._bodies.active
+        row_of_slot = self._current_layout().row_of_slot
+        a, b = c.body_a[:n], c.body_b[:n]
+        # Bodies removed since that step take their contacts with them.
+        keep = np.nonzero(active[a] & ((b < 0) | active[np.maximum(b, 0)]))[0]
+        a, b = a[keep], b[keep]
+        return {
+            "points": c.point[keep],
+            "normals": c.normal[keep],
+            "depths": c.depth[keep],
+            "impulses": c.collision_impulse[keep] + c.impulse[keep] + c.support_impulse[keep],
+            "body_a": row_of_slot[a],
+            "body_b": np.where(b >= 0, row_of_slot[np.maximum(b, 0)], b),
+        }
+
+    def body(self, name):
+        """Everything a scene file holds about one body (the SPEC 3 keys), as plain Python."""
+        slot = self._slot(name)
+        b = self._bodies
+        shape = self._shape(slot)
+        return {
+            "name": name, "shape": shape.name, **shape.fields,
+            "position": b.position[slot].tolist(),
+            "quaternion": b.orientation[slot].tolist(),
+            "linear_velocity": b.velocity[slot, :3].tolist(),
+            "angular_velocity": b.velocity[slot, 3:].tolist(),
+            "mass": float(b.mass[slot]),
+            "elasticity": float(b.elasticity[slot]),
+            "static_friction": float(b.static_friction[slot]),
+            "dynamic_friction": float(b.dynamic_friction[slot]),
+            "immovable": bool(b.immovable[slot]),
+            "allow_freezing": bool(b.allow_freezing[slot]),
+            "frozen": bool(b.frozen[slot]),
+        }
+
+    def stage_seconds(self):
+        """CPU seconds spent in each stage of the step while `profiling` was on."""
+        return {stage: float(ns) * 1e-9 for stage, ns in zip(STAGES, self._stage_ns)}
+
+    @property
+    def playground_triangles(self):
+        """(T, 3, 3) the playground's triangles (a copy)."""
+        return self._playground.triangles.copy()
