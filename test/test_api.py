@@ -199,11 +199,11 @@ def test_buffer_growth_mid_call_gives_the_same_result():
     roomy, cramped = pile(40, seed=3), pile(40, seed=3)
     broad = cramped._broad
     cramped._broad = broad._replace(pair_a=np.zeros(2, np.int64), pair_b=np.zeros(2, np.int64))
-    from vplayground_ros.physics.contact import allocate_contacts
-    cramped._contacts = [allocate_contacts(4, 2), allocate_contacts(4, 2)]
+    from vplayground_ros.physics.step_context import allocate_contact_buffers, newest_contacts
+    cramped._contacts = allocate_contact_buffers(4, 2)
     roomy.step(200)
     cramped.step(200)
-    assert len(cramped._broad.pair_a) > 2 and len(cramped._contacts[0].body_a) > 4
+    assert len(cramped._broad.pair_a) > 2 and len(newest_contacts(cramped._contacts).body_a) > 4
     for key, value in roomy.state().items():
         assert np.array_equal(value, cramped.state()[key]), key
 

@@ -1,10 +1,9 @@
 """The step pipeline: one compiled call runs many whole steps. Read `step_world` top to bottom to
 read the physics; each stage lives in the module named after it."""
-from collections import namedtuple
-
-import numpy as np
 import time
 import warnings
+
+import numpy as np
 
 from numba import njit, objmode
 from numba.core.errors import NumbaWarning
@@ -17,22 +16,19 @@ from .freezing import update_freezing, wake_touched
 from .integrate import integrate_positions, integrate_velocities, update_bodies
 from .narrow_phase import collide
 from .playground import find_playground_pairs
+from .step_context import swap_contacts
 from .vehicle import drive_vehicles
-
-Settings = namedtuple("Settings", [
-    "gravity", "dt", "resolve_iterations", "octree_depth",
-    "freezing_enabled", "freezing_time", "freezing_linear_speed", "freezing_angular_speed",
-    "ground_enabled", "ground_height", "ground_material",  # (elasticity, static, dynamic)
-    "root_min", "root_size",  # the octree's root cube
-])
 
 # step_world's status: why it returned before doing every step.
 DONE, GROW_PAIRS, GROW_CONTACTS, GROW_INDEX = 0, 1, 2, 3
 
-# Stages timed when step_world is asked to profile (nanoseconds of the stepping thread's CPU
-# time summed over its steps: other processes on a shared machine do not inflate them).
+# The stages of a step, in order; step_world times each (nanoseconds of the stepping thread's CPU
+# time summed over its steps, so other processes on a shared machine do not inflate them) when
+# asked to profile. STAGES names them for reports; the constants index stage_ns.
 STAGES = ("derived state", "detection", "wake", "collision pass", "forces and wheels",
           "contact pass", "positions", "freezing")
+(STAGE_DERIVED, STAGE_DETECTION, STAGE_WAKE, STAGE_COLLISION, STAGE_FORCES, STAGE_CONTACT,
+ STAGE_POSITIONS, STAGE_FREEZING) = range(len(STAGES))
 
 
 # clock_ns reads the clock in object mode, which Numba warns holds the GIL: only when profiling.
@@ -53,6 +49,15 @@ def clock_ns(profile):
 
 # step_world's counters, summed over its steps (the caller zeroes them).
 STAT_WOKEN, STAT_FROZEN, STAT_PAIRS, STAT_POINTS, STAT_TRIANGLES = 0, 1, 2, 3, 4
+
+
+@njit(cache=True, nogil=True)
+def lap(ctx, stage, since):
+    """Adds the time since `since` to `stage` when profiling; returns now."""
+    now = clock_ns(ctx.profile)
+    if ctx.profile:
+        ctx.stage_ns[stage] += now - since
+    return now
 
 
 @njit(cache=True, nogil=True)
@@ -124,16 +129,15 @@ def detect(bodies, broad, playground, contacts, settings, moving_ids):
 
 
 @njit(cache=True, nogil=True)
-def step_world(steps, bodies, playground, vehicles, settings, broad, previous, current, stats,
-               stage_ns, profile):
-    """Runs up to `steps` steps. Returns (steps done, status). The contact buffers swap every
-    step: after an odd number of steps the newest contacts are in the buffer passed as
-    `current`, else in the one passed as `previous`. A status other than DONE means a buffer was
-    too small; that step has not been applied and the caller grows the buffer and goes on.
-    With `profile`, the time of each of STAGES is added to stage_ns."""
-    s = settings
+def step_world(steps, ctx):
+    """Runs up to `steps` steps of the StepContext `ctx`. Returns (steps done, status). A status
+    other than DONE means a buffer was too small; that step has not been applied and the caller
+    grows the buffer and goes on."""
+    bodies, broad, playground, s = ctx.bodies, ctx.broad, ctx.playground, ctx.settings
     for done in range(steps):
-        t0 = clock_ns(profile)
+        previous = ctx.contacts.pair[ctx.contacts.newest[0]]
+        current = ctx.contacts.pair[1 - ctx.contacts.newest[0]]
+        t = clock_ns(ctx.profile)
         # 1. Derived state: rotations, solver masses, broad-phase bounds (of every body when the
         #    octree changed under the static index).
         live = list_live_bodies(bodies, broad, broad.force_rebuild[0])
@@ -142,13 +146,13 @@ def step_world(steps, bodies, playground, vehicles, settings, broad, previous, c
             if not rebuild_static_index(bodies, broad, s):
                 return done, GROW_INDEX
             live = list_live_bodies(bodies, broad, False)
-        t1 = clock_ns(profile)
-        # 2. Collision detection (octree broad phase, SAT narrow phase) at the current positions,
-        #    with speculative margins covering this step's motion.
+        t = lap(ctx, STAGE_DERIVED, t)
+        # 2. Collision detection (octree broad phase, narrow phase per shape pair) at the current
+        #    positions, with speculative margins covering this step's motion.
         status = detect(bodies, broad, playground, current, s, live)
         if status != DONE:
             return done, status
-        t2 = clock_ns(profile)
+        t = lap(ctx, STAGE_DETECTION, t)
         # 3. Freezing: sleepers touched by moving bodies wake, and are detected again with their
         #    own contacts so they do not sink for a step.
         woken, stale = wake_touched(current, bodies, s.freezing_linear_speed)
@@ -159,39 +163,35 @@ def step_world(steps, bodies, playground, vehicles, settings, broad, previous, c
             status = detect(bodies, broad, playground, current, s, live)
             if status != DONE:
                 return done, status
-        t3 = clock_ns(profile)
+        t = lap(ctx, STAGE_WAKE, t)
         # 4. Collision pass with the pre-step velocities and the bodies' elasticity.
         warm_start_from(previous, current)
         prepare_contacts(current, bodies, s.ground_material, s.gravity, s.dt)
         collision_pass(current, bodies, s.resolve_iterations)
-        t4 = clock_ns(profile)
+        t = lap(ctx, STAGE_COLLISION, t)
         # 5. Velocity update with external forces: the cars' wheels (springs and dampers see the
         #    velocities before gravity adds its share, or dampers would hold up the cars), then
         #    gravity and pushes.
-        drive_vehicles(vehicles, bodies, broad, playground, s.ground_enabled, s.ground_height,
-                       s.root_min, s.root_size, s.octree_depth, s.dt)
+        drive_vehicles(ctx)
         integrate_velocities(bodies, live, s.gravity, s.dt)
-        t5 = clock_ns(profile)
+        t = lap(ctx, STAGE_FORCES, t)
         # 6. Contact pass: zero elasticity, twice the iterations, split-impulse penetration fix.
         warm_start(current, bodies)
         contact_pass(current, bodies, 2 * s.resolve_iterations)
-        t6 = clock_ns(profile)
+        t = lap(ctx, STAGE_CONTACT, t)
         # 7. Positions from velocities.
         integrate_positions(bodies, live, s.dt)
-        t7 = clock_ns(profile)
+        t = lap(ctx, STAGE_POSITIONS, t)
         # 8. Freezing of bodies that have been at rest long enough.
         frozen_now = update_freezing(bodies, live, s.freezing_enabled, s.freezing_time,
                                      s.freezing_linear_speed, s.freezing_angular_speed, s.dt)
         index_manifolds(current)
-        if profile:
-            t8 = clock_ns(profile)
-            for k, (a, b) in enumerate(((t0, t1), (t1, t2), (t2, t3), (t3, t4), (t4, t5),
-                                        (t5, t6), (t6, t7), (t7, t8))):
-                stage_ns[k] += b - a
+        lap(ctx, STAGE_FREEZING, t)
+        stats = ctx.stats
         stats[STAT_WOKEN] += woken
         stats[STAT_FROZEN] += frozen_now
         stats[STAT_PAIRS] += broad.pair_count[0]
         stats[STAT_POINTS] += current.count[0]
         stats[STAT_TRIANGLES] += broad.playground_count[0]
-        previous, current = current, previous
+        swap_contacts(ctx.contacts)
     return steps, DONE

@@ -10,6 +10,7 @@ import numpy as np
 from .broad_phase import cell_centres
 from .pipeline import STAGES
 from .ray_batch import RayScene
+from .step_context import newest_contacts
 
 # contacts() of a step without any (a world at rest: frozen bodies make none), which the node
 # asks for after every batch. Read-only, so sharing the arrays is safe.
@@ -72,7 +73,7 @@ class WorldQueries:
     def contacts(self):
         """The newest step's contact points; body_a/body_b are rows of state(), -1 the ground,
         -2 the playground. Normals point from A to B; impulses are N s (collision + contact)."""
-        c = self._contacts[0]
+        c = newest_contacts(self._contacts)
         n = int(c.count[0])
         if n == 0:
             return dict(NO_CONTACTS)

@@ -94,11 +94,14 @@ def ray_triangle(origin, direction, reach, triangles, normals, j):
 
 
 @njit(cache=True, nogil=True)
-def cast_ray(origin, direction, reach, exclude, query_id, bodies, broad, playground, ground_enabled,
-             ground_height, root_min, root_size, depth):
+def cast_ray(origin, direction, reach, exclude, query_id, ctx):
     """Nearest hit of the segment origin + t direction, 0 <= t <= reach (direction unit), with
-    anything but body `exclude`: (t, what: a body slot, GROUND or PLAYGROUND, normal), t NO_HIT
-    when nothing is hit. `query_id` (negative, unique per ray in a step) marks objects seen."""
+    anything in the StepContext's world but body `exclude`: (t, what: a body slot, GROUND or
+    PLAYGROUND, normal), t NO_HIT when nothing is hit. `query_id` (negative, unique per ray in a
+    step) marks objects seen."""
+    bodies, broad, playground, s = ctx.bodies, ctx.broad, ctx.playground, ctx.settings
+    ground_enabled, ground_height = s.ground_enabled, s.ground_height
+    root_min, root_size, depth = s.root_min, s.root_size, s.octree_depth
     best, hit, best_normal = NO_HIT, GROUND, (0.0, 0.0, 1.0)
     if ground_enabled and direction[2] < 0.0:
         t = (ground_height - origin[2]) / direction[2]

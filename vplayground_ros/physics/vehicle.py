@@ -122,16 +122,16 @@ def ackermann(vehicles, v, w):
 
 
 @njit(cache=True, nogil=True)
-def drive_vehicles(vehicles, bodies, broad, playground, ground_enabled, ground_height, root_min,
-                   root_size, depth, dt):
+def drive_vehicles(ctx):
     """Controller, wheel ray casts, suspension and tyre forces of every vehicle for one step,
     applied as impulses to the chassis (and the opposite to any box a wheel stands on). The four
     springs are evaluated on the same state, then applied; the tyres follow one by one, each
     seeing what the others already did (so four wheels never cancel the same slip four times)."""
+    vehicles, bodies, dt = ctx.vehicles, ctx.bodies, ctx.settings.dt
     if not np.any(vehicles.active):
         return  # nothing to drive: no per-body work (a world at rest costs next to nothing)
     position, velocity = bodies.position, bodies.velocity
-    broad.stamp[:] = -1  # the rays' query ids repeat every step
+    ctx.broad.stamp[:] = -1  # the rays' query ids repeat every step
     for v in range(len(vehicles.active)):
         if not vehicles.active[v]:
             continue
@@ -153,9 +153,7 @@ def drive_vehicles(vehicles, bodies, broad, playground, ground_enabled, ground_h
                      position[c, 1] + r[1, 0] * m[0] + r[1, 1] * m[1] + r[1, 2] * m[2],
                      position[c, 2] + r[2, 0] * m[0] + r[2, 1] * m[1] + r[2, 2] * m[2])
             reach = vehicles.spring_length[v, w] + vehicles.radius[v, w]
-            t, hit, normal = cast_ray(mount, down, reach, c, wheel_query(v, w, WHEELS), bodies, broad,
-                                      playground, ground_enabled, ground_height, root_min,
-                                      root_size, depth)
+            t, hit, normal = cast_ray(mount, down, reach, c, wheel_query(v, w, WHEELS), ctx)
             vehicles.in_contact[v, w] = t != NO_HIT
             if t == NO_HIT:
                 vehicles.compression[v, w] = 0.0

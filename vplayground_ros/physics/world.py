@@ -14,13 +14,14 @@ from . import shapes
 from .bodies import allocate_bodies, grow_bodies
 from .broad_phase import allocate_broad_phase
 from .constants import CONTACT_MARGIN
-from .contact import allocate_contacts, index_manifolds
+from .contact import index_manifolds
 from .freezing import wake_body
 from .math3d import rpy_to_quat
 from .pipeline import (DONE, GROW_CONTACTS, GROW_INDEX, GROW_PAIRS, STAGES, STAT_FROZEN,
-                       STAT_PAIRS, STAT_POINTS, STAT_TRIANGLES, STAT_WOKEN, Settings, step_world)
+                       STAT_PAIRS, STAT_POINTS, STAT_TRIANGLES, STAT_WOKEN, step_world)
 from .playground import EMPTY_PLAYGROUND_ARGS, index_playground, make_playground
 from .queries import WorldQueries
+from .step_context import StepContext, allocate_contact_buffers, kernel_settings, newest_contacts
 from .vehicle_registry import DEFAULT_COMMAND_TIMEOUT, VehicleRegistry
 
 # Bodies farther than this from the world's centre (the playground's middle, else the origin)
@@ -73,8 +74,7 @@ class World(WorldQueries):
         self._unchecked = np.ones(capacity, dtype=bool)
         self._vehicles = VehicleRegistry()  # the chassis of each is the body of its name
         self._broad = allocate_broad_phase(capacity, 4 * capacity)
-        # [newest, scratch]: the newest step's contacts, and the buffer the next step fills.
-        self._contacts = [allocate_contacts(16 * capacity, 4 * capacity) for _ in range(2)]
+        self._contacts = allocate_contact_buffers(16 * capacity, 4 * capacity)
         self._root = None  # (min corner, edge length) of the octree root cube; fitted lazily
         self._playground = make_playground(*EMPTY_PLAYGROUND_ARGS)[0]
         self.playground_spec = None  # how the scene described the playground, for saving
@@ -335,16 +335,13 @@ class World(WorldQueries):
         counters = np.zeros(5, np.int64)
         done = 0
         while done < n:
-            newest, scratch = self._contacts
-            settings = self._kernel_settings()
+            ctx = StepContext(self._bodies, self._playground, self._vehicles.arrays, self._broad,
+                              self._contacts, kernel_settings(self.settings, self.ground, specs.DEFAULT_GROUND,
+                                                              self._root),
+                              counters, self._stage_ns, self.profiling)
             started = time.thread_time()
-            steps, status = step_world(n - done, self._bodies, self._playground,
-                                       self._vehicles.arrays, settings,
-                                       self._broad, newest, scratch, counters, self._stage_ns,
-                                       self.profiling)
+            steps, status = step_world(n - done, ctx)
             self.engine_cpu_seconds += time.thread_time() - started
-            if steps % 2:
-                self._contacts.reverse()
             done += steps
             self.time += steps * dt
             self.step_count += steps
@@ -439,7 +436,7 @@ class World(WorldQueries):
         b = self._bodies
         changed = np.zeros(len(b.active), dtype=bool)
         changed[slots] = True
-        c = self._contacts[0]
+        c = newest_contacts(self._contacts)
         n = int(c.count[0])
         body_b = c.body_b[:n]
         involved = changed[c.body_a[:n]] | ((body_b >= 0) & changed[np.maximum(body_b, 0)])
@@ -499,29 +496,6 @@ class World(WorldQueries):
             raise RuntimeError("octree index overflow: the playground index is too small")
         self._broad.force_rebuild[0] = True
 
-    def _kernel_settings(self):
-        s, g = self.settings, self.ground
-        m = g or specs.DEFAULT_GROUND
-        root_min, root_size = self._root
-        freezing = s["freezing"]
-        return Settings(
-            gravity=np.asarray(s["gravity"], dtype=np.float64),
-            dt=1.0 / s["steps_per_second"],
-            resolve_iterations=int(s["resolve_iterations"]),
-            octree_depth=int(s["octree_depth"]),
-            freezing_enabled=bool(freezing["enabled"]),
-            freezing_time=float(freezing["time"]),
-            freezing_linear_speed=float(freezing["linear_speed"]),
-            freezing_angular_speed=float(freezing["angular_speed"]),
-            ground_enabled=g is not None,
-            ground_height=float(g["height"]) if g else 0.0,
-            # The playground is made of the ground's material (the defaults without a ground).
-            ground_material=(float(m["elasticity"]), float(m["static_friction"]),
-                             float(m["dynamic_friction"])),
-            root_min=np.asarray(root_min, dtype=np.float64),
-            root_size=float(root_size),
-        )
-
     def _grow(self, capacity):
         old = len(self._names)
         self._bodies = grow_bodies(self._bodies, capacity)
@@ -541,13 +515,14 @@ class World(WorldQueries):
             playground_body=np.zeros(size, np.int64), playground_triangle=np.zeros(size, np.int64))
 
     def _grow_contacts(self):
-        newest, _ = self._contacts
+        newest = newest_contacts(self._contacts)
         points, manifolds = 2 * len(newest.body_a), 2 * len(newest.manifold_start)
-        grown = allocate_contacts(points, manifolds)
+        grown = allocate_contact_buffers(points, manifolds)
+        kept = newest_contacts(grown)  # the warm start's source
         for field in newest._fields:
             if field.startswith("table_"):
                 continue
-            old, new = getattr(newest, field), getattr(grown, field)
+            old, new = getattr(newest, field), getattr(kept, field)
             new[:len(old)] = old
-        index_manifolds(grown)
-        self._contacts = [grown, allocate_contacts(points, manifolds)]
+        index_manifolds(kept)
+        self._contacts = grown

@@ -1,0 +1,72 @@
+"""Everything one compiled call of the step works on, bundled as Box2D's b2StepContext is: the
+stages take the context (or the parts of it they need) instead of long argument lists.
+
+The contact buffers are a pair: each step fills one from the other (the warm start reads the
+older), then `newest` names the one it filled. The World reads contacts through newest_contacts.
+"""
+from collections import namedtuple
+
+import numpy as np
+from numba import njit
+
+from .contact import allocate_contacts
+
+Settings = namedtuple("Settings", [
+    "gravity", "dt", "resolve_iterations", "octree_depth",
+    "freezing_enabled", "freezing_time", "freezing_linear_speed", "freezing_angular_speed",
+    "ground_enabled", "ground_height", "ground_material",  # (elasticity, static, dynamic)
+    "root_min", "root_size",  # the octree's root cube
+])
+
+ContactBuffers = namedtuple("ContactBuffers", [
+    "pair",    # (Contacts, Contacts)
+    "newest",  # (1,) int64: which of pair the newest step filled
+])
+
+StepContext = namedtuple("StepContext", [
+    "bodies", "playground", "vehicles", "broad", "contacts",  # ContactBuffers
+    "settings",
+    "stats",     # (STAT_*,) int64 counters summed over the steps (the caller zeroes them)
+    "stage_ns",  # (len(STAGES),) int64 CPU ns per stage, summed while `profile`
+    "profile",
+])
+
+
+def allocate_contact_buffers(points, manifolds):
+    return ContactBuffers((allocate_contacts(points, manifolds), allocate_contacts(points, manifolds)),
+                          np.zeros(1, np.int64))
+
+
+def newest_contacts(buffers):
+    return buffers.pair[buffers.newest[0]]
+
+
+@njit(cache=True, nogil=True)
+def swap_contacts(buffers):
+    """The buffer just filled becomes the newest; the other is the next step's to fill."""
+    buffers.newest[0] = 1 - buffers.newest[0]
+
+
+def kernel_settings(settings, ground, default_ground, root):
+    """The World's validated settings (SPEC 3) as the kernels take them."""
+    s, g = settings, ground
+    m = g or default_ground
+    root_min, root_size = root
+    freezing = s["freezing"]
+    return Settings(
+        gravity=np.asarray(s["gravity"], dtype=np.float64),
+        dt=1.0 / s["steps_per_second"],
+        resolve_iterations=int(s["resolve_iterations"]),
+        octree_depth=int(s["octree_depth"]),
+        freezing_enabled=bool(freezing["enabled"]),
+        freezing_time=float(freezing["time"]),
+        freezing_linear_speed=float(freezing["linear_speed"]),
+        freezing_angular_speed=float(freezing["angular_speed"]),
+        ground_enabled=g is not None,
+        ground_height=float(g["height"]) if g else 0.0,
+        # The playground is made of the ground's material (the defaults without a ground).
+        ground_material=(float(m["elasticity"]), float(m["static_friction"]),
+                         float(m["dynamic_friction"])),
+        root_min=np.asarray(root_min, dtype=np.float64),
+        root_size=float(root_size),
+    )
