@@ -206,3 +206,38 @@ def test_as_fast_as_possible_publishes_at_the_simulated_rates(running):
     assert [t for t, _ in sink.of("diagnostics")] == [0.0, 1.0, 2.0]
     assert [t for t, _ in sink.of("rtf")] == [0.0, 0.5, 1.0, 1.5, 2.0]
     assert all(decoder("std_msgs/msg/Float64")(d).data > 0.0 for _, d in sink.of("rtf")[1:])
+
+
+class ThreadRecordingWorld:
+    """A World whose every attribute read records the reading thread's name."""
+
+    def __init__(self, world):
+        object.__setattr__(self, "_world", world)
+        object.__setattr__(self, "threads", set())
+
+    def __getattr__(self, name):
+        import threading
+        self.threads.add(threading.current_thread().name)
+        return getattr(self._world, name)
+
+    def __setattr__(self, name, value):
+        setattr(self._world, name, value)
+
+
+def test_the_publisher_never_reads_the_world_it_only_reads_snapshots():
+    # simulation.py's rule: nothing outside the simulation thread touches the World while it
+    # steps. Scenery (scene markers) and wheels (car markers) come with the snapshots.
+    options = parse_args(["--no-record", "--real-time-factor", "0", "--duration", "1.0"])
+    world = ThreadRecordingWorld(load_world(SCENE))
+    sim = Simulation(world, real_time_factor=0.0, duration=1.0)
+    runtime = Runtime(sim, options, logging.getLogger("test_broadcast.threads"))
+    sink = Collector()
+    runtime.broadcaster.add_sink(sink)
+    runtime.start()
+    try:
+        sim.wait(60)
+    finally:
+        runtime.stop()
+    assert sink.of("scene_markers") and sink.of("car_markers") and sink.of("body_markers")
+    # MainThread: this test's set-up and the Runtime's construction, before stepping.
+    assert world.threads == {"MainThread", "vplayground-physics"}

@@ -359,18 +359,11 @@ class Broadcaster:
         """The driven car: the first vehicle of the world, or None."""
         return next(iter(snapshot.vehicles), None)
 
-    def car_wheels(self, car):
-        """The car's wheel specs (they change only through ~/edit), or None once it is gone."""
-        try:
-            return self.sim.world.vehicle(car)["wheels"]
-        except KeyError:
-            return None
-
     def publish_state(self, snap):
         world_frame, odom_frame, base_frame = self.frames
         self.send("poses", messages.pose_array(snap, world_frame), snap.time)
         car = self.car(snap)
-        wheels = self.car_wheels(car) if car is not None else None
+        wheels = snap.wheels.get(car)
         car_frames = []
         if car is not None:
             self.send("odom", messages.car_odometry(snap, car, odom_frame, base_frame), snap.time)
@@ -424,7 +417,7 @@ class Broadcaster:
             self.send("body_markers", messages.body_markers(snap, world_frame, self.marker_ids_of(snap.names),
                                                             self.marker_encoder, car), snap.time)
         if car is not None and self.wanted("car_markers"):
-            wheels = self.car_wheels(car)
+            wheels = snap.wheels.get(car)
             if wheels is not None:
                 self.send("car_markers", messages.car_markers(snap, car, world_frame, wheels), snap.time)
         if self.parameters["contacts.publish"] and snap.contacts is not None:
@@ -436,9 +429,8 @@ class Broadcaster:
 
     def publish_scenery(self, snap, octree_cells):
         """The scenery, latched (octree_cells read on the simulation thread at this snapshot)."""
-        world = self.sim.world
-        self.send("scene_markers", messages.scene_markers(snap.time, self.frames[0], world.ground,
-                                                          world.playground_triangles, octree_cells), snap.time)
+        self.send("scene_markers", messages.scene_markers(snap.time, self.frames[0], snap.scenery.ground,
+                                                          snap.scenery.triangles, octree_cells), snap.time)
 
     def publish_rtf(self, snap):
         self.send("rtf", messages.float64(self.sim.achieved_rtf), snap.time)

@@ -46,10 +46,17 @@ class Snapshot:
     # [(sensors.Sensor, reading)] of the sensors read after this batch's last step, on the
     # simulation thread (the rays need the World); the publisher turns them into messages.
     readings: list = field(default_factory=list)
+    wheels: dict = field(default_factory=dict)  # vehicle name -> its wheel specs (shared)
+    scenery: "Scenery" = None
 
+
+# The static world as the publisher draws it (shared by snapshots until it changes):
+# the ground spec (or None), the playground's triangles (T, 3, 3, read-only), and the World's
+# scenery_version they were taken at.
+Scenery = namedtuple("Scenery", "ground triangles version")
 
 # What the snapshots of one world's layout share, taken once per layout rather than per batch.
-SharedLayout = namedtuple("SharedLayout", "world version names vehicle_names properties")
+SharedLayout = namedtuple("SharedLayout", "world version names vehicle_names properties wheels scenery")
 
 
 class Simulation:
@@ -286,15 +293,25 @@ class Simulation:
             time=world.time, step=world.step_count, names=layout.names,
             state={**world.motion_state(), **layout.properties},
             vehicles={name: world.vehicle_state(name) for name in layout.vehicle_names},
-            contacts=world.contacts() if self.with_contacts else None)
+            contacts=world.contacts() if self.with_contacts else None,
+            wheels=layout.wheels, scenery=layout.scenery)
 
     def _shared_layout(self, world):
-        """Names and body properties, taken again only when the world's layout changed."""
+        """Names, body properties, wheels and scenery, taken again only when the world's layout
+        or scenery changed: the publisher reads these from snapshots, never from the World."""
         layout = self._layout
-        if layout is None or layout.world is not world or layout.version != world.layout_version:
+        version = (world.layout_version, world.scenery_version)
+        if layout is None or layout.world is not world or layout.version != version:
             properties = world.body_properties()
             for array in properties.values():
                 array.flags.writeable = False
-            layout = self._layout = SharedLayout(world, world.layout_version, world.body_names(),
-                                                 world.vehicle_names(), properties)
+            vehicle_names = world.vehicle_names()
+            scenery = layout.scenery if layout is not None and layout.world is world else None
+            if scenery is None or scenery.version != world.scenery_version:
+                triangles = world.playground_triangles
+                triangles.flags.writeable = False
+                scenery = Scenery(world.ground, triangles, world.scenery_version)
+            layout = self._layout = SharedLayout(
+                world, version, world.body_names(), vehicle_names, properties,
+                {name: world.vehicle(name)["wheels"] for name in vehicle_names}, scenery)
         return layout

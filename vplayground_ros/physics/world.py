@@ -68,6 +68,7 @@ class World(WorldQueries):
         # remove, edit, a vehicle's registration): readers of state() rows may keep whatever
         # depends only on those while it stays the same.
         self.layout_version = 0
+        self.scenery_version = 0  # bumped by every change of the playground (the ground is fixed)
         self._layout = None
         # Slots whose state may have changed since remove_escaped last checked them (frozen and
         # immovable bodies do not move).
@@ -144,6 +145,7 @@ class World(WorldQueries):
         as {index: {wheel keys}} (0-3: front-left, front-right, rear-left, rear-right). The
         chassis is edited as a body (edit_body)."""
         self._vehicles.edit(name, fields)
+        self.layout_version += 1  # its wheels
         self._wake(self._slots[name])
 
     def drive(self, name, speed, yaw_rate, timeout=DEFAULT_COMMAND_TIMEOUT):
@@ -307,6 +309,7 @@ class World(WorldQueries):
         self._centre = (0.5 * (playground.aabb_min.min(axis=0) + playground.aabb_max.max(axis=0))
                         if len(playground.triangles) else np.zeros(3))
         self.playground_spec = spec
+        self.scenery_version += 1
         self._unchecked[:] = True  # the world's bounds moved with its centre
         self._root = None  # refit around the mesh, which indexes it
         self.wake_all()
