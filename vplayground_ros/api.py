@@ -173,7 +173,7 @@ def handled(fn):
         except RequestError as error:
             return False, str(error)
         except specs.SpecError as error:
-            code = NAME_INVALID if error.path.endswith("name") and "invalid name" in error.problem else FAILED
+            code = NAME_INVALID if isinstance(error, specs.InvalidName) else FAILED
             return False, f"{code}: {error}"
         except KeyError as error:
             return False, f"{NOT_FOUND}: {error.args[0] if error.args else 'no such entity'}"

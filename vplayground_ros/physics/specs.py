@@ -54,6 +54,11 @@ class SpecError(ValueError):
         super().__init__(f"{path}: {problem}" if path else problem)
 
 
+class InvalidName(SpecError):
+    """A name that breaks NAME_PATTERN: its own type, so that callers answering with result
+    codes (the requests' NAME_INVALID) tell it from other bad values without reading the text."""
+
+
 def child(path, key):
     if isinstance(key, int):
         return f"{path}[{key}]"
@@ -119,7 +124,7 @@ def name(value, path):
     if not isinstance(value, str):
         raise SpecError(path, f"expected a string, got {type(value).__name__}")
     if not NAME_PATTERN.fullmatch(value):  # fullmatch: `$` alone lets a trailing newline in
-        raise SpecError(path, f"invalid name {value[:80]!r}: 1-64 characters of letters, digits, "
+        raise InvalidName(path, f"invalid name {value[:80]!r}: 1-64 characters of letters, digits, "
                               "'_', '-', '.', starting with a letter or '_'")
     return value
 
