@@ -23,6 +23,7 @@ import numpy as np
 import regex
 import yaml
 
+from .parameters import WorldSettings
 from .physics import specs
 from .physics.shapes import SHAPES
 from .resources import find_shared
@@ -202,11 +203,14 @@ class Requests:
     thread and hands the work to the simulation thread.
 
     `scene_directories` (paths) and `max_bodies` are plain attributes: the parameter layer may
-    replace them at any time, and each request reads them once."""
+    replace them at any time, and each request reads them once. `settings` owns the physics
+    settings (parameters.Parameters in the Runtime; without one, the World's own): ~/set_freezing
+    sets `freezing.enabled` through it, and a scene load or reset hands it the new settings."""
 
     def __init__(self, simulation, scene_label="", scene_directories=None, bag_directory=None,
-                 max_bodies=DEFAULT_MAX_BODIES):
+                 max_bodies=DEFAULT_MAX_BODIES, settings=None):
         self.sim = simulation
+        self.settings = settings if settings is not None else WorldSettings(simulation)
         self.scene_label = scene_label
         self.scene_directories = ([Path(d) for d in scene_directories] if scene_directories is not None
                                   else default_scene_directories(bag_directory))
@@ -438,7 +442,16 @@ class Requests:
         scope = specs.integer(scope, "reset.scope", 1, SCOPE_ALL)
         if scope != SCOPE_ALL and scope & ~(SCOPE_TIME | SCOPE_STATE | SCOPE_SPAWNED):
             raise RequestError(FAILED, f"reset scope {scope} is not a combination of 1 TIME, 2 STATE, 4 SPAWNED")
-        return self.sim.call(lambda world: self._reset(world, scope))
+        ok, message = self.sim.call(lambda world: self._reset(world, scope))
+        if ok and scope == SCOPE_ALL:
+            self._follow_scene_settings()
+        return ok, message
+
+    def _follow_scene_settings(self):
+        """The settings owner takes the loaded scene's settings, which the new World has."""
+        ok, reason = self.settings.load_settings(self.initial["settings"])
+        if not ok:
+            log.warning(f"parameters not updated from the scene: {reason}")
 
     def _reset(self, world, scope):
         if scope == SCOPE_ALL:
@@ -473,14 +486,10 @@ class Requests:
     @handled
     def set_freezing(self, enabled):
         enabled = specs.boolean(enabled, "set_freezing.data")
-        return self.sim.call(lambda world: self._set_freezing(world, enabled))
-
-    @staticmethod
-    def _set_freezing(world, enabled):
-        if world.settings["freezing"]["enabled"] == enabled:
+        if self.settings["freezing.enabled"] == enabled:
             return reply(ALREADY, f"freezing already {'on' if enabled else 'off'}")
-        world.update_settings({"freezing": {"enabled": enabled}})
-        return reply(OK, f"freezing {'on' if enabled else 'off'}")
+        ok, reason = self.settings.set({"freezing.enabled": enabled})
+        return reply(OK, f"freezing {'on' if enabled else 'off'}") if ok else reply(FAILED, reason)
 
     @handled
     def wake_all(self):
@@ -550,6 +559,7 @@ class Requests:
             self.sim.call(install)
         except TimeoutError as error:
             return UNDEFINED_FAILURE, f"{FAILED}: {error}"
+        self._follow_scene_settings()
         return MAP_SUCCESS, f"{OK}: loaded {target} ({len(world.body_names())} bodies)"
 
     @handled
