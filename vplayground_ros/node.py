@@ -61,6 +61,8 @@ def descriptor(spec):
         extra["integer_range"] = [IntegerRange(from_value=int(spec.low), to_value=int(spec.high), step=1)]
     elif spec.low is not None and spec.kind == "float":
         extra["floating_point_range"] = [FloatingPointRange(from_value=float(spec.low), to_value=float(spec.high))]
+    elif spec.low is not None:  # rclpy ranges only scalars: an array's range in words
+        extra["additional_constraints"] = f"each element in [{spec.low:g}, {spec.high:g}]"
     return ParameterDescriptor(description=spec.description, read_only=spec.read_only,
                                type=PARAMETER_TYPES[spec.kind].value, **extra)
 

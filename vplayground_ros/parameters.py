@@ -34,6 +34,13 @@ class ParameterSpec:
     read_only: bool = False
 
 
+def setting(name, default, description, kind):
+    """A physics parameter, its range the schema's (specs.SETTINGS_RANGES), so what the node
+    advertises is what the World accepts."""
+    low, high = specs.SETTINGS_RANGES[name]
+    return ParameterSpec(name, default, description, kind, low, high)
+
+
 def parameter_table(settings, options, scene_directories, max_bodies):
     """Every parameter; the physics ones default to the scene's `settings`."""
     s = settings
@@ -46,16 +53,15 @@ def parameter_table(settings, options, scene_directories, max_bodies):
         P("start_paused", bool(options.start_paused), "start paused (~/pause false to play)", "bool", read_only=True),
         P("duration", float(options.duration or 0.0),
           "stop after this much simulated time, s (0 = run until stopped)", "float", read_only=True),
-        P("gravity", [float(v) for v in s["gravity"]], "gravity vector, m/s^2, world frame", "float[3]",
-          -specs.MAX_COORDINATE, specs.MAX_COORDINATE),
-        P("steps_per_second", int(s["steps_per_second"]), "physics steps per simulated second", "int", 1, 10000),
-        P("resolve_iterations", int(s["resolve_iterations"]),
-          "collision passes per step (contact passes are twice this)", "int", 1, 100),
-        P("octree_depth", int(s["octree_depth"]), "depth of the broad-phase octree", "int", 1, 10),
+        setting("gravity", [float(v) for v in s["gravity"]], "gravity vector, m/s^2, world frame", "float[3]"),
+        setting("steps_per_second", int(s["steps_per_second"]), "physics steps per simulated second", "int"),
+        setting("resolve_iterations", int(s["resolve_iterations"]),
+                "collision passes per step (contact passes are twice this)", "int"),
+        setting("octree_depth", int(s["octree_depth"]), "depth of the broad-phase octree", "int"),
         P("freezing.enabled", bool(f["enabled"]), "freeze bodies at rest", "bool"),
-        P("freezing.time", float(f["time"]), "seconds below the thresholds before freezing", "float", 0, 1e6),
-        P("freezing.linear_speed", float(f["linear_speed"]), "freezing threshold, m/s", "float", 0, 1e6),
-        P("freezing.angular_speed", float(f["angular_speed"]), "freezing threshold, rad/s", "float", 0, 1e6),
+        setting("freezing.time", float(f["time"]), "seconds below the thresholds before freezing", "float"),
+        setting("freezing.linear_speed", float(f["linear_speed"]), "freezing threshold, m/s", "float"),
+        setting("freezing.angular_speed", float(f["angular_speed"]), "freezing threshold, rad/s", "float"),
         P("publish_rate", 30.0, "simulated Hz of poses, odometry, joint states, transforms", "float", 0.1, 1000),
         P("marker_rate", 30.0, "simulated Hz of marker topics (when subscribed)", "float", 0.1, 1000),
         P("static_republish_period", 5.0, "simulated s between re-sends of the scenery", "float", 0.1, 3600),
