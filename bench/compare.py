@@ -15,8 +15,9 @@ a shared machine do not inflate and which the ratios use, and wall time. A run t
 than --budget CPU seconds stops early and says so (MuJoCo's default Newton solver factors each
 contact island's Hessian, which on one island of hundreds of boxes costs ~0.2 s a step here).
 
-    python bench/compare.py            # the full suite (~10 minutes)
-    python bench/compare.py --quick    # a few seconds: small scenes, for the regression guard
+    python bench/compare.py                   # the full suite (~13 minutes on a shared 2-core VM)
+    python bench/compare.py --quick           # a few seconds: small scenes, for the regression guard
+    python bench/compare.py --scenes columns  # the pile and the 5,000 asleep only (~5 minutes)
 
 PyBullet, MuJoCo and matplotlib come from `pip install .[bench]`, the Rust peers from
 `bench/peers/build.sh` (make bench runs both); missing ones are skipped.
