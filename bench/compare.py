@@ -263,7 +263,7 @@ class Timing:
             return None
         # four decimals: a step of thousands of sleeping bodies in Rapier or Jolt is under 1 microsecond
         return {"median_ms": round(float(np.median(cpu)), 4), "p95_ms": round(float(np.percentile(cpu, 95)), 4),
-                "max_ms": round(float(cpu.max()), 2), "wall_median_ms": round(float(np.median(wall)), 3),
+                "max_ms": round(float(cpu.max()), 4), "wall_median_ms": round(float(np.median(wall)), 3),
                 "wall_max_ms": round(float(wall.max()), 2)}
 
     def row(self, scene, bodies, engine, complete, seconds, rtf_from=0):
