@@ -4,7 +4,8 @@ against brute force over sampled directions."""
 import numpy as np
 import pytest
 
-from vplayground_ros.physics.convex import MAX_CLIP_POINTS, allocate_scratch, shape_contact
+from vplayground_ros.physics.convex import (MAX_CLIP_POINTS, allocate_scratch, shape_contact,
+                                            triangle_weights)
 from vplayground_ros.physics.math3d import rpy_to_quat
 from vplayground_ros.physics.narrow_phase import (box_box, collide_ground, collide_pair,
                                                   collide_triangle, reduce_manifold)
@@ -250,16 +251,20 @@ SEAM = [[(0, 0, 0), (1, 0, 0), (0, 1, 0)], [(1, 0, 0), (1, 1, 0), (0, 1, 0)]]  #
 @pytest.mark.parametrize("kind, dims", [(SPHERE, (0.2, 0, 0)), (CAPSULE, (0.2, 0.2, 0)),
                                         (CYLINDER, (0.2, 0.2, 0))])
 def test_rolling_over_a_seam_keeps_the_face_normal(kind, dims):
-    """A body crossing the shared edge of two coplanar triangles, sunk a little: every contact
-    has the face normal (none points into the neighbour), and one is as deep as the sinking."""
+    """A body rolling across the shared edge of two coplanar triangles, sunk a little: every
+    contact has the face normal (none points into the neighbour), one is as deep as the
+    sinking, and all lie on the line it rolls about (its lowest), which stands still while it
+    rolls: a point ahead of it would be moving down, and the solver would bump the body up."""
     rpy = (np.pi / 2, 0, np.pi / 4) if kind != SPHERE else (0, 0, 0)  # lying along the seam
+    rolling = np.array([1, 1, 0]) / np.sqrt(2)
     for t in np.linspace(0.3, 0.7, 9):
-        centre = (t, t, 0.2 - 0.004)
+        centre = np.array([t, t, 0.2 - 0.004])
         deepest = []
         for tri in SEAM:
             points, depths, normal = triangle(body(kind, centre, rpy, dims), tri)
             if len(points):
                 assert normal == pytest.approx([0, 0, -1])
+                assert (points - centre) @ rolling == pytest.approx([0] * len(points), abs=1e-9)
                 deepest.append(depths.max())
         assert max(deepest) == pytest.approx(0.004, abs=1e-9)
 
@@ -272,6 +277,20 @@ def test_sphere_beside_a_step_gets_the_edge_normal():
     points, depths, normal = triangle(body(SPHERE, (-0.15, 0.3, 0.01), dims=(0.2, 0, 0)), top)
     assert normal == pytest.approx(np.array([0.15, 0, -0.01]) / np.hypot(0.15, 0.01))
     assert depths == pytest.approx([0.2 - np.hypot(0.15, 0.01)])
+
+
+def test_degenerate_simplices_divide_by_nothing():
+    """Coinciding corners (GJK met a capsule's end twice, lying on a triangle) have no edge
+    to project on: the corner itself is the closest point."""
+    assert triangle_weights((1.0, 2.0, 3.0), (1.0, 2.0, 3.0), (4.0, 5.0, 6.0)) == (1.0, 0.0, 0.0)
+    assert triangle_weights((1.0, 2.0, 3.0), (4.0, 5.0, 6.0), (1.0, 2.0, 3.0)) == (1.0, 0.0, 0.0)
+    assert triangle_weights((4.0, 5.0, 6.0), (1.0, 2.0, 3.0), (1.0, 2.0, 3.0))[0] == 0.0
+    capsule = (CAPSULE, (-7.90653532629521, -0.9987272268885038, 0.2021571252939717),
+               ((0.8929457611581519, 0.45016426242333185, -6.683222403269795e-05),
+                (-0.002926033117740451, 0.005655619987950611, -0.999979725940854),
+                (-0.4501547577887881, 0.892927853076277, 0.006367357435235754)), (0.2, 0.2, 0.0))
+    points, depths, normal = triangle(capsule, [(-8, -2, 0), (-7.5, -2, 0), (-7.5, 2, 0)])
+    assert normal == pytest.approx([0, 0, -1])
 
 
 def test_cylinder_standing_on_a_triangle():

@@ -150,10 +150,13 @@ def round_ground(p, r, dims, height, margin, out_point, out_depth):
 @njit(cache=True, nogil=True)
 def sphere_triangle(c, radius, tri, tri_normal, margin, out_point, out_depth):
     """Sphere and one-sided triangle: (point count, normal sphere -> triangle). None when the
-    centre is behind the plane. The triangle's closest point gives the contact; while the sphere
-    is sunk at most SEAM_TOLERANCE below the plane the normal is the face's even at an edge
-    (the depth is then the sphere's surface straight above that edge point), so a ball rolling
-    over the seam of two coplanar triangles is not pushed back by the edge it crosses."""
+    centre is behind the plane. The triangle's closest point gives the contact. While the
+    sphere is sunk at most SEAM_TOLERANCE below the plane the normal is the face's even when
+    that point is on an edge, so a ball rolling over the seam of two coplanar triangles is not
+    pushed back by the edge it crosses; the depth is then the sphere's surface straight above
+    the edge point, and the point is the sphere's lowest, which stands still while it rolls (at
+    the edge point, a rolling ball's surface moves down onto the next triangle, and the solver
+    would take that for an approach and bump the ball up)."""
     n = (tri_normal[0], tri_normal[1], tri_normal[2])
     front = dot(sub(c, tri[0]), n)
     if front <= 0.0:
@@ -168,11 +171,11 @@ def sphere_triangle(c, radius, tri, tri_normal, margin, out_point, out_depth):
         beside_sq = max(distance_sq - front * front, 0.0)  # the centre's offset along the plane
         if beside_sq >= radius * radius:
             return 0, (0.0, 0.0, 0.0)
-        above = front - np.sqrt(radius * radius - beside_sq)  # the sphere's surface over it
-        if above > margin:
+        depth = np.sqrt(radius * radius - beside_sq) - front
+        if depth < -margin:
             return 0, (0.0, 0.0, 0.0)
-        set_row(out_point, 0, add_scaled(closest, 0.5 * above, n))
-        out_depth[0] = -above
+        set_row(out_point, 0, add_scaled(c, 0.5 * depth - radius, n))
+        out_depth[0] = depth
         return 1, (-n[0], -n[1], -n[2])
     distance = np.sqrt(distance_sq)
     normal = scaled(1.0 / distance, gap) if distance > 1e-12 else (-n[0], -n[1], -n[2])

@@ -184,19 +184,20 @@ def triangle_weights(a, b, c):
     if d3 >= 0.0 and d4 <= d3:
         return 0.0, 1.0, 0.0
     vc = d1 * d4 - d3 * d2
+    # The edge regions' denominators vanish only when two corners coincide.
     if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
-        v = d1 / (d1 - d3)
+        v = d1 / (d1 - d3) if d1 > d3 else 0.0
         return 1.0 - v, v, 0.0
     d5, d6 = -dot(ab, c), -dot(ac, c)
     if d6 >= 0.0 and d5 <= d6:
         return 0.0, 0.0, 1.0
     vb = d5 * d2 - d1 * d6
     if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
-        w = d2 / (d2 - d6)
+        w = d2 / (d2 - d6) if d2 > d6 else 0.0
         return 1.0 - w, 0.0, w
     va = d3 * d6 - d5 * d4
     if va <= 0.0 and d4 - d3 >= 0.0 and d5 - d6 >= 0.0:
-        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        w = (d4 - d3) / ((d4 - d3) + (d5 - d6)) if d4 - d3 + d5 - d6 > 0.0 else 0.0
         return 0.0, 1.0 - w, w
     denom = va + vb + vc
     if denom > 1e-30:
@@ -293,6 +294,17 @@ def put_support(kind_a, pa, ra, da, kind_b, pb, rb, db, d, store, block, i):
 
 
 @njit(cache=True, nogil=True)
+def in_simplex(simplex, n, w):
+    """w is (to 1e-12 m) a point of the simplex already: rounding in v kept the test on v . w
+    from seeing it, and a repeated point would make the simplex degenerate."""
+    for k in range(n):
+        gap = sub(row(simplex, k), w)
+        if dot(gap, gap) <= 1e-24:
+            return True
+    return False
+
+
+@njit(cache=True, nogil=True)
 def gjk(kind_a, pa, ra, da, kind_b, pb, rb, db, limit, simplex):
     """Distance between the cores of A and B (van den Bergen's GJK). Returns (outcome, simplex
     size, closest point on A's core, closest point on B's core): BEYOND as soon as a direction
@@ -312,7 +324,7 @@ def gjk(kind_a, pa, ra, da, kind_b, pb, rb, db, limit, simplex):
         vw = dot(v, w)
         if vw > 0.0 and vw * vw > vv * limit * limit:
             return BEYOND, n, pa, pb  # w's plane separates them by more than limit
-        if vv - vw <= GJK_RELATIVE_TOLERANCE * vv:
+        if vv - vw <= GJK_RELATIVE_TOLERANCE * vv or in_simplex(simplex, n, w):
             break  # no support point is nearer than v: it is the closest point
         n, weights = closest_on_simplex(simplex, n + 1)
         if n == 4:
@@ -603,7 +615,7 @@ def clip_faces(face_a, count_a, face_b, count_b, normal, margin, sc, out_point, 
             return 0
         plane_normal = cross(cross(line_ref, normal), line_ref)
     along = dot(plane_normal, normal)
-    if along * along < 1e-12 * dot(plane_normal, plane_normal):
+    if along * along <= 1e-12 * dot(plane_normal, plane_normal):
         return 0  # the reference is edge-on to the normal
     kept = 0
     for k in range(count_inc):
@@ -726,20 +738,23 @@ def convex_triangle(kind, p, r, dims, tri, tri_normal, margin, sc, out_point, ou
     if count_a >= 2:
         count = clip_faces(sc.face_a, count_a, sc.face_b, 3, into, margin, sc, out_point,
                            out_depth)
-    # The shape's lowest point over the triangle, or else the deepest contact's points, measured
-    # along the face normal.
+    # The shape's lowest point when it is over the triangle and the clipped face missed it.
+    # Beside the triangle with nothing clipped, the shape reaches over an edge: the nearest
+    # approach gives the depth, measured along the face normal, and the lowest point is where
+    # it acts, since it stands still while the shape rolls (the surface near the edge moves down
+    # onto the next triangle, which the solver would take for an approach and bump the shape).
     inside = True
     for k in range(3):
         edge = sub(tri[(k + 1) % 3], tri[k])
         if dot(cross(edge, n), sub(lowest, tri[k])) > 0.0:
             inside = False
     if inside:
-        deepest_a, deepest_b = lowest, add_scaled(lowest, -face_gap, n)
+        depth = -face_gap
     elif count > 0:
         return count, into
     else:
-        deepest_a, deepest_b = point_a, point_b
-    depth = dot(sub(deepest_b, deepest_a), n)
+        depth = dot(sub(point_b, point_a), n)
     if depth < -margin:
         return count, into
-    return add_deepest(count, deepest_a, deepest_b, depth, out_point, out_depth), into
+    return add_deepest(count, lowest, add_scaled(lowest, depth, n), depth, out_point,
+                       out_depth), into
