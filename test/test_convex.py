@@ -395,3 +395,38 @@ def test_random_poses_agree_with_sampled_directions():
         assert np.all(directions @ point_b <= support_value(*b, directions) + 1e-9)
         checked["separated" if separated else "overlapping"] += 1
     assert min(checked.values()) > 50
+
+
+def test_degenerate_and_random_poses_never_fail():
+    """Coinciding centres, parallel and square axes, exact contact, thin shapes, triangles
+    through the body: every pair, triangle and ground job returns finite points within the
+    margin and a unit normal (a Numba ZeroDivisionError would stop the whole step)."""
+    rng = np.random.default_rng(7)
+    angles = np.array([0.0, np.pi / 2, np.pi, np.pi / 4, -np.pi / 2])
+
+    def choose(values, random):
+        return rng.choice(values, 3) if rng.random() < 0.5 else random
+
+    def dims(kind):
+        if kind == BOX:
+            return choose([0.01, 0.1, 0.5], rng.uniform(0.01, 1, 3))
+        radius = rng.choice([0.01, 0.1, 0.5])
+        half = 0.0 if kind == SPHERE else rng.choice([0.005, 0.1, 0.5])
+        return radius, half, 0.0
+
+    for trial in range(3000):
+        ka, kb = KINDS[trial % 4], KINDS[(trial // 4) % 4]
+        a = body(ka, choose([0.0, 0.5, -0.5], rng.uniform(-1, 1, 3)),
+                 choose(angles, rng.uniform(-np.pi, np.pi, 3)), dims(ka))
+        b = body(kb, a[1] if trial % 7 == 0 else choose([0.0, 0.5, -0.5], rng.uniform(-1, 1, 3)),
+                 a[2] if trial % 5 == 0 else choose(angles, rng.uniform(-np.pi, np.pi, 3)), dims(kb))
+        margin = float(rng.choice([0.0, 0.02, 0.5]))
+        tri = choose([-1.0, 0.0, 0.5], rng.uniform(-1, 1, 3)), rng.uniform(-1, 1, 3), \
+            rng.uniform(-1, 1, 3)
+        jobs = [pair(a, b, margin), ground(a, float(rng.uniform(-1, 1)), margin)]
+        if np.linalg.norm(np.cross(tri[1] - tri[0], tri[2] - tri[0])) > 1e-3:
+            jobs.append(triangle(a, tri, margin))
+        for points, depths, normal in jobs:
+            if len(points):
+                assert np.linalg.norm(normal) == pytest.approx(1.0)
+                assert np.all(depths >= -margin - 1e-12)
