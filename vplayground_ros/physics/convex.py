@@ -20,7 +20,7 @@ from numba import njit
 
 from .constants import SEAM_TOLERANCE
 from .math3d import cross
-from .shapes import MAX_FACE_POINTS, core_radius, core_support, supporting_face
+from .shapes import BOX, CYLINDER, MAX_FACE_POINTS, core_radius, core_support, supporting_face
 
 # Not a body shape: a playground triangle in the convex path. Its "rotation" maps the unit
 # triangle (0, e_x, e_y) onto it: columns edge v1 - v0, edge v2 - v0, face normal.
@@ -32,11 +32,19 @@ MAX_CLIP_POINTS = 2 * MAX_FACE_POINTS + 1
 
 GJK_MAX_ITERATIONS = 64
 # GJK stops when a new support point brings the squared distance closer by less than this
-# fraction of it: the distance is then exact to about this fraction of itself, squared-rooted.
-GJK_RELATIVE_TOLERANCE = 1e-12
+# fraction of it: the distance is then exact to half this fraction of itself. Tighter, the
+# last simplices grow flat enough for rounding to spoil them.
+GJK_RELATIVE_TOLERANCE = 1e-10
 # Cores closer than this count as overlapping: their closest points no longer give a reliable
 # direction, and EPA's does.
 GJK_OVERLAP_DISTANCE = 1e-7  # m
+
+# Boxes and cylinders overlapping by less than about twice this are measured on copies shrunk
+# by it (Jolt's convex radius): GJK between the shrunk shapes gives the normal (exact between
+# faces) in a few iterations, where EPA needs dozens to follow a cylinder's curved side, and
+# resting contacts overlap a few millimetres (LINEAR_SLOP). It is also how far the deepest
+# point can sit beside a true rim or corner: small against the shapes.
+SHRINK = 0.01  # m, at most a quarter of the shape's smallest half dimension
 
 EPA_MAX_VERTICES = 64
 EPA_MAX_FACES = 2 * EPA_MAX_VERTICES  # a closed triangulated polytope has 2 V - 4 faces
@@ -314,33 +322,33 @@ def gjk(kind_a, pa, ra, da, kind_b, pb, rb, db, limit, simplex):
     if dot(d, d) < 1e-24:
         d = (1.0, 0.0, 0.0)
     v = put_support(kind_a, pa, ra, da, kind_b, pb, rb, db, d, simplex, 4, 0)
-    n, weights = 1, (1.0, 0.0, 0.0, 0.0)
+    point_a, point_b = row(simplex, 4), row(simplex, 8)  # v's points on A and B
+    n = 1
     for _ in range(GJK_MAX_ITERATIONS):
         vv = dot(v, v)
         if vv < GJK_OVERLAP_DISTANCE * GJK_OVERLAP_DISTANCE:
-            return OVERLAPPING, n, pa, pb
+            return OVERLAPPING, n, point_a, point_b
         w = put_support(kind_a, pa, ra, da, kind_b, pb, rb, db, (-v[0], -v[1], -v[2]),
                         simplex, 4, n)
         vw = dot(v, w)
         if vw > 0.0 and vw * vw > vv * limit * limit:
-            return BEYOND, n, pa, pb  # w's plane separates them by more than limit
+            return BEYOND, n, point_a, point_b  # w's plane separates them by more than limit
         if vv - vw <= GJK_RELATIVE_TOLERANCE * vv or in_simplex(simplex, n, w):
             break  # no support point is nearer than v: it is the closest point
         n, weights = closest_on_simplex(simplex, n + 1)
         if n == 4:
-            return OVERLAPPING, n, pa, pb
-        closer = (0.0, 0.0, 0.0)
+            return OVERLAPPING, n, point_a, point_b
+        closer, closer_a, closer_b = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
         for k in range(n):
             closer = add_scaled(closer, weights[k], row(simplex, k))
+            closer_a = add_scaled(closer_a, weights[k], row(simplex, 4 + k))
+            closer_b = add_scaled(closer_b, weights[k], row(simplex, 8 + k))
         if dot(closer, closer) >= vv:
-            break  # rounding stalls progress: v is as close as it gets
-        v = closer
-    point_a, point_b = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
-    for k in range(n):
-        point_a = add_scaled(point_a, weights[k], row(simplex, 4 + k))
-        point_b = add_scaled(point_b, weights[k], row(simplex, 8 + k))
-    gap = sub(point_a, point_b)
-    if dot(gap, gap) < GJK_OVERLAP_DISTANCE * GJK_OVERLAP_DISTANCE:
+            # No progress: w was (to rounding) in v's plane and the nearly flat simplex it
+            # made lost the closest point. v and its points stand.
+            break
+        v, point_a, point_b = closer, closer_a, closer_b
+    if dot(v, v) < GJK_OVERLAP_DISTANCE * GJK_OVERLAP_DISTANCE:
         return OVERLAPPING, n, point_a, point_b
     return SEPARATED, n, point_a, point_b
 
@@ -484,10 +492,55 @@ def epa(kind_a, pa, ra, da, kind_b, pb, rb, db, simplex, n, sc):
 
 
 @njit(cache=True, nogil=True)
+def shrink_of(kind, dims):
+    """How far the shallow-overlap test shrinks a shape without a radius (see SHRINK)."""
+    if kind == BOX:
+        return min(SHRINK, 0.25 * min(dims[0], dims[1], dims[2]))
+    if kind == CYLINDER:
+        return min(SHRINK, 0.25 * min(dims[0], dims[1]))
+    return 0.0
+
+
+@njit(cache=True, nogil=True)
+def shrunk(kind, dims, by):
+    """The dimensions of the shape shrunk by `by` all round (a box's or cylinder's)."""
+    if kind == BOX:
+        return (dims[0] - by, dims[1] - by, dims[2] - by)
+    if kind == CYLINDER:
+        return (dims[0] - by, dims[1] - by, dims[2])
+    return (dims[0], dims[1], dims[2])
+
+
+@njit(cache=True, nogil=True)
+def shallow_contact(kind_a, pa, ra, da, kind_b, pb, rb, db, sc):
+    """The contact of overlapping A and B from the distance of their shrunk versions (see
+    SHRINK): (found, normal A -> B, point on A, point on B, depth), found when the shrunk
+    shapes are apart. The depth is the true shapes' overlap along the normal, the points are
+    on their supporting planes, beside the shrunk shapes' closest points."""
+    shrink_a, shrink_b = shrink_of(kind_a, da), shrink_of(kind_b, db)
+    nothing = (0.0, 0.0, 0.0)
+    if shrink_a + shrink_b == 0.0:
+        return False, nothing, nothing, nothing, 0.0
+    outcome, n, core_a, core_b = gjk(kind_a, pa, ra, shrunk(kind_a, da, shrink_a), kind_b, pb, rb,
+                                     shrunk(kind_b, db, shrink_b), np.inf, sc.simplex)
+    if outcome != SEPARATED:
+        return False, nothing, nothing, nothing, 0.0
+    gap = sub(core_b, core_a)
+    normal = scaled(1.0 / np.sqrt(dot(gap, gap)), gap)
+    reach_a = dot(surface_point(kind_a, pa, ra, da, normal), normal)
+    reach_b = dot(surface_point(kind_b, pb, rb, db, (-normal[0], -normal[1], -normal[2])), normal)
+    middle = scaled(0.5, add_scaled(core_a, 1.0, core_b))
+    along = dot(middle, normal)
+    return (True, normal, add_scaled(middle, reach_a - along, normal),
+            add_scaled(middle, reach_b - along, normal), reach_a - reach_b)
+
+
+@njit(cache=True, nogil=True)
 def shape_contact(kind_a, pa, ra, da, kind_b, pb, rb, db, margin, sc):
     """The deepest contact of A and B: (found, normal A -> B, point on A's surface, point on
     B's surface, depth: positive overlapping, negative apart); not found when they are more
-    than `margin` apart."""
+    than `margin` apart. Apart, GJK's closest points give it exactly; overlapping a little, the
+    shrunk shapes' (shallow_contact); deeper, EPA's."""
     radius_a, radius_b = radius_of(kind_a, da), radius_of(kind_b, db)
     outcome, n, core_a, core_b = gjk(kind_a, pa, ra, da, kind_b, pb, rb, db,
                                      radius_a + radius_b + margin, sc.simplex)
@@ -500,6 +553,9 @@ def shape_contact(kind_a, pa, ra, da, kind_b, pb, rb, db, margin, sc):
         normal = scaled(1.0 / distance, gap)
         depth = radius_a + radius_b - distance
     else:
+        shallow = shallow_contact(kind_a, pa, ra, da, kind_b, pb, rb, db, sc)
+        if shallow[0]:
+            return shallow
         found, normal, depth, core_a, core_b = epa(kind_a, pa, ra, da, kind_b, pb, rb, db,
                                                    sc.simplex, n, sc)
         if not found:
