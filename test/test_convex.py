@@ -443,8 +443,10 @@ def test_degenerate_and_random_poses_never_fail():
         ka, kb = KINDS[trial % 4], KINDS[(trial // 4) % 4]
         a = body(ka, choose([0.0, 0.5, -0.5], rng.uniform(-1, 1, 3)),
                  choose(angles, rng.uniform(-np.pi, np.pi, 3)), dims(ka))
-        b = body(kb, a[1] if trial % 7 == 0 else choose([0.0, 0.5, -0.5], rng.uniform(-1, 1, 3)),
-                 a[2] if trial % 5 == 0 else choose(angles, rng.uniform(-np.pi, np.pi, 3)), dims(kb))
+        position = choose([0.0, 0.5, -0.5], rng.uniform(-1, 1, 3))
+        rpy = choose(angles, rng.uniform(-np.pi, np.pi, 3))
+        b = body(kb, a[1] if trial % 7 == 0 else position, a[2] if trial % 5 == 0 else rpy,
+                 dims(kb))
         margin = float(rng.choice([0.0, 0.02, 0.5]))
         tri = choose([-1.0, 0.0, 0.5], rng.uniform(-1, 1, 3)), rng.uniform(-1, 1, 3), \
             rng.uniform(-1, 1, 3)

@@ -2,8 +2,9 @@
 playground triangle, a shape and the ground, through their support mappings alone.
 
 GJK finds the distance between the two shapes' cores (a sphere's centre, a capsule's segment,
-the whole box or cylinder); separated cores give the normal from their closest points, and
-overlapping ones go to EPA for the normal and depth of least penetration. The core radii then
+the whole box or cylinder); separated cores give the normal from their closest points. Cores
+overlapping by little (resting boxes and cylinders) are measured again shrunk (see SHRINK),
+and deeper ones go to EPA for the normal and depth of least penetration. The core radii then
 put the points on the surfaces. The manifold is Jolt's: the supporting faces of both shapes
 along the normal, the incident one clipped against the side planes of the reference one, each
 point's depth measured along the normal, those within the margin kept; and the exact deepest
@@ -36,7 +37,7 @@ GJK_MAX_ITERATIONS = 64
 # last simplices grow flat enough for rounding to spoil them.
 GJK_RELATIVE_TOLERANCE = 1e-10
 # Cores closer than this count as overlapping: their closest points no longer give a reliable
-# direction, and EPA's does.
+# direction, and the shrunk shapes' or EPA's does.
 GJK_OVERLAP_DISTANCE = 1e-7  # m
 
 # Boxes and cylinders overlapping by less than about twice this are measured on copies shrunk
@@ -131,7 +132,8 @@ def to_world(p, r, x):
 def triangle_frame(tri, normal):
     """(origin, rotation) of a triangle as a TRIANGLE shape (see TRIANGLE)."""
     v0, v1, v2 = tri[0], tri[1], tri[2]
-    return v0, ((v1[0] - v0[0], v2[0] - v0[0], normal[0]), (v1[1] - v0[1], v2[1] - v0[1], normal[1]),
+    return v0, ((v1[0] - v0[0], v2[0] - v0[0], normal[0]),
+                (v1[1] - v0[1], v2[1] - v0[1], normal[1]),
                 (v1[2] - v0[2], v2[2] - v0[2], normal[2]))
 
 

@@ -19,6 +19,7 @@ from .contact import GROUND, PLAYGROUND
 from .convex import (MAX_CLIP_POINTS, allocate_scratch, clip_polygon, convex_ground,
                      convex_pair, convex_triangle)
 from .shapes import BOX, CAPSULE, SPHERE
+
 FACE_AXIS_TOLERANCE = 1e-3  # B's face must beat A's by this to become the reference (no flip-flop)
 
 
@@ -467,9 +468,10 @@ def collide(contacts, bodies, broad, playground, ground_enabled, ground_height, 
             key_b = b
             margin = CONTACT_MARGIN + reach[a] + reach[b]
             if shape[a] == BOX and shape[b] == BOX:
-                n, normal = box_box(vector3(position, a), matrix3(rotation, a), vector3(dimensions, a),
-                                    vector3(position, b), matrix3(rotation, b), vector3(dimensions, b),
-                                    margin, poly_a, poly_b, scratch_point, scratch_depth)
+                n, normal = box_box(vector3(position, a), matrix3(rotation, a),
+                                    vector3(dimensions, a), vector3(position, b),
+                                    matrix3(rotation, b), vector3(dimensions, b), margin, poly_a,
+                                    poly_b, scratch_point, scratch_depth)
             else:
                 n, normal = collide_pair(shape[a], vector3(position, a), matrix3(rotation, a),
                                          vector3(dimensions, a), shape[b], vector3(position, b),
@@ -486,7 +488,8 @@ def collide(contacts, bodies, broad, playground, ground_enabled, ground_height, 
                                          poly_a, poly_b, scratch_point, scratch_depth)
             else:
                 n, normal = collide_triangle(shape[a], vector3(position, a), matrix3(rotation, a),
-                                             vector3(dimensions, a), matrix3(playground.triangles, t),
+                                             vector3(dimensions, a),
+                                             matrix3(playground.triangles, t),
                                              vector3(playground.normals, t),
                                              CONTACT_MARGIN + reach[a], scratch, scratch_point,
                                              scratch_depth)
@@ -497,7 +500,8 @@ def collide(contacts, bodies, broad, playground, ground_enabled, ground_height, 
             b, key_b, normal = GROUND, GROUND, down
             if shape[a] == BOX:
                 n = box_ground(vector3(position, a), matrix3(rotation, a), vector3(dimensions, a),
-                               ground_height, CONTACT_MARGIN + reach[a], scratch_point, scratch_depth)
+                               ground_height, CONTACT_MARGIN + reach[a], scratch_point,
+                               scratch_depth)
             else:
                 n = collide_ground(shape[a], vector3(position, a), matrix3(rotation, a),
                                    vector3(dimensions, a), ground_height, CONTACT_MARGIN + reach[a],
