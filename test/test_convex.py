@@ -6,11 +6,10 @@ import pytest
 
 from vplayground_ros.physics.convex import (MAX_CLIP_POINTS, SHRINK, allocate_scratch,
                                             shape_contact, triangle_weights)
-from vplayground_ros.physics.math3d import rpy_to_quat
+from vplayground_ros.physics.math3d import quat_to_matrix, rpy_to_quat
 from vplayground_ros.physics.narrow_phase import (box_box, collide_ground, collide_pair,
                                                   collide_triangle, reduce_manifold)
 from vplayground_ros.physics.shapes import BOX, CAPSULE, CYLINDER, SPHERE
-from vplayground_ros.physics.world import quaternions_to_matrices
 
 MARGIN = 0.02
 SCRATCH = allocate_scratch()
@@ -19,7 +18,8 @@ KINDS = (BOX, SPHERE, CAPSULE, CYLINDER)
 
 
 def rotation(rpy=(0.0, 0.0, 0.0)):
-    m = quaternions_to_matrices(np.array([rpy_to_quat(rpy)]))[0]
+    m = np.empty((3, 3))
+    quat_to_matrix(rpy_to_quat(rpy), m)
     return tuple(tuple(float(x) for x in r) for r in m)
 
 
