@@ -70,11 +70,6 @@ def marker(ns, marker_id, kind, pose=IDENTITY, scale=(1.0, 1.0, 1.0), rgba=(0.0,
 DELETE_ALL = marker("", 0, 0, action=DELETEALL)
 
 
-def pose_array(snapshot, frame):
-    """~/bodies/poses, in the order of ~/get_entities."""
-    return cdr.pose_array(snapshot.time, frame, snapshot.state["positions"], snapshot.state["quaternions"])
-
-
 # Body categories (marker namespaces), and their colours with frozen grey last.
 CATEGORIES = np.array(["box", "immovable", "vehicle"])
 BOX, IMMOVABLE, VEHICLE, FROZEN = range(4)
@@ -90,19 +85,49 @@ def categories(snapshot):
     return kinds
 
 
-def body_markers(snapshot, frame, ids, encoder, car=None):
-    """~/bodies/markers: DELETEALL, then one CUBE per body (ns = category, ids (N,) stable per
-    name, frozen grey), but for the driven `car`: ~/car/markers draws it with its wheels, and
-    two markers at one place would show whichever colour the viewer draws last."""
-    s = snapshot.state
-    kinds = categories(snapshot)
-    colours = CATEGORY_COLOURS[np.where(s["frozen"], FROZEN, kinds)]
-    poses = np.concatenate([s["positions"], s["quaternions"]], axis=1)
-    sizes = s["sizes"]
-    if car is not None:
-        drawn = np.arange(len(kinds)) != snapshot.names.index(car)
-        kinds, ids, colours, poses, sizes = kinds[drawn], ids[drawn], colours[drawn], poses[drawn], sizes[drawn]
-    return encoder.encode(snapshot.time, frame, CATEGORIES[kinds], ids, poses, sizes, colours)
+class BodyMarkers:
+    """~/bodies/markers: DELETEALL, then one CUBE per body (ns = category, ids stable per name,
+    frozen grey), but for the driven car: ~/car/markers draws it with its wheels, and two
+    markers at one place would show whichever colour the viewer draws last.
+
+    Names, categories, ids and sizes change only with the layout (spawn, remove, edit): what is
+    made of them is kept, read-only, until it does; the colours until the frozen flags change.
+    A settled world's snapshots share their arrays (Simulation), so then only the stamps are
+    written (cdr.TemplateEncoder)."""
+
+    def __init__(self):
+        self.encoder = cdr.BodyMarkerEncoder()
+        self._layout = None   # (key, drawn rows or None, kinds, namespaces, ids (N, 1), sizes)
+        self._colours = None  # (frozen flags, the layout entry, colours)
+
+    def layout(self, snapshot, ids, car):
+        s = snapshot.state
+        key = (snapshot.names, s["immovable"], s["sizes"], ids, tuple(snapshot.vehicles), car)
+        cached = self._layout
+        if cached is not None and all(a is b for a, b in zip(key[:4], cached[0][:4])) and key[4:] == cached[0][4:]:
+            return cached
+        kinds = categories(snapshot)
+        drawn = None if car is None else np.arange(len(kinds)) != snapshot.names.index(car)
+        namespaces, ids, sizes = CATEGORIES[kinds], np.asarray(ids, "<i4").reshape(-1, 1), s["sizes"]
+        if drawn is not None:
+            kinds, namespaces, ids, sizes = kinds[drawn], namespaces[drawn], ids[drawn], sizes[drawn]
+        for array in (kinds, namespaces, ids, sizes):
+            array.flags.writeable = False
+        self._layout = (key, drawn, kinds, namespaces, ids, sizes)
+        return self._layout
+
+    def encode(self, snapshot, frame, ids, poses, car=None):
+        """ids (N,) the bodies' marker ids, poses (N, 7) xyz + xyzw of every body."""
+        layout = self.layout(snapshot, ids, car)
+        _, drawn, kinds, namespaces, ids, sizes = layout
+        frozen = snapshot.state["frozen"]
+        cached = self._colours
+        if cached is None or cached[0] is not frozen or cached[1] is not layout:
+            colours = CATEGORY_COLOURS[np.where(frozen if drawn is None else frozen[drawn], FROZEN, kinds)]
+            colours.flags.writeable = False
+            self._colours = cached = (frozen, layout, colours)
+        return self.encoder.encode(snapshot.time, frame, namespaces, ids, poses if drawn is None else poses[drawn],
+                                   sizes, cached[2])
 
 
 def marker_array(seconds, frame, markers):
