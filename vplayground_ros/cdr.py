@@ -316,24 +316,41 @@ def pose_array_of(seconds, frame, block):
     return b"".join((ENCAPSULATION, w.data, np.ascontiguousarray(block, "<f8")))
 
 
+_CLOUD_HEADS = {}  # (frame, fields, point step) -> the PointCloud2 up to point_step, zero stamp and width
+
+
 def point_cloud(seconds, frame, fields, rows):
     """sensor_msgs/PointCloud2 of one row: fields [(name, offset, datatype, count)] and a numpy
-    structured array whose dtype is that layout."""
-    w = Writer()
-    w.header(split_stamp(seconds), frame)
-    w.u32(1)  # height
-    w.u32(len(rows))  # width
-    w.u32(len(fields))
-    for name, offset, datatype, count in fields:
-        w.string(name)
-        w.u32(offset)
-        w.u8(datatype)
-        w.u32(count)
-    w.u8(0)  # is_bigendian
-    w.u32(rows.dtype.itemsize)  # point_step
-    w.u32(rows.dtype.itemsize * len(rows))  # row_step
+    structured array whose dtype is that layout. What precedes the points is written once per
+    frame and layout, then the stamp and the counts are patched in."""
+    key = (frame, tuple(map(tuple, fields)), rows.dtype.itemsize)
+    head = _CLOUD_HEADS.get(key)
+    if head is None:
+        w = Writer()
+        w.header((0, 0), frame)
+        w.u32(1)  # height
+        w.align(4)
+        width_at = w.position
+        w.u32(0)  # width
+        w.u32(len(fields))
+        for name, offset, datatype, count in fields:
+            w.string(name)
+            w.u32(offset)
+            w.u8(datatype)
+            w.u32(count)
+        w.u8(0)  # is_bigendian
+        w.u32(rows.dtype.itemsize)  # point_step
+        if len(_CLOUD_HEADS) > 64:  # frames come from parameters: never an unbounded table
+            _CLOUD_HEADS.clear()
+        head = _CLOUD_HEADS[key] = (bytes(w.data), width_at)
+    data, width_at = head
     payload = rows.tobytes()
-    w.u32(len(payload))
-    w.data += payload
-    w.u8(1)  # is_dense
-    return ENCAPSULATION + bytes(w.data)
+    out = bytearray(ENCAPSULATION)
+    out += data
+    struct.pack_into("<iI", out, 4, *split_stamp(seconds))
+    struct.pack_into("<I", out, 4 + width_at, len(rows))
+    out += b"\x00" * (-len(data) % 4)  # row_step, data's length: uint32s
+    out += struct.pack("<II", rows.dtype.itemsize * len(rows), len(payload))
+    out += payload
+    out.append(1)  # is_dense
+    return bytes(out)
