@@ -284,6 +284,33 @@ def test_renaming_keeps_names_valid_and_stays_linear(requests):
     assert ok and message.endswith("a_5001") and time.perf_counter() - started < 5.0
 
 
+def test_a_resting_world_shares_its_motion_state_until_a_command(requests):
+    """With every body frozen a batch moves nothing: its snapshot shares the last one's motion
+    arrays (read-only, no copy per batch). A command shows in the next snapshot, even one that
+    moves a body and leaves it frozen, and a moving body ends the sharing."""
+    sim = requests.sim
+    names = sim.world.body_names()
+    sim.call(lambda world: [world.edit_body(name, frozen=True) for name in names])
+
+    def batch():
+        sim.world.step(4)
+        sim._publish()
+        return sim.snapshot.state
+
+    first, second = batch(), batch()
+    assert second["positions"] is first["positions"] and second["frozen"] is first["frozen"]
+    with pytest.raises(ValueError):
+        second["positions"][0, 0] = 1.0
+    sim.call(lambda world: world.edit_body(names[0], position=[4.0, 5.0, 6.0], frozen=True))
+    moved = batch()
+    assert moved["positions"] is not first["positions"]
+    assert moved["positions"][0].tolist() == [4.0, 5.0, 6.0] and moved["frozen"].all()
+    assert batch()["positions"] is moved["positions"]
+    sim.call(lambda world: world.edit_body(names[0], frozen=False))
+    falling = batch()
+    assert batch()["positions"][0, 2] < falling["positions"][0, 2]
+
+
 def test_snapshots_follow_every_change_of_the_bodies(requests, tmp_path):
     """Names, vehicles and sizes, masses and flags are taken once per layout, not every batch:
     each spawn, edit, removal (slots reused out of order) and scene load shows in the snapshot

@@ -132,8 +132,11 @@ class Broadcaster:
         self.marker_ids = {}
         self._next_marker_id = 0
         self._ids_of = ([], np.zeros(0, np.int32))  # the last names and their marker ids
-        self.marker_encoder = cdr.BodyMarkerEncoder()
-        self.tf_encoder = cdr.TransformEncoder()
+        self.body_markers = messages.BodyMarkers()
+        self.tf_encoder = cdr.TransformEncoder()         # /tf, on the publisher thread
+        self.tf_static_encoder = cdr.TransformEncoder()  # /tf_static, on the simulation thread
+        self._pose_block = None  # (positions, quaternions, their (N, 7) rows) last made
+        self._tf_frames = None   # (names, car frames, parents, children) last made
         self._last_clock = -math.inf
         self._last_state = None
         self._latched = {}  # key -> (data, seconds) last sent
@@ -282,7 +285,7 @@ class Broadcaster:
         if frames_changed:
             world_frame, odom_frame, _ = self.frames
             frames = [(world_frame, odom_frame, messages.IDENTITY), *self._sensor_frames]
-            self.send("tf_static", self.tf_encoder.encode(seconds, [p for p, _, _ in frames], [c for _, c, _ in frames],
+            self.send("tf_static", self.tf_static_encoder.encode(seconds, [p for p, _, _ in frames], [c for _, c, _ in frames],
                                                           [pose for _, _, pose in frames]), seconds)
 
     def _hand_over(self, item):
@@ -361,7 +364,7 @@ class Broadcaster:
 
     def publish_state(self, snap):
         world_frame, odom_frame, base_frame = self.frames
-        self.send("poses", messages.pose_array(snap, world_frame), snap.time)
+        self.send("poses", cdr.pose_array_of(snap.time, world_frame, self.pose_block(snap)), snap.time)
         car = self.car(snap)
         wheels = snap.wheels.get(car)
         car_frames = []
@@ -383,11 +386,35 @@ class Broadcaster:
                     snap.time, world_frame, name, [*s["positions"][row], *s["quaternions"][row]]), snap.time)
         if self.wanted("tf"):
             # world -> every body (child = its name), odom -> base_link, base_link -> wheels.
-            parents = [world_frame] * len(snap.names) + [p for p, _, _ in car_frames]
-            children = list(snap.names) + [c for _, c, _ in car_frames]
-            poses = np.concatenate([np.concatenate([s["positions"], s["quaternions"]], axis=1).reshape(-1, 7),
-                                    np.asarray([p for _, _, p in car_frames], float).reshape(-1, 7)])
+            parents, children = self.tf_frames(snap.names, car_frames)
+            poses = self.pose_block(snap)
+            if car_frames:
+                poses = np.concatenate([poses, np.asarray([p for _, _, p in car_frames], float).reshape(-1, 7)])
             self.send("tf", self.tf_encoder.encode(snap.time, parents, children, poses), snap.time)
+
+    def pose_block(self, snap):
+        """(N, 7) float64 rows of xyz + xyzw, read-only, made once per motion state: for
+        ~/bodies/poses, the markers and /tf alike, and for as long as a settled world's
+        snapshots share their arrays."""
+        positions, quaternions = snap.state["positions"], snap.state["quaternions"]
+        cached = self._pose_block
+        if cached is None or cached[0] is not positions or cached[1] is not quaternions:
+            block = np.concatenate([positions, quaternions], axis=1).astype("<f8", copy=False)
+            block.flags.writeable = False
+            self._pose_block = cached = (positions, quaternions, block)
+        return cached[2]
+
+    def tf_frames(self, names, car_frames):
+        """/tf's parents and children (tuples): world -> each body, then the car's frames; made
+        again only when the names (a list shared by the snapshots of one layout) or the car's
+        frames change."""
+        car = tuple((parent, child) for parent, child, _ in car_frames)
+        cached = self._tf_frames
+        if cached is None or cached[0] is not names or cached[1] != car:
+            parents = (self.frames[0],) * len(names) + tuple(parent for parent, _ in car)
+            children = tuple(names) + tuple(child for _, child in car)
+            self._tf_frames = cached = (names, car, parents, children)
+        return cached[2], cached[3]
 
     def marker_id(self, name):
         """A body's marker id, stable while it exists."""
@@ -414,8 +441,8 @@ class Broadcaster:
         world_frame = self.frames[0]
         car = self.car(snap)
         if self.wanted("body_markers"):
-            self.send("body_markers", messages.body_markers(snap, world_frame, self.marker_ids_of(snap.names),
-                                                            self.marker_encoder, car), snap.time)
+            self.send("body_markers", self.body_markers.encode(snap, world_frame, self.marker_ids_of(snap.names),
+                                                               self.pose_block(snap), car), snap.time)
         if car is not None and self.wanted("car_markers"):
             wheels = snap.wheels.get(car)
             if wheels is not None:

@@ -7,6 +7,7 @@ The odom frame is where the car started: odometry here is perfect (a simulator k
 world -> odom is fixed at the car's pose when the scene was loaded.
 """
 import math
+from collections import namedtuple
 
 import numpy as np
 
@@ -72,11 +73,6 @@ def marker(ns, marker_id, kind, pose=IDENTITY, scale=(1.0, 1.0, 1.0), rgba=(0.0,
 DELETE_ALL = marker("", 0, 0, action=DELETEALL)
 
 
-def pose_array(snapshot, frame):
-    """~/bodies/poses, in the order of ~/get_entities."""
-    return cdr.pose_array(snapshot.time, frame, snapshot.state["positions"], snapshot.state["quaternions"])
-
-
 # Body categories (marker namespaces), and their colours with frozen grey last.
 CATEGORIES = np.array(["box", "immovable", "vehicle"])
 BOX, IMMOVABLE, VEHICLE, FROZEN = range(4)
@@ -97,45 +93,91 @@ def categories(snapshot):
 SHAPE_MARKER_TYPES = np.array([CUBE, SPHERE, CAPSULE_MARKER, CYLINDER], np.int32)
 CAPSULE_END_ID_BITS = (1 << 29, 1 << 30)
 
+# What drawing bodies' shapes takes beyond their poses (it changes only with the layout): the
+# body row of each marker, its type, id and scale, and the capsules (rows, half lengths).
+ShapeMarkerLayout = namedtuple("ShapeMarkerLayout", "rows types ids scales capsules capsule_half")
 
-def shape_markers(shape_codes, dimensions, poses, ids):
-    """The markers that draw bodies: (body row of each marker, type, id, pose (M, 7), scale
-    (M, 3)), vectorised (no Python loop per body: this runs at marker_rate over thousands)."""
+
+def shape_marker_layout(shape_codes, dimensions, ids):
+    """Vectorised (no Python loop per body: the node draws thousands at marker_rate)."""
     r, half = dimensions[:, 0], dimensions[:, 1]
     scales = np.where((shape_codes == shapes.BOX)[:, None], 2.0 * dimensions,
                       np.stack([2.0 * r, 2.0 * r, np.where(shape_codes == shapes.SPHERE, 2.0 * r, 2.0 * half)], 1))
     rows = np.arange(len(shape_codes))
-    types, marker_ids = SHAPE_MARKER_TYPES[shape_codes], np.asarray(ids, np.int32)
+    types, marker_ids = SHAPE_MARKER_TYPES[shape_codes], np.asarray(ids, np.int32).reshape(-1)
     capsules = np.nonzero(shape_codes == shapes.CAPSULE)[0]
-    if len(capsules) == 0:
-        return rows, types, marker_ids, poses, scales
-    axis = quaternions_to_matrices(poses[capsules, 3:])[:, :, 2] * half[capsules, None]
-    ends = [np.concatenate([poses[capsules, :3] + sign * axis, poses[capsules, 3:]], axis=1) for sign in (1.0, -1.0)]
     diameter = np.repeat(2.0 * r[capsules, None], 3, axis=1)
-    return (np.concatenate([rows, capsules, capsules]),
-            np.concatenate([types, np.full(2 * len(capsules), SPHERE, np.int32)]),
-            np.concatenate([marker_ids, marker_ids[capsules] | CAPSULE_END_ID_BITS[0],
-                            marker_ids[capsules] | CAPSULE_END_ID_BITS[1]]),
-            np.concatenate([poses, *ends]), np.concatenate([scales, diameter, diameter]))
+    return ShapeMarkerLayout(
+        np.concatenate([rows, capsules, capsules]),
+        np.concatenate([types, np.full(2 * len(capsules), SPHERE, np.int32)]),
+        np.concatenate([marker_ids, marker_ids[capsules] | CAPSULE_END_ID_BITS[0],
+                        marker_ids[capsules] | CAPSULE_END_ID_BITS[1]]),
+        np.concatenate([scales, diameter, diameter]), capsules, half[capsules])
 
 
-def body_markers(snapshot, frame, ids, encoder, car=None):
+def shape_marker_poses(layout, poses):
+    """The markers' poses (M, 7) from the bodies' (N, 7): a capsule's ends beside it."""
+    if len(layout.capsules) == 0:
+        return poses
+    capsules = layout.capsules
+    axis = quaternions_to_matrices(poses[capsules, 3:])[:, :, 2] * layout.capsule_half[:, None]
+    ends = [np.concatenate([poses[capsules, :3] + sign * axis, poses[capsules, 3:]], axis=1) for sign in (1.0, -1.0)]
+    return np.concatenate([poses, *ends])
+
+
+def shape_markers(shape_codes, dimensions, poses, ids):
+    """The markers that draw bodies: (body row of each marker, type, id, pose (M, 7), scale
+    (M, 3))."""
+    layout = shape_marker_layout(shape_codes, dimensions, ids)
+    return layout.rows, layout.types, layout.ids, shape_marker_poses(layout, poses), layout.scales
+
+
+class BodyMarkers:
     """~/bodies/markers: DELETEALL, then each body's shape (shape_markers; ns = category, ids
-    (N,) stable per name, frozen grey), but for the driven `car`: ~/car/markers draws it with
-    its wheels, and two markers at one place would show whichever colour the viewer draws
-    last."""
-    s = snapshot.state
-    kinds = categories(snapshot)
-    colours = CATEGORY_COLOURS[np.where(s["frozen"], FROZEN, kinds)]
-    poses = np.concatenate([s["positions"], s["quaternions"]], axis=1)
-    codes, dimensions = s["shapes"], s["dimensions"]
-    if car is not None:
-        drawn = np.arange(len(kinds)) != snapshot.names.index(car)
-        kinds, ids, colours, poses = kinds[drawn], ids[drawn], colours[drawn], poses[drawn]
-        codes, dimensions = codes[drawn], dimensions[drawn]
-    rows, types, marker_ids, poses, scales = shape_markers(codes, dimensions, poses, ids)
-    return encoder.encode(snapshot.time, frame, CATEGORIES[kinds[rows]], types, marker_ids, poses, scales,
-                          colours[rows])
+    stable per name, frozen grey), but for the driven car: ~/car/markers draws it with its
+    wheels, and two markers at one place would show whichever colour the viewer draws last.
+
+    Names, categories, ids, shapes and sizes change only with the layout (spawn, remove, edit):
+    what is made of them is kept, read-only, until it does; the colours until the frozen flags
+    change. A settled world's snapshots share their arrays (Simulation), so then only the
+    stamps are written (cdr.TemplateEncoder)."""
+
+    def __init__(self):
+        self.encoder = cdr.BodyMarkerEncoder()
+        self._layout = None   # (key, drawn rows or None, kinds, namespaces, ShapeMarkerLayout)
+        self._colours = None  # (frozen flags, the layout entry, colours)
+
+    def layout(self, snapshot, ids, car):
+        s = snapshot.state
+        key = (snapshot.names, s["immovable"], s["shapes"], s["dimensions"], ids, tuple(snapshot.vehicles), car)
+        cached = self._layout
+        if cached is not None and all(a is b for a, b in zip(key[:5], cached[0][:5])) and key[5:] == cached[0][5:]:
+            return cached
+        kinds = categories(snapshot)
+        drawn = None if car is None else np.arange(len(kinds)) != snapshot.names.index(car)
+        codes, dimensions = s["shapes"], s["dimensions"]
+        if drawn is not None:
+            kinds, ids, codes, dimensions = kinds[drawn], np.asarray(ids)[drawn], codes[drawn], dimensions[drawn]
+        markers = shape_marker_layout(codes, dimensions, ids)
+        namespaces = CATEGORIES[kinds[markers.rows]]
+        for array in (kinds, namespaces, *markers):
+            array.flags.writeable = False
+        self._layout = (key, drawn, kinds, namespaces, markers)
+        return self._layout
+
+    def encode(self, snapshot, frame, ids, poses, car=None):
+        """ids (N,) the bodies' marker ids, poses (N, 7) xyz + xyzw of every body."""
+        layout = self.layout(snapshot, ids, car)
+        _, drawn, kinds, namespaces, markers = layout
+        frozen = snapshot.state["frozen"]
+        cached = self._colours
+        if cached is None or cached[0] is not frozen or cached[1] is not layout:
+            colours = CATEGORY_COLOURS[np.where(frozen if drawn is None else frozen[drawn], FROZEN, kinds)][markers.rows]
+            colours.flags.writeable = False
+            self._colours = cached = (frozen, layout, colours)
+        poses = shape_marker_poses(markers, poses if drawn is None else poses[drawn])
+        return self.encoder.encode(snapshot.time, frame, namespaces, markers.types, markers.ids, poses,
+                                   markers.scales, cached[2])
 
 
 def marker_array(seconds, frame, markers):
