@@ -241,3 +241,23 @@ def test_the_publisher_never_reads_the_world_it_only_reads_snapshots():
     assert sink.of("scene_markers") and sink.of("car_markers") and sink.of("body_markers")
     # MainThread: this test's set-up and the Runtime's construction, before stepping.
     assert world.threads == {"MainThread", "vplayground-physics"}
+
+
+def test_body_markers_draw_each_shape_and_follow_a_capsule(running):
+    scene = {"version": 1, "bodies": [
+        {"name": "ball", "shape": "sphere", "radius": 0.3, "position": [0, 0, 0.3]},
+        {"name": "pill", "shape": "capsule", "radius": 0.2, "length": 0.6, "position": [2, 0, 0.2],
+         "rpy": [0, 1.5707963267948966, 0]},
+        {"name": "can", "shape": "cylinder", "radius": 0.25, "length": 0.5, "position": [4, 0, 0.25]},
+        {"name": "crate", "position": [6, 0, 0.5]}]}
+    runtime, sink = running(scene, "--real-time-factor", "0", "--duration", "0.2")
+    runtime.sim.wait(60)
+    runtime.stop()
+    _, last = sink.of("body_markers", MARKERS)[-1]
+    drawn = [(m.type, m.scale.x, m.scale.z) for m in last.markers[1:]]
+    # SPHERE, the capsule's CYLINDER, CYLINDER, CUBE, then the capsule's two end spheres
+    assert [t for t, _, _ in drawn] == [2, 3, 3, 1, 2, 2]
+    assert drawn[1][1:] == pytest.approx((0.4, 0.6)) and drawn[4][1:] == pytest.approx((0.4, 0.4))
+    capsule, ends = last.markers[2].pose.position, [m.pose.position for m in last.markers[5:]]
+    # lying along x: its ends 0.3 m either side of its centre
+    assert sorted(e.x - capsule.x for e in ends) == pytest.approx([-0.3, 0.3], abs=1e-3)

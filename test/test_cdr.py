@@ -149,12 +149,14 @@ def test_read_only_arrays_given_again_or_anew_encode_as_a_fresh_encoder_does():
     poses, sizes = frozen(rng.normal(size=(6, 7))), frozen(np.ones((6, 3)))
     colours, ids = frozen(np.ones((6, 4), np.float32)), frozen(np.arange(6, dtype="<i4").reshape(-1, 1))
     namespaces = frozen(np.array(["box"] * 5 + ["immovable"]))
+    types = frozen(np.array([1, 1, 2, 3, 1, 1], np.int32))
     moved = poses.copy()
     moved[4, 2] += 1.0
     markers, transforms = cdr.BodyMarkerEncoder(), cdr.TransformEncoder()
     parents, children = ("world",) * 6, tuple(f"b{k}" for k in range(6))
     for seconds, p in [(1.0, poses), (1.5, poses), (2.0, frozen(poses.copy())), (2.5, frozen(moved)), (3.0, poses)]:
-        assert markers.encode(seconds, "world", namespaces, ids, p, sizes, colours) == \
-            cdr.BodyMarkerEncoder().encode(seconds, "world", list(namespaces), ids.ravel(), p.copy(), sizes, colours)
+        assert markers.encode(seconds, "world", namespaces, types, ids, p, sizes, colours) == \
+            cdr.BodyMarkerEncoder().encode(seconds, "world", list(namespaces), list(types), ids.ravel(), p.copy(),
+                                           sizes, colours)
         assert transforms.encode(seconds, parents, children, p) == \
             cdr.TransformEncoder().encode(seconds, list(parents), list(children), p.copy())
