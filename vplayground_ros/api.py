@@ -24,7 +24,7 @@ import regex
 import yaml
 
 from .physics import specs
-from .physics.shapes import SHAPES
+from .physics.shapes import SHAPES, half_extents, solid
 from .resources import find_shared
 from .scene import YAML_LOADER, SceneError, load_world, world_to_scene
 from .physics.math3d import rpy_to_quat
@@ -643,8 +643,7 @@ def describe(world, name, vehicles=None):
     is_vehicle = name in (world.vehicle_names() if vehicles is None else vehicles)
     props = world.vehicle(name) if is_vehicle else world.body(name)
     body = world.body(name)
-    module = SHAPES[body["shape"]].module
-    size = 2.0 * np.asarray(module.half_extents(module.dimensions(body)))
+    size = 2.0 * np.asarray(half_extents(SHAPES[body["shape"]].code, solid(body["shape"], body).dimensions))
     return {
         "name": name,
         "category": "vehicle" if is_vehicle else ("immovable" if body["immovable"] else "box"),

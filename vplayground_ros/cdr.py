@@ -210,7 +210,8 @@ class BodyMarkerEncoder:
 
     def __init__(self):
         self._elements = TemplateEncoder(lambda w, key: w.marker(
-            (0, 0), key[0], key[1], 0, key[2], 0, [0.0] * 7, [0.0] * 3, [0.0] * 4, True))
+            (0, 0), key[0], key[1], 0, key[2], 0, [0.0] * 7, [0.0] * 3, [0.0] * 4, True,
+            np.frombuffer(key[3], "<f8").reshape(-1, 3)))
         self._head = (None, b"")  # (frame, the count and the DELETEALL marker with zero numbers)
 
     def head(self, frame, count, stamp_bytes):
@@ -226,15 +227,20 @@ class BodyMarkerEncoder:
         head[4:12] = stamp_bytes  # the DELETEALL's header stamp follows the count
         return head
 
-    def encode(self, seconds, frame, namespaces, types, ids, poses, sizes, colours):
+    def encode(self, seconds, frame, namespaces, types, ids, poses, sizes, colours, points=None):
         """namespaces (N,) str, types (N,) int Marker types, ids (N,) int, poses (N, 7) xyz +
-        xyzw, sizes (N, 3), colours (N, 4) RGBA: the MarkerArray's CDR bytes."""
+        xyzw, sizes (N, 3), colours (N, 4) RGBA, points: None, or per marker its points (K, 3)
+        or None (they are part of the marker's template: they may not change from one message
+        to the next unless the array itself does): the MarkerArray's CDR bytes."""
         stamp_bytes = struct.pack("<iI", *split_stamp(seconds))
         head = self.head(frame, len(ids) + 1, stamp_bytes)
         namespaces, types = np.asarray(namespaces, str), np.asarray(types, np.int32)
+        point_bytes = (b"",) * len(types) if points is None else tuple(
+            b"" if p is None else np.ascontiguousarray(p, "<f8").tobytes() for p in points)
         identity = (frame, namespaces.dtype.str, len(namespaces), namespaces.tobytes(),
-                    types.tobytes())  # no loop per body
-        elements = self._elements.elements(stamp_bytes, ((frame, str(ns), int(t)) for ns, t in zip(namespaces, types)), {
+                    types.tobytes(), points is None or point_bytes)  # no loop per body without points
+        keys = ((frame, str(ns), int(t), p) for ns, t, p in zip(namespaces, types, point_bytes))
+        elements = self._elements.elements(stamp_bytes, keys, {
             "id": np.asarray(ids, "<i4").reshape(-1, 1), "pose": np.asarray(poses, "<f8"),
             "scale": np.asarray(sizes, "<f8"), "color": np.asarray(colours, "<f4")}, len(head) % 8, identity)
         return b"".join((ENCAPSULATION, head, elements))

@@ -94,16 +94,19 @@ def categories(snapshot):
 
 # The marker that draws each shape; a capsule is its cylinder plus a SPHERE on each end, whose
 # ids are the body's with CAPSULE_END_ID_BITS set (body ids stay far below them).
-SHAPE_MARKER_TYPES = np.array([CUBE, SPHERE, CAPSULE_MARKER, CYLINDER], np.int32)
+# A convex body is its hull's triangles (a TRIANGLE_LIST in its frame, scale 1).
+SHAPE_MARKER_TYPES = np.array([CUBE, SPHERE, CAPSULE_MARKER, CYLINDER, TRIANGLE_LIST], np.int32)
 CAPSULE_END_ID_BITS = (1 << 29, 1 << 30)
 
 
 def shape_markers(shape_codes, dimensions, poses, ids):
     """The markers that draw bodies: (body row of each marker, type, id, pose (M, 7), scale
-    (M, 3)), vectorised (no Python loop per body: this runs at marker_rate over thousands)."""
+    (M, 3)), vectorised (no Python loop per body: this runs at marker_rate over thousands).
+    A convex body's marker takes its hull's triangles as points (hull_points)."""
     r, half = dimensions[:, 0], dimensions[:, 1]
     scales = np.where((shape_codes == shapes.BOX)[:, None], 2.0 * dimensions,
                       np.stack([2.0 * r, 2.0 * r, np.where(shape_codes == shapes.SPHERE, 2.0 * r, 2.0 * half)], 1))
+    scales[shape_codes == shapes.CONVEX] = 1.0
     rows = np.arange(len(shape_codes))
     types, marker_ids = SHAPE_MARKER_TYPES[shape_codes], np.asarray(ids, np.int32)
     capsules = np.nonzero(shape_codes == shapes.CAPSULE)[0]
@@ -134,8 +137,20 @@ def body_markers(snapshot, frame, ids, encoder, car=None):
         kinds, ids, colours, poses = kinds[drawn], ids[drawn], colours[drawn], poses[drawn]
         codes, dimensions = codes[drawn], dimensions[drawn]
     rows, types, marker_ids, poses, scales = shape_markers(codes, dimensions, poses, ids)
+    meshes = hull_points(s["hull_triangles"], car and snapshot.names.index(car))
     return encoder.encode(snapshot.time, frame, CATEGORIES[kinds[rows]], types, marker_ids, poses, scales,
-                          colours[rows])
+                          colours[rows], meshes and [meshes[row] for row in rows])
+
+
+def hull_points(hull_triangles, left_out=None):
+    """Each row's TRIANGLE_LIST points (a convex body's hull triangles, (3T, 3)), None for the
+    other shapes; None when no body is convex. `left_out`: a row that is not drawn (the car)."""
+    if all(t is None for t in hull_triangles):
+        return None
+    rows = [t.reshape(-1, 3) if t is not None else None for t in hull_triangles]
+    if left_out is not None:
+        del rows[left_out]
+    return rows
 
 
 def marker_array(seconds, frame, markers):

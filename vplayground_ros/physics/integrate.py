@@ -32,10 +32,12 @@ def update_bodies(bodies, live, dt, root_size, depth):
         if awake:
             bodies.solver_inv_mass[i] = bodies.inv_mass[i]
             d = bodies.inv_inertia[i]
-            for row in range(3):
+            for row in range(3):  # R D R^T
                 for col in range(3):
-                    inv_i[row, col] = (r[row, 0] * d[0] * r[col, 0] + r[row, 1] * d[1] * r[col, 1]
-                                       + r[row, 2] * d[2] * r[col, 2])
+                    total = 0.0
+                    for j in range(3):
+                        total += r[row, j] * (d[j, 0] * r[col, 0] + d[j, 1] * r[col, 1] + d[j, 2] * r[col, 2])
+                    inv_i[row, col] = total
         else:
             bodies.solver_inv_mass[i] = 0.0
             inv_i[:, :] = 0.0

@@ -1,0 +1,368 @@
+"""Spheres, capsules and cylinders against analytic answers: mass and inertia, rolling, resting,
+rebounds, rays, mixed piles; and their scene keys."""
+import math
+import re
+
+import numpy as np
+import pytest
+
+from vplayground_ros.messages import shape_markers
+from vplayground_ros.physics import World
+from vplayground_ros.physics import shapes
+from vplayground_ros.scene import load_world, save_world
+
+G = 9.81
+ROUND = {"sphere": {"shape": "sphere", "radius": 0.4},
+         "capsule": {"shape": "capsule", "radius": 0.3, "length": 0.8},
+         "cylinder": {"shape": "cylinder", "radius": 0.4, "length": 0.6}}
+
+
+def incline(theta, mu=1.0):
+    """The ground as an incline: gravity tilted by theta about y, downhill along +x."""
+    return World({"gravity": [G * math.sin(theta), 0, -G * math.cos(theta)]},
+                 ground={"static_friction": mu, "dynamic_friction": mu, "elasticity": 0.0})
+
+
+def roll_acceleration(world, steps=256):
+    world.step(32)  # settle the contact
+    v0 = world.state()["linear_velocities"][0, 0]
+    world.step(steps)
+    return (world.state()["linear_velocities"][0, 0] - v0) / (steps / 128)
+
+
+@pytest.mark.parametrize("shape, volume, unit_inertia", [
+    ({"shape": "sphere", "radius": 0.5}, 4 / 3 * math.pi * 0.125, (0.1, 0.1, 0.1)),
+    ({"shape": "cylinder", "radius": 0.5, "length": 2.0}, math.pi * 0.25 * 2,
+     ((3 * 0.25 + 4) / 12, (3 * 0.25 + 4) / 12, 0.125)),
+    # a capsule of no length is a sphere
+    ({"shape": "capsule", "radius": 0.5, "length": 0.0}, 4 / 3 * math.pi * 0.125, (0.1, 0.1, 0.1)),
+])
+def test_mass_and_inertia_follow_from_density(shape, volume, unit_inertia):
+    world = World(ground=None, settings={"gravity": [0, 0, 0]})
+    world.add_body({"name": "b", **shape, "density": 800.0})
+    mass = world.body("b")["mass"]
+    assert mass == pytest.approx(800.0 * volume)
+    world.apply_impulse("b", angular_impulse=[1.0, 2.0, 3.0])
+    world.step(1)
+    omega = world.state()["angular_velocities"][0]
+    assert omega == pytest.approx(np.array([1.0, 2.0, 3.0]) / (mass * np.array(unit_inertia)), rel=1e-9)
+
+
+def test_capsule_inertia_is_its_cylinder_and_hemispheres():
+    # Integrated numerically over a fine grid of the solid, against the closed form.
+    r, length = 0.3, 0.8
+    grid = np.linspace(-0.7, 0.7, 141)
+    x, y, z = np.meshgrid(grid, grid, grid, indexing="ij")
+    inside = x ** 2 + y ** 2 + (z - np.clip(z, -length / 2, length / 2)) ** 2 <= r * r
+    ixx = np.mean((y[inside] ** 2 + z[inside] ** 2))
+    izz = np.mean((x[inside] ** 2 + y[inside] ** 2))
+    across, _, axial = shapes.capsule.unit_inertia(shapes.capsule.dimensions({"radius": r, "length": length}))
+    assert across == pytest.approx(ixx, rel=0.01) and axial == pytest.approx(izz, rel=0.01)
+
+
+@pytest.mark.parametrize("theta", [0.15, 0.3])
+def test_a_sphere_rolls_down_an_incline_at_five_sevenths_g_sin(theta):
+    world = incline(theta)
+    world.add_body({"name": "ball", "shape": "sphere", "radius": 0.5, "position": [0, 0, 0.5],
+                    "static_friction": 1.0, "dynamic_friction": 1.0, "elasticity": 0.0,
+                    "allow_freezing": False})
+    assert roll_acceleration(world) == pytest.approx(5 / 7 * G * math.sin(theta), rel=0.03)
+    # Rolling, not sliding: the contact point is at rest (v = w r).
+    s = world.state()
+    assert s["angular_velocities"][0, 1] * 0.5 == pytest.approx(s["linear_velocities"][0, 0], rel=0.02)
+
+
+def test_a_cylinder_on_its_side_rolls_at_two_thirds_g_sin():
+    theta = 0.2
+    world = incline(theta)
+    # The axis along y: rolling downhill along x.
+    world.add_body({"name": "can", "shape": "cylinder", "radius": 0.4, "length": 1.0,
+                    "position": [0, 0, 0.4], "rpy": [math.pi / 2, 0, 0], "static_friction": 1.0,
+                    "dynamic_friction": 1.0, "elasticity": 0.0, "allow_freezing": False})
+    assert roll_acceleration(world) == pytest.approx(2 / 3 * G * math.sin(theta), rel=0.03)
+    assert abs(world.state()["positions"][0, 1]) < 0.01  # straight downhill
+
+
+def test_a_cylinder_on_its_end_stands_on_an_incline_below_its_friction_angle():
+    world = incline(0.3, mu=0.8)
+    world.add_body({"name": "can", "shape": "cylinder", "radius": 0.3, "length": 0.5,
+                    "position": [0, 0, 0.25], "static_friction": 0.8, "dynamic_friction": 0.8,
+                    "elasticity": 0.0, "allow_freezing": False})
+    world.step(3 * 128)
+    s = world.state()
+    assert np.linalg.norm(s["positions"][0] - [0, 0, 0.25]) < 0.01
+    assert np.linalg.norm(s["angular_velocities"][0]) < 0.01
+    # A stable manifold over the end, not one point: several ground contacts spread over it.
+    points = world.contacts()["points"]
+    assert len(points) >= 3
+    assert np.ptp(points[:, 0]) > 0.3 and np.ptp(points[:, 1]) > 0.3
+
+
+@pytest.mark.parametrize("shape", list(ROUND))
+def test_round_bodies_lie_still_on_the_ground(shape):
+    spec = ROUND[shape]
+    # capsules and cylinders lie on their sides, axis along x
+    lying = {"rpy": [0, math.pi / 2, 0]} if shape != "sphere" else {}
+    rest = spec["radius"]
+    world = World()
+    world.add_body({"name": "b", **spec, **lying, "position": [0, 0, rest], "allow_freezing": False})
+    world.step(5 * 128)
+    s = world.state()
+    assert np.linalg.norm(s["positions"][0] - [0, 0, rest]) < 0.01
+    assert np.linalg.norm(s["linear_velocities"][0]) < 1e-3
+    assert np.linalg.norm(s["angular_velocities"][0]) < 1e-2
+
+
+@pytest.mark.parametrize("elasticity", [0.4, 0.8])
+def test_a_ball_dropped_on_a_ball_rebounds_per_its_elasticity(elasticity):
+    drop = 1.5
+    world = World(ground=None)
+    world.add_body({"name": "base", "shape": "sphere", "radius": 0.5, "immovable": True,
+                    "elasticity": 0.0})
+    world.add_body({"name": "ball", "shape": "sphere", "radius": 0.25, "position": [0, 0, 0.75 + drop],
+                    "elasticity": elasticity, "allow_freezing": False})
+    bounced, apex = False, 0.0
+    for _ in range(3 * 128):
+        world.step(1)
+        height = world.state()["positions"][1, 2] - 0.75
+        vz = world.state()["linear_velocities"][1, 2]
+        bounced = bounced or vz > 0.0
+        if bounced:
+            apex = max(apex, height)
+            if vz < 0.0:
+                break
+    assert bounced
+    assert apex == pytest.approx(elasticity ** 2 * drop, rel=0.08)
+    # Head on: no sideways kick.
+    assert np.linalg.norm(world.state()["positions"][1, :2]) < 1e-6
+
+
+def mixed_pile(count, seed=3):
+    rng = np.random.default_rng(seed)
+    world = World()
+    kinds = [{"size": [0.5, 0.4, 0.3]}, {"shape": "sphere", "radius": 0.25},
+             {"shape": "capsule", "radius": 0.15, "length": 0.4},
+             {"shape": "cylinder", "radius": 0.25, "length": 0.4}]
+    side = 4
+    for k in range(count):
+        x, y, z = k % side, (k // side) % side, k // (side * side)
+        world.add_body({"name": f"b{k}", **kinds[k % 4], "elasticity": 0.3,
+                        "position": [(x - 1.5) * 0.9 + rng.uniform(-0.1, 0.1),
+                                     (y - 1.5) * 0.9 + rng.uniform(-0.1, 0.1), 0.6 + 0.9 * z],
+                        "rpy": list(rng.uniform(-math.pi, math.pi, 3))})
+    return world
+
+
+def energy(world):
+    s, masses = world.state(), np.array([world.body(n)["mass"] for n in world.body_names()])
+    kinetic = 0.5 * np.sum(masses * np.sum(s["linear_velocities"] ** 2, axis=1))
+    return kinetic + np.sum(masses * G * s["positions"][:, 2])
+
+
+def test_a_mixed_pile_comes_to_rest_without_interpenetration_or_energy_gain():
+    world = mixed_pile(48)
+    start = energy(world)
+    worst_gain, deepest = -np.inf, 0.0
+    for _ in range(8 * 16):
+        world.step(8)
+        worst_gain = max(worst_gain, energy(world) - start)
+        depths = world.contacts()["depths"]
+        deepest = max(deepest, float(depths.max()) if len(depths) else 0.0)
+    s = world.state()
+    # Rotational energy is left out of `energy`, so a gain would only show more clearly.
+    assert worst_gain < 1e-6 * abs(start) + 1.0
+    assert deepest < 0.03
+    assert s["frozen"].all() or np.abs(s["linear_velocities"]).max() < 0.05
+    assert s["positions"][:, 2].min() > 0.1  # nothing sank through the ground
+
+
+@pytest.mark.parametrize("shape, origin, direction, distance, normal", [
+    ("sphere", [3, 0, 0], [-1, 0, 0], 2.6, [1, 0, 0]),
+    ("capsule", [0, 0, 5], [0, 0, -1], 5 - 0.7, [0, 0, 1]),      # the upper hemisphere's top
+    ("capsule", [3, 0, 0.3], [-1, 0, 0], 2.7, [1, 0, 0]),        # the side
+    ("cylinder", [0.2, 0, 5], [0, 0, -1], 5 - 0.3, [0, 0, 1]),   # the flat end
+    ("cylinder", [3, 0, 0.1], [-1, 0, 0], 2.6, [1, 0, 0]),       # the side
+    ("cylinder", [0.45, 0, 5], [0, 0, -1], math.inf, [0, 0, 0]),  # just past the rim
+])
+def test_rays_hit_round_shapes_at_their_surfaces(shape, origin, direction, distance, normal):
+    world = World(ground=None, settings={"gravity": [0, 0, 0]})
+    world.add_body({"name": "b", **ROUND[shape], "position": [0, 0, 0]})
+    hits = world.cast_rays(np.array([origin], float), np.array([direction], float), 10.0)
+    assert hits.distance[0] == pytest.approx(distance)
+    if math.isfinite(distance):
+        assert hits.normal[0] == pytest.approx(normal, abs=1e-9)
+
+
+def test_rays_see_a_turned_cylinder_in_its_frame():
+    world = World(ground=None, settings={"gravity": [0, 0, 0]})
+    world.add_body({"name": "b", "shape": "cylinder", "radius": 0.4, "length": 2.0,
+                    "position": [0, 0, 1], "rpy": [0, math.pi / 2, 0]})  # axis along x
+    hits = world.cast_rays(np.array([[0.9, 0, 5]]), np.array([[0, 0, -1.0]]), 10.0)
+    assert hits.distance[0] == pytest.approx(5 - 1.4)
+    hits = world.cast_rays(np.array([[1.1, 0, 5]]), np.array([[0, 0, -1.0]]), 10.0)
+    assert math.isinf(hits.distance[0])  # beyond the end (the length is along x now)
+
+
+def test_shapes_save_and_reload(tmp_path):
+    world = World()
+    for k, spec in enumerate(ROUND.values()):
+        world.add_body({"name": f"b{k}", **spec, "position": [2.0 * k, 0, 1.0], "density": 300.0})
+    save_world(world, tmp_path / "shapes.yaml")
+    again = load_world(tmp_path / "shapes.yaml")
+    for name in world.body_names():
+        assert again.body(name) == world.body(name)
+    capsule = again.body("b1")
+    assert (capsule["shape"], capsule["radius"], capsule["length"]) == ("capsule", 0.3, 0.8)
+    assert "size" not in capsule
+
+
+@pytest.mark.parametrize("spec, problem", [
+    ({"shape": "sphere", "size": [1, 1, 1]}, "body.size: a sphere has no size (its keys: radius)"),
+    ({"shape": "box", "radius": 1.0}, "body.radius: a box has no radius (its keys: size)"),
+    ({"shape": "cylinder", "radius": 1.0, "length": 0.0}, "body.length: must be > 0 for a cylinder, got 0"),
+    ({"shape": "sphere", "radius": -1.0}, "body.radius: must be > 0, got -1"),
+    ({"shape": "cone"}, "body.shape: unsupported shape 'cone' (supported: box, sphere, capsule, cylinder)"),
+])
+def test_bad_shape_keys_are_refused_naming_the_key(spec, problem):
+    world = World()
+    with pytest.raises(ValueError) as error:
+        world.add_body(spec)
+    assert str(error.value) == problem
+    assert world.body_names() == []
+
+
+def test_editing_a_radius_keeps_the_mass_and_changes_the_inertia():
+    world = World(ground=None, settings={"gravity": [0, 0, 0]})
+    world.add_body({"name": "b", "shape": "sphere", "radius": 0.5, "mass": 10.0})
+    world.edit_body("b", radius=1.0)
+    assert world.body("b")["radius"] == 1.0 and world.body("b")["mass"] == 10.0
+    world.apply_impulse("b", angular_impulse=[0, 0, 4.0])
+    world.step(1)
+    assert world.state()["angular_velocities"][0, 2] == pytest.approx(4.0 / (0.4 * 10.0 * 1.0))
+    with pytest.raises(ValueError, match="a sphere has no length"):
+        world.edit_body("b", length=2.0)
+
+
+def test_markers_draw_each_shape():
+    codes = np.array([shapes.BOX, shapes.SPHERE, shapes.CAPSULE, shapes.CYLINDER])
+    dims = np.array([[0.5, 0.25, 0.1], [0.4, 0, 0], [0.3, 0.4, 0], [0.4, 0.3, 0]])
+    poses = np.array([[0, 0, 0, 0, 0, 0, 1.0]] * 3 + [[0, 0, 0, 0, math.sin(math.pi / 4), 0, math.cos(math.pi / 4)]])
+    poses[2, :3] = [5, 0, 1]
+    rows, types, ids, where, scales = shape_markers(codes, dims, poses, np.array([1, 2, 3, 4]))
+    # CUBE, SPHERE, CYLINDER (a capsule's middle), CYLINDER, then the capsule's two end spheres
+    assert list(types) == [1, 2, 3, 3, 2, 2] and list(rows) == [0, 1, 2, 3, 2, 2]
+    assert len(set(ids)) == 6
+    assert scales[:4].tolist() == [[1.0, 0.5, 0.2], [0.8, 0.8, 0.8], [0.6, 0.6, 0.8], [0.8, 0.8, 0.6]]
+    assert where[4:, :3].tolist() == [[5, 0, 1.4], [5, 0, 0.6]]
+
+
+# ---------------------------------------------------------------- convex hulls
+BRICK = [[x, y, z] for x in (-0.5, 0.5) for y in (-0.25, 0.25) for z in (-0.1, 0.1)]
+OCTAHEDRON_OBJ = """# a regular octahedron of radius 0.5, with an interior point the hull drops
+v 0.5 0 0
+v -0.5 0 0
+v 0 0.5 0
+v 0 -0.5 0
+v 0 0 0.5
+v 0 0 -0.5
+f 1 3 5
+f 3 2 5
+f 2 4 5
+f 4 1 5
+f 3 1 6
+f 2 3 6
+f 4 2 6
+f 1 4 6
+"""
+
+
+def test_a_convex_hull_has_the_mass_and_inertia_of_its_solid():
+    world = World(ground=None, settings={"gravity": [0, 0, 0]})
+    # The hull of a brick's corners and points inside it, placed off the origin: the body is
+    # centred on the hull's centre of mass.
+    inside = np.random.default_rng(1).uniform(-0.09, 0.09, (20, 3))
+    points = np.vstack([BRICK, inside]) + [2.0, -1.0, 0.5]
+    world.add_body({"name": "c", "shape": "convex", "points": points.tolist(), "density": 400.0,
+                    "position": [0, 0, 3]})
+    body = world.body("c")
+    assert body["mass"] == pytest.approx(400.0 * 1.0 * 0.5 * 0.2)
+    assert sorted(map(tuple, np.round(body["points"], 12))) == sorted(map(tuple, BRICK))
+    world.apply_impulse("c", angular_impulse=[1.0, 2.0, 3.0])
+    world.step(1)
+    box = np.array([0.25 + 0.04, 1.0 + 0.04, 1.0 + 0.25]) / 12 * body["mass"]
+    assert world.state()["angular_velocities"][0] == pytest.approx(np.array([1.0, 2.0, 3.0]) / box, rel=1e-9)
+
+
+def test_a_turned_convex_body_turns_its_full_inertia_tensor():
+    # A tetrahedron's inertia is not diagonal in its mesh frame: an impulse about x alone
+    # spins it about another axis too, exactly as I^-1 L says.
+    points = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
+    world = World(ground=None, settings={"gravity": [0, 0, 0]})
+    world.add_body({"name": "t", "shape": "convex", "points": points.tolist(), "mass": 6.0})
+    world.apply_impulse("t", angular_impulse=[1.0, 0, 0])
+    world.step(1)
+    # The unit tetrahedron's inertia about its centroid (1/4, 1/4, 1/4), per kg.
+    centred = points - 0.25
+    covariance = (np.einsum("i,j->ij", centred.sum(0), centred.sum(0)) + centred.T @ centred) / 20.0
+    inertia = 6.0 * (np.trace(covariance) * np.eye(3) - covariance)
+    assert world.state()["angular_velocities"][0] == pytest.approx(np.linalg.solve(inertia, [1.0, 0, 0]), rel=1e-9)
+
+
+def test_rays_hit_a_convex_body_on_its_faces():
+    world = World(ground=None, settings={"gravity": [0, 0, 0]})
+    world.add_body({"name": "c", "shape": "convex", "points": BRICK, "position": [0, 0, 1],
+                    "rpy": [0, 0, math.pi / 2]})  # its long side along y now
+    hits = world.cast_rays(np.array([[0, 3, 1.0], [0.3, 0, 5.0], [0.2, 0, 5.0]]),
+                           np.array([[0, -1, 0], [0, 0, -1], [0, 0, -1.0]]), 10.0)
+    assert hits.distance[0] == pytest.approx(2.5) and hits.normal[0] == pytest.approx([0, 1, 0], abs=1e-12)
+    assert math.isinf(hits.distance[1])  # beyond its 0.25 m half width along x
+    assert hits.distance[2] == pytest.approx(3.9) and hits.normal[2] == pytest.approx([0, 0, 1], abs=1e-12)
+
+
+def test_a_scene_takes_a_convex_mesh_and_saves_its_hull(tmp_path):
+    (tmp_path / "gem.obj").write_text(OCTAHEDRON_OBJ)
+    scene = tmp_path / "scene.yaml"
+    scene.write_text("version: 1\nbodies:\n  - {name: gem, shape: convex, mesh: gem.obj, position: [0, 0, 1]}\n")
+    world = load_world(scene)
+    assert world.body("gem")["mass"] == pytest.approx(500.0 * 4 / 3 * 0.5 ** 3)  # 8 tetrahedra
+    save_world(world, tmp_path / "saved.yaml")
+    again = load_world(tmp_path / "saved.yaml")
+    assert again.body("gem") == world.body("gem")
+
+
+@pytest.mark.parametrize("body, problem", [
+    ({"shape": "convex"}, "body.points: missing"),
+    ({"shape": "convex", "points": [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]]},
+     "points: the points are flat or degenerate"),
+    ({"shape": "convex", "points": [[math.cos(a) * math.sin(b), math.sin(a) * math.sin(b), math.cos(b)]
+                                    for a in np.linspace(0, 6, 12) for b in np.linspace(0.2, 2.9, 8)]},
+     "points: the convex hull has 96 vertices, more than the 64 allowed"),
+    ({"shape": "convex", "points": [[0, 0, 0]] * 3}, "body.points: expected a list of 4 to"),
+    ({"shape": "sphere", "points": BRICK}, "body.points: a sphere has no points"),
+])
+def test_bad_convex_bodies_are_refused_naming_the_problem(body, problem):
+    world = World()
+    with pytest.raises(ValueError, match=re.escape(problem)):
+        world.add_body(body)
+    assert world.body_names() == []
+
+
+def test_a_mesh_on_another_shape_is_refused(tmp_path):
+    (tmp_path / "gem.obj").write_text(OCTAHEDRON_OBJ)
+    from vplayground_ros.scene import SceneError
+    with pytest.raises(SceneError, match=re.escape("bodies[0].mesh: only a convex body takes a mesh")):
+        load_world({"version": 1, "bodies": [{"shape": "box", "mesh": "gem.obj"}]})
+
+
+def test_a_convex_body_is_drawn_as_its_hull_triangles():
+    from vplayground_ros.messages import hull_points
+    world = World()
+    world.add_body({"name": "c", "shape": "convex", "points": BRICK})
+    world.add_body({"name": "b", "size": [1, 1, 1], "position": [3, 0, 1]})
+    props = world.body_properties()
+    rows, types, _, _, scales = shape_markers(props["shapes"], props["dimensions"],
+                                              np.array([[0, 0, 0, 0, 0, 0, 1.0]] * 2), np.array([1, 2]))
+    assert list(types) == [11, 1] and scales[0].tolist() == [1, 1, 1]
+    points = hull_points(props["hull_triangles"])
+    assert points[1] is None and points[0].shape == (36, 3)  # a brick's 12 triangles
+    assert np.allclose(np.abs(points[0]), [0.5, 0.25, 0.1])  # its corners, in its frame
