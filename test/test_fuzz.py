@@ -874,7 +874,8 @@ def parameter_names():
     world = load_world({"version": 1})
     options = argparse.Namespace(scene="", real_time_factor=1.0, start_paused=False, duration=None, record=None,
                                  record_split_size=0, foxglove=None)
-    return [spec.name for spec in parameter_table(world, options, Requests(Simulation(world)))] + ["no_such.parameter"]
+    return ([spec.name for spec in parameter_table(world.settings, options, [], api.DEFAULT_MAX_BODIES)]
+            + ["no_such.parameter"])
 
 
 @pytest.mark.parametrize("name", parameter_names())

@@ -243,8 +243,8 @@ def test_parameters_accepted_and_rejected(ros):
 
 def test_foxglove_server_shares_the_ros_graph(ros):
     """With ROS present both are live: a spawn through the socket shows in the ROS
-    ~/get_entities, and a parameter set through the socket goes through rclpy (refused with the
-    same validation, or seen by `ros2 param get` when accepted), and a client subscribed to a
+    ~/get_entities, and a parameter set through the socket is refused with the same validation,
+    or seen by `ros2 param get` when accepted (rclpy's copy follows), and a client subscribed to a
     parameter hears of each change once, whether it or `ros2 param set` made it."""
     client = FoxgloveClient(ros.foxglove.url)
     try:

@@ -131,7 +131,6 @@ def run(sim, options, recorder, ros_args, stop):
         if options.foxglove is not None:
             from .foxglove_server import FoxgloveServer
             server = FoxgloveServer(runtime, options.foxglove_host, options.foxglove)
-            runtime.parameters.values["foxglove.port"] = server.port  # the port bound (0 asked any)
         if node is not None:
             node.attach(runtime)
             executor = SingleThreadedExecutor()

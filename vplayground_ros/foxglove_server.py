@@ -6,7 +6,8 @@ from the same Runtime:
   the server is one more Broadcaster sink, so it logs the very bytes the bag and the ROS
   publishers get, with log time = simulation time; /clock also feeds the server's time;
 - the services (services.py) with ros2msg/cdr request and response schemas;
-- the parameters: get, set through the Runtime's one validation, updates to subscribers;
+- the parameters: get, set through the Runtime's Parameters (their one owner and validation),
+  updates to subscribers;
 - client publish: cmd_vel, clicked_point, initialpose and ~/push (cdr or json) into the same
   handlers as the ROS subscriptions.
 A latched topic (scenery, state, /tf_static) is sent again when a client subscribes to it.
@@ -69,6 +70,7 @@ class FoxgloveServer:
             raise OSError(f"the Foxglove server cannot listen on {host}:{port}: {error}") from None
         self.port = self.front.port
         self.url = f"ws://{host}:{self.port}"
+        runtime.parameters.set_read_only({"foxglove.port": self.port})  # the port bound (0 asks for any)
         runtime.parameters.listen(self._parameters_changed)
         runtime.broadcaster.add_sink(self)
 
@@ -168,7 +170,7 @@ class FoxgloveServer:
         changes = {p.name: p.get_value() for p in parameters}
         self._setting.names = set(changes)  # the sdk sends what this returns to the subscribers itself
         try:
-            ok, reason = self.runtime.set_parameters(changes)
+            ok, reason = self.runtime.parameters.set(changes)
         finally:
             self._setting.names = set()
         if not ok:

@@ -4,10 +4,12 @@ Everything the node offers comes from the Runtime's tables (broadcast.TOPICS, in
 services.service_table, parameters.parameter_table); this file only maps them onto rclpy.
 Publishers send the CDR bytes the Broadcaster made (the same bytes go to the bag and to the
 Foxglove server); subscriptions and services hand rclpy messages to the shared handlers, which
-only read attributes; parameter sets go through the Runtime's one validation.
+only read attributes; the node registers with the Runtime's Parameters (their one owner and
+validation) and keeps rclpy's copy of them in step.
 """
 import array
 import importlib
+import threading
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
@@ -59,6 +61,8 @@ def descriptor(spec):
         extra["integer_range"] = [IntegerRange(from_value=int(spec.low), to_value=int(spec.high), step=1)]
     elif spec.low is not None and spec.kind == "float":
         extra["floating_point_range"] = [FloatingPointRange(from_value=float(spec.low), to_value=float(spec.high))]
+    elif spec.low is not None:  # rclpy ranges only scalars: an array's range in words
+        extra["additional_constraints"] = f"each element in [{spec.low:g}, {spec.high:g}]"
     return ParameterDescriptor(description=spec.description, read_only=spec.read_only,
                                type=PARAMETER_TYPES[spec.kind].value, **extra)
 
@@ -127,6 +131,10 @@ class SimulatorNode(Node):
         return callback
 
     # ------------------------------------------------------------------ parameters
+    # The Runtime's Parameters own the values; rclpy holds a copy so that `ros2 param get` and
+    # /parameter_events work. A set through rclpy goes to Parameters.set from the callback; a
+    # change made anywhere else (the Foxglove server, ~/set_freezing, a scene load) is copied
+    # into rclpy by the listener, whose own callback then accepts the already validated values.
     def _declare_parameters(self):
         store = self.runtime.parameters
         for spec in store.specs.values():
@@ -134,19 +142,28 @@ class SimulatorNode(Node):
         # Overrides given with --ros-args -p: validated and applied like any other set.
         overrides = {name: plain(self.get_parameter(name).value) for name in store.specs}
         store.override({name: value for name, value in overrides.items() if value != store[name]})
+        self._from_rclpy = threading.local()  # .active: inside our set-parameters callback
+        self._copying = threading.local()     # .active: copying a change into rclpy
         self.add_on_set_parameters_callback(self._on_parameters)
-        self.runtime.set_parameters = self._set_from_outside
+        store.listen(self._copy_into_rclpy)
 
     def _on_parameters(self, parameters):
-        ok, reason = self.runtime.parameters.set({p.name: plain(p.value) for p in parameters})
+        if getattr(self._copying, "active", False):  # values Parameters has already taken
+            return SetParametersResult(successful=True)
+        self._from_rclpy.active = True
+        try:
+            ok, reason = self.runtime.parameters.set({p.name: plain(p.value) for p in parameters})
+        finally:
+            self._from_rclpy.active = False
         return SetParametersResult(successful=ok, reason=reason)
 
-    def _set_from_outside(self, changes):
-        """A set from the Foxglove server: through rclpy, so `ros2 param get` agrees."""
-        store = self.runtime.parameters
+    def _copy_into_rclpy(self, changed):
+        if getattr(self._from_rclpy, "active", False):  # rclpy stores these itself
+            return
+        self._copying.active = True
         try:
-            values = {name: store.check(name, value) for name, value in changes.items()}
-        except ValueError as error:
-            return False, str(error)
-        result = self.set_parameters_atomically([Parameter(name, value=value) for name, value in values.items()])
-        return result.successful, result.reason
+            result = self.set_parameters_atomically([Parameter(name, value=value) for name, value in changed.items()])
+        finally:
+            self._copying.active = False
+        if not result.successful:
+            self.get_logger().warning(f"parameters {', '.join(changed)} not copied into rclpy: {result.reason}")

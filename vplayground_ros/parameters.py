@@ -1,11 +1,21 @@
-"""The SPEC 6.4 parameters, ROS-free: one table, one validation, one place that applies a
-change. The ROS node declares them from the table and hands every set to Parameters.set; the
-Foxglove server does the same, so a value refused on one is refused on the other, with the same
-reason, and nothing changes.
+"""The SPEC 6.4 parameters, ROS-free: one table, one owner of the values, one validation.
+
+`Parameters` holds every value; everything else is told of changes (`listen`) and never
+writes a value itself:
+- the Runtime applies physics values to the World, and limits to the Requests, one way: the
+  World never writes back. A newly loaded scene (`~/load_scene`, `~/reset`) brings its own
+  settings, which the requests hand to `load_settings`; `~/set_freezing` is a set of
+  `freezing.enabled` like any other;
+- the transports (the rclpy node, the Foxglove server) set through `set` and listen to tell
+  their clients (the node keeps rclpy's copy in step, so `ros2 param get` agrees), so a value
+  refused on one is refused on the other, with the same reason, and nothing changes;
+- read-only values found at start-up (the command line's overrides, the port the Foxglove server
+  bound) come in through `set_read_only`, checked like a set.
 """
 import math
 import threading
 from dataclasses import dataclass
+from types import MappingProxyType
 
 from .physics import specs
 
@@ -24,10 +34,16 @@ class ParameterSpec:
     read_only: bool = False
 
 
-def parameter_table(world, options, requests):
-    """Every parameter; the physics ones default to the scene's values, the request limits to
-    the Requests' own."""
-    s = world.settings
+def setting(name, default, description, kind):
+    """A physics parameter, its range the schema's (specs.SETTINGS_RANGES), so what the node
+    advertises is what the World accepts."""
+    low, high = specs.SETTINGS_RANGES[name]
+    return ParameterSpec(name, default, description, kind, low, high)
+
+
+def parameter_table(settings, options, scene_directories, max_bodies):
+    """Every parameter; the physics ones default to the scene's `settings`."""
+    s = settings
     f = s["freezing"]
     P = ParameterSpec
     return [
@@ -37,16 +53,15 @@ def parameter_table(world, options, requests):
         P("start_paused", bool(options.start_paused), "start paused (~/pause false to play)", "bool", read_only=True),
         P("duration", float(options.duration or 0.0),
           "stop after this much simulated time, s (0 = run until stopped)", "float", read_only=True),
-        P("gravity", [float(v) for v in s["gravity"]], "gravity vector, m/s^2, world frame", "float[3]",
-          -specs.MAX_COORDINATE, specs.MAX_COORDINATE),
-        P("steps_per_second", int(s["steps_per_second"]), "physics steps per simulated second", "int", 1, 10000),
-        P("resolve_iterations", int(s["resolve_iterations"]),
-          "collision passes per step (contact passes are twice this)", "int", 1, 100),
-        P("octree_depth", int(s["octree_depth"]), "depth of the broad-phase octree", "int", 1, 10),
+        setting("gravity", [float(v) for v in s["gravity"]], "gravity vector, m/s^2, world frame", "float[3]"),
+        setting("steps_per_second", int(s["steps_per_second"]), "physics steps per simulated second", "int"),
+        setting("resolve_iterations", int(s["resolve_iterations"]),
+                "collision passes per step (contact passes are twice this)", "int"),
+        setting("octree_depth", int(s["octree_depth"]), "depth of the broad-phase octree", "int"),
         P("freezing.enabled", bool(f["enabled"]), "freeze bodies at rest", "bool"),
-        P("freezing.time", float(f["time"]), "seconds below the thresholds before freezing", "float", 0, 1e6),
-        P("freezing.linear_speed", float(f["linear_speed"]), "freezing threshold, m/s", "float", 0, 1e6),
-        P("freezing.angular_speed", float(f["angular_speed"]), "freezing threshold, rad/s", "float", 0, 1e6),
+        setting("freezing.time", float(f["time"]), "seconds below the thresholds before freezing", "float"),
+        setting("freezing.linear_speed", float(f["linear_speed"]), "freezing threshold, m/s", "float"),
+        setting("freezing.angular_speed", float(f["angular_speed"]), "freezing threshold, rad/s", "float"),
         P("publish_rate", 30.0, "simulated Hz of poses, odometry, joint states, transforms", "float", 0.1, 1000),
         P("marker_rate", 30.0, "simulated Hz of marker topics (when subscribed)", "float", 0.1, 1000),
         P("static_republish_period", 5.0, "simulated s between re-sends of the scenery", "float", 0.1, 3600),
@@ -67,9 +82,9 @@ def parameter_table(world, options, requests):
         P("record", str(options.record or ""), "MCAP bag being written ('' = not recording)", "str", read_only=True),
         P("record_split_size", int(options.record_split_size),
           "bytes after which the bag continues in a new file (0 = one file)", "int", 0, 1 << 50, read_only=True),
-        P("scene_directories", [str(d) for d in requests.scene_directories],
+        P("scene_directories", [str(d) for d in scene_directories],
           "directories ~/load_scene and ~/save_scene may use (set at start only)", "str[]", read_only=True),
-        P("max_bodies", int(requests.max_bodies), "most bodies the world may hold (spawns past it are refused)",
+        P("max_bodies", int(max_bodies), "most bodies the world may hold (spawns past it are refused)",
           "int", 1, 1_000_000),
         P("foxglove.port", int(options.foxglove or 0),
           "port of the built-in Foxglove WebSocket server (0 = off)", "int", 0, 65535, read_only=True),
@@ -79,26 +94,26 @@ def parameter_table(world, options, requests):
 class Parameters:
     """Current values, validated sets, and listeners told of every applied change."""
 
-    def __init__(self, table, world_settings):
+    def __init__(self, table):
         self.specs = {p.name: p for p in table}
-        self.values = {p.name: p.default for p in table}
-        self._world_settings = world_settings  # () -> the world's settings, to validate physics
+        self._values = {p.name: p.default for p in table}
+        self.values = MappingProxyType(self._values)  # read them; change them through set()
         self._listeners = []
         self._lock = threading.Lock()
 
     def __getitem__(self, name):
-        return self.values[name]
+        return self._values[name]
 
     def listen(self, fn):
-        """fn({name: value}) after every applied change."""
+        """fn({name: value}) after every applied change, whoever made it."""
         self._listeners.append(fn)
 
-    def check(self, name, value):
+    def check(self, name, value, read_only_ok=False):
         """The value as stored (ints accepted for floats), or ValueError naming the problem."""
         spec = self.specs.get(name)
         if spec is None:
             raise ValueError(f"{name}: no such parameter")
-        if spec.read_only:
+        if spec.read_only and not read_only_ok:
             raise ValueError(f"{name}: read-only")
         if spec.kind == "bool":
             if not isinstance(value, bool):
@@ -131,41 +146,78 @@ class Parameters:
 
     def override(self, values):
         """Start-up values from the command line (--ros-args -p), read-only ones included:
-        type- and range-checked like a set, then applied."""
-        checked = {}
-        for name, value in values.items():
-            spec = self.specs.get(name)
-            if spec is None:
-                raise ValueError(f"{name}: no such parameter")
-            checked[name] = self.check(name, value) if not spec.read_only else value
+        type- and range-checked like a set, then applied; ValueError naming the first problem."""
+        checked = {name: self.check(name, value, read_only_ok=True) for name, value in values.items()}
         writable = {n: v for n, v in checked.items() if not self.specs[n].read_only}
         ok, reason = self.set(writable)
         if not ok:
             raise ValueError(reason)
-        fixed = {n: v for n, v in checked.items() if self.specs[n].read_only}
-        self.values.update(fixed)
-        for fn in self._listeners:
-            fn(fixed)
+        self.set_read_only({n: v for n, v in checked.items() if n not in writable})
+
+    def set_read_only(self, values):
+        """Read-only parameters are read-only to clients, not to the program: values known only
+        at start-up (the command line's, the port the Foxglove server bound when asked for any)
+        come in here, type- and range-checked like a set; ValueError naming the problem."""
+        checked = {name: self.check(name, value, read_only_ok=True) for name, value in values.items()}
+        with self._lock:
+            changed = {n: v for n, v in checked.items() if v != self._values[n]}
+            self._values.update(changed)
+        self._tell(changed)
 
     def set(self, changes):
         """Applies {name: value} all together, or nothing: (True, "") or (False, reason)."""
         with self._lock:
             try:
                 checked = {name: self.check(name, value) for name, value in changes.items()}
-                physics = settings_from({n: v for n, v in checked.items() if n in PHYSICS})
-                if physics:
-                    current = self._world_settings()
-                    merged = {**current, **physics}
-                    merged["freezing"] = {**current["freezing"], **physics.get("freezing", {})}
-                    specs.validate_settings(merged)
+                physics = {n: v for n, v in checked.items() if n in PHYSICS}
+                if physics:  # together with the other physics values, as the World will take them
+                    specs.validate_settings(settings_from({**self.physics(), **physics}))
             except ValueError as error:
                 return False, str(error)
-            changed = {n: v for n, v in checked.items() if v != self.values[n]}
-            self.values.update(checked)
+            changed = {n: v for n, v in checked.items() if v != self._values[n]}
+            self._values.update(checked)
+        self._tell(changed)
+        return True, ""
+
+    def physics(self):
+        """{name: value} of the physics parameters, the World's settings."""
+        return {name: self._values[name] for name in PHYSICS}
+
+    def load_settings(self, settings):
+        """The physics parameters take a newly loaded scene's settings (the World built from it
+        already has them): (True, "") or (False, reason)."""
+        return self.set(physics_parameters(settings))
+
+    def _tell(self, changed):
         if changed:
             for fn in self._listeners:
                 fn(changed)
+
+
+class WorldSettings:
+    """The World's own settings behind the get and set of Parameters, for Requests used without
+    a parameter layer (scripts, tests): there the World is the one owner."""
+
+    def __init__(self, sim):
+        self.sim = sim
+
+    def __getitem__(self, name):
+        return self.sim.call(lambda world: physics_parameters(world.settings)[name])
+
+    def set(self, changes):
+        self.sim.call(lambda world: world.update_settings(settings_from(changes)))
         return True, ""
+
+    def load_settings(self, settings):
+        return True, ""  # the new World has them
+
+
+def physics_parameters(settings):
+    """{parameter name: value} of World settings ({..., "freezing": {...}})."""
+    values = {name: settings[name] for name in PHYSICS if not name.startswith("freezing.")}
+    values["gravity"] = [float(v) for v in settings["gravity"]]
+    values.update({f"freezing.{key}": value for key, value in settings["freezing"].items()})
+    return values
 
 
 def settings_from(values):

@@ -5,7 +5,7 @@ the services). ROS-free: `vplayground --no-ros --foxglove` runs on this alone.
 import threading
 from pathlib import Path
 
-from .api import Requests
+from .api import DEFAULT_MAX_BODIES, Requests, default_scene_directories
 from .broadcast import BagSink, Broadcaster, resolve
 from .inputs import Inputs
 from .parameters import PHYSICS, Parameters, parameter_table, settings_from
@@ -19,11 +19,12 @@ class Runtime:
         self.log = log
         self.recorder = recorder
         self.resolve_name = resolve_name
-        self.requests = Requests(sim, str(options.scene),
-                                 bag_directory=recorder.path.parent if recorder is not None else None)
-        self.parameters = Parameters(parameter_table(sim.world, options, self.requests), lambda: sim.world.settings)
+        # The parameters own every setting (parameters.py); the requests change them through it.
+        directories = default_scene_directories(recorder.path.parent if recorder is not None else None)
+        self.parameters = Parameters(parameter_table(sim.world.settings, options, directories, DEFAULT_MAX_BODIES))
         self.parameters.listen(self._apply)
-        self.set_parameters = self.parameters.set  # the ROS node routes sets through rclpy
+        self.requests = Requests(sim, str(options.scene), scene_directories=directories,
+                                 max_bodies=DEFAULT_MAX_BODIES, settings=self.parameters)
         self.broadcaster = Broadcaster(sim, self.parameters, log, resolve_name)
         if recorder is not None:
             self.broadcaster.add_sink(BagSink(recorder))
@@ -51,25 +52,26 @@ class Runtime:
         while not self._stop.is_set():
             self.broadcaster.publish_next()
 
-    def sync_parameters(self):
-        """After a service changed the world's settings (a scene load, a reset, ~/set_freezing):
-        the physics parameters take the world's values, so `ros2 param get` and Foxglove's
-        Parameters panel tell the truth."""
-        current = parameter_table(self.sim.world, self.options, self.requests)
-        changed = {p.name: p.default for p in current if p.name in PHYSICS and p.default != self.parameters[p.name]}
-        if changed:
-            ok, reason = self.set_parameters(changed)
-            if not ok:
-                self.log.warning(f"parameters not updated from the world: {reason}")
-
     def _apply(self, changed):
-        """A validated parameter change, acting on the running simulation."""
+        """A validated parameter change, acting on the running simulation: one way, the World
+        and the Requests never write a parameter back."""
         physics = settings_from({n: v for n, v in changed.items() if n in PHYSICS})
         if physics:
-            self.sim.call(lambda world: world.update_settings(physics))
+            self.sim.call(lambda world: take_settings(world, physics))
         if "real_time_factor" in changed:
             self.sim.real_time_factor = changed["real_time_factor"]
         if "max_bodies" in changed:
             self.requests.max_bodies = changed["max_bodies"]
         if "scene_directories" in changed:
             self.requests.scene_directories = [Path(d) for d in changed["scene_directories"]]
+
+
+def take_settings(world, settings):
+    """world.update_settings for the settings that differ from the world's: a newly loaded
+    scene's own settings, handed on to the parameters, come back here unchanged and must not
+    wake every body of the new world."""
+    current = world.settings
+    freezing = settings.get("freezing", {})
+    if (any(current[key] != value for key, value in settings.items() if key != "freezing")
+            or any(current["freezing"][key] != value for key, value in freezing.items())):
+        world.update_settings(settings)

@@ -36,14 +36,6 @@ def service_table(runtime):
             return {"success": success, "message": message}
         return serve
 
-    def changes_settings(handler):
-        """A handler after which the physics parameters follow the world's settings."""
-        def serve(request):
-            response = handler(request)
-            runtime.sync_parameters()
-            return response
-        return serve
-
     def load_scene(request):
         result, message = requests.load_scene(str(request.map_url))
         if result == MAP_SUCCESS:
@@ -65,13 +57,13 @@ def service_table(runtime):
         Service("~/save_scene", "diagnostic_msgs/srv/AddDiagnostics", text(requests.save_scene)),
         Service("~/get_entities", "visualization_msgs/srv/GetInteractiveMarkers", get_entities),
         Service("~/pause", "std_srvs/srv/SetBool", boolean(requests.pause)),
-        Service("~/set_freezing", "std_srvs/srv/SetBool", changes_settings(boolean(requests.set_freezing))),
+        Service("~/set_freezing", "std_srvs/srv/SetBool", boolean(requests.set_freezing)),
         Service("~/step", "std_srvs/srv/Trigger", trigger(lambda: requests.step(parameters["step_count"]))),
         Service("~/reset", "std_srvs/srv/Trigger",
-                changes_settings(trigger(lambda: requests.reset(parameters["reset_scope"])))),
+                trigger(lambda: requests.reset(parameters["reset_scope"]))),
         Service("~/wake_all", "std_srvs/srv/Trigger", trigger(requests.wake_all)),
         Service("~/get_simulator_features", "std_srvs/srv/Trigger", trigger(requests.features)),
-        Service("~/load_scene", "nav_msgs/srv/LoadMap", changes_settings(load_scene)),
+        Service("~/load_scene", "nav_msgs/srv/LoadMap", load_scene),
     ]
 
 

@@ -55,6 +55,11 @@ class SpecError(ValueError):
         super().__init__(f"{path}: {problem}" if path else problem)
 
 
+class InvalidName(SpecError):
+    """A name that breaks NAME_PATTERN: its own type, so that callers answering with result
+    codes (the requests' NAME_INVALID) tell it from other bad values without reading the text."""
+
+
 def child(path, key):
     if isinstance(key, int):
         return f"{path}[{key}]"
@@ -120,7 +125,7 @@ def name(value, path):
     if not isinstance(value, str):
         raise SpecError(path, f"expected a string, got {type(value).__name__}")
     if not NAME_PATTERN.fullmatch(value):  # fullmatch: `$` alone lets a trailing newline in
-        raise SpecError(path, f"invalid name {value[:80]!r}: 1-64 characters of letters, digits, "
+        raise InvalidName(path, f"invalid name {value[:80]!r}: 1-64 characters of letters, digits, "
                               "'_', '-', '.', starting with a letter or '_'")
     return value
 
@@ -137,21 +142,30 @@ def quaternion(value, path):
     return [v / length for v in q]
 
 
+# The inclusive range of each numeric setting (gravity: of each component), the one table:
+# validate_settings checks it and the node's parameters advertise it (parameters.py).
+SETTINGS_RANGES = {
+    "gravity": (-1.0e3, 1.0e3),
+    "steps_per_second": (1, 10000),
+    "resolve_iterations": (1, 100),
+    "octree_depth": (1, 10),
+    "seed": (0, 2**63 - 1),
+    "freezing.time": (0.0, 1.0e6),
+    "freezing.linear_speed": (0.0, 1.0e6),
+    "freezing.angular_speed": (0.0, 1.0e6),
+}
+
+
 def validate_settings(raw, path="settings"):
     """Settings merged over the defaults (a partial mapping changes only its keys)."""
     raw = {} if raw is None else raw
     mapping(raw, path, DEFAULT_SETTINGS)
     out = {**DEFAULT_SETTINGS, "freezing": dict(DEFAULT_SETTINGS["freezing"])}
     if "gravity" in raw:
-        out["gravity"] = vector(raw["gravity"], child(path, "gravity"), 3, -1.0e3, 1.0e3)
-    if "steps_per_second" in raw:
-        out["steps_per_second"] = integer(raw["steps_per_second"], child(path, "steps_per_second"), 1, 10000)
-    if "resolve_iterations" in raw:
-        out["resolve_iterations"] = integer(raw["resolve_iterations"], child(path, "resolve_iterations"), 1, 100)
-    if "octree_depth" in raw:
-        out["octree_depth"] = integer(raw["octree_depth"], child(path, "octree_depth"), 1, 10)
-    if "seed" in raw:
-        out["seed"] = integer(raw["seed"], child(path, "seed"), 0, 2**63 - 1)
+        out["gravity"] = vector(raw["gravity"], child(path, "gravity"), 3, *SETTINGS_RANGES["gravity"])
+    for key in ("steps_per_second", "resolve_iterations", "octree_depth", "seed"):
+        if key in raw:
+            out[key] = integer(raw[key], child(path, key), *SETTINGS_RANGES[key])
     if "freezing" in raw:
         fpath = child(path, "freezing")
         freezing = mapping(raw["freezing"], fpath, DEFAULT_SETTINGS["freezing"])
@@ -159,7 +173,7 @@ def validate_settings(raw, path="settings"):
             out["freezing"]["enabled"] = boolean(freezing["enabled"], child(fpath, "enabled"))
         for key in ("time", "linear_speed", "angular_speed"):
             if key in freezing:
-                out["freezing"][key] = number(freezing[key], child(fpath, key), 0.0, 1.0e6)
+                out["freezing"][key] = number(freezing[key], child(fpath, key), *SETTINGS_RANGES[f"freezing.{key}"])
     return out
 
 

@@ -1,0 +1,49 @@
+"""Entities as plain data (~/get_entity, ~/get_entities): category, pose, twist, properties
+and bounds of a body, a vehicle or a sensor.
+"""
+import numpy as np
+
+from ..physics.math3d import rpy_to_quat
+from ..physics.shapes import SHAPES, half_extents, solid
+from ..sensors import matrix_to_quaternion, pose_matrix
+
+SENSOR_SIZE = 0.1  # m: the cube ~/get_entities draws a sensor as
+
+
+def describe(world, name, vehicles=None):
+    """An entity as plain data: category, pose and twist in `world`, properties, bounds.
+    `vehicles`: the set of vehicle names, when describing many."""
+    is_vehicle = name in (world.vehicle_names() if vehicles is None else vehicles)
+    props = world.vehicle(name) if is_vehicle else world.body(name)
+    body = world.body(name)
+    size = 2.0 * np.asarray(half_extents(SHAPES[body["shape"]].code, solid(body["shape"], body).dimensions))
+    return {
+        "name": name,
+        "category": "vehicle" if is_vehicle else ("immovable" if body["immovable"] else "box"),
+        "frame": "world",
+        "pose": {"position": body["position"], "orientation": body["quaternion"]},
+        "twist": {"linear": body["linear_velocity"], "angular": body["angular_velocity"]},
+        "mass": body["mass"],
+        "frozen": body["frozen"],
+        "properties": props,
+        "shape": body["shape"],
+        "bounds": {"size": size.tolist()},
+    }
+
+
+def describe_sensor(world, spec):
+    """A sensor as plain data, like describe(): its pose in `world` now, its spec as properties
+    and a 0.1 m cube as its bounds (for ~/get_entities' marker)."""
+    mount = pose_matrix(spec["pose"][:3], rpy_to_quat(spec["pose"][3:]))
+    if spec["parent"] != "world":
+        body = world.body(spec["parent"])
+        mount = pose_matrix(body["position"], body["quaternion"]) @ mount
+    return {
+        "name": spec["name"],
+        "category": "sensor",
+        "frame": "world",
+        "pose": {"position": mount[:3, 3].tolist(), "orientation": matrix_to_quaternion(mount[:3, :3]).tolist()},
+        "properties": dict(spec),
+        "shape": "box",
+        "bounds": {"size": [SENSOR_SIZE] * 3},
+    }

@@ -1,0 +1,236 @@
+"""The entity services: ~/spawn, ~/edit, ~/remove, ~/get_entity, ~/get_entities. Bodies,
+vehicles and sensors are entities; their names are unique among all three.
+"""
+import logging
+
+import yaml
+
+from ..physics import specs
+from ..sensors import TYPES as SENSOR_TYPES, validate_sensor
+from .descriptions import describe, describe_sensor
+from .name_filter import MAX_FILTER, match_names
+from .naming import unique_name
+from .payload import YAML_DUMPER, as_mapping, parse, pose_fields, xyz
+from .results import FAILED, INVALID_POSE, NAME_NOT_UNIQUE, NOT_FOUND, OK, RequestError, handled, reply
+
+log = logging.getLogger(__name__)
+
+
+def sensor_named(world, name):
+    """The spec of the world's sensor `name`, or None."""
+    return next((s for s in world.sensor_specs if s["name"] == name), None)
+
+
+def drop_sensors_of(world, removed):
+    """The sensors whose parent was just removed go with it, with a warning."""
+    removed = set(removed)
+    orphans = [s["name"] for s in world.sensor_specs if s["parent"] in removed]
+    if orphans:
+        log.warning(f"sensors {', '.join(orphans)} removed with their parent")
+        world.sensor_specs = [s for s in world.sensor_specs if s["parent"] not in removed]
+    return orphans
+
+
+def check_inside(world, position, path):
+    try:
+        world.check_inside(position, path)
+    except specs.SpecError as error:
+        raise RequestError(INVALID_POSE, str(error)) from None
+
+
+class EntityRequests:
+    """Requests' entity handlers (see requests.py for the state they share)."""
+
+    @handled
+    def spawn(self, text):
+        request = parse(text)
+        items = request if isinstance(request, list) else [request]
+        if not items:
+            raise RequestError(FAILED, "nothing to spawn")
+        cap = int(self.max_bodies)
+        if len(items) > cap:  # before validating any of them: a million boxes fail at once
+            raise RequestError(FAILED, f"spawn of {len(items)} entities: more than max_bodies ({cap})")
+        prepared = [self._prepare_spawn(raw, f"[{k}]" if isinstance(request, list) else "spawn")
+                    for k, raw in enumerate(items)]
+        return self.sim.call(lambda world: self._spawn(world, prepared, cap))
+
+    @staticmethod
+    def _prepare_spawn(raw, path):
+        """(path, is vehicle, validated spec, allow_renaming) of one spawn entry."""
+        item = dict(as_mapping(raw, path))
+        rename = specs.boolean(item.pop("allow_renaming", False), f"{path}.allow_renaming")
+        if "initial_pose" in item:
+            pose = as_mapping(item.pop("initial_pose"), f"{path}.initial_pose")
+            item.update(pose_fields(pose, f"{path}.initial_pose"))
+            if "quaternion" in item:
+                item.pop("rpy", None)  # the pose's orientation wins over the spec's
+        if item.get("type") in SENSOR_TYPES:  # its parent is checked against the world
+            return path, "sensor", item, rename
+        vehicle = "wheels" in item or "chassis" in item
+        spec = specs.validate_vehicle(item, path) if vehicle else specs.validate_body(item, path)
+        return path, vehicle, spec, rename
+
+    def _spawn(self, world, prepared, cap):
+        existing = world.body_names()
+        if len(existing) + len(prepared) > cap:
+            raise RequestError(FAILED, f"spawn of {len(prepared)} entities: the world has {len(existing)} "
+                                       f"bodies and max_bodies is {cap}")
+        names, suffixes = set(existing) | {s["name"] for s in world.sensor_specs}, {}
+        parents = set(existing) | {spec.get("name") for _, kind, spec, _ in prepared if kind != "sensor"}
+        sensors = []
+        for path, vehicle, spec, rename in prepared:
+            if vehicle == "sensor":
+                sensor = validate_sensor(spec, path, parents)
+                if sensor["name"] in names or sensor["name"] == "world":
+                    raise RequestError(NAME_NOT_UNIQUE, f"{path}.name: {sensor['name']!r} is taken "
+                                                        "(sensor names are frames, unique among entities)")
+                names.add(sensor["name"])
+                sensors.append(sensor)
+                continue
+            name = spec.get("name")
+            if name is not None and name in names:
+                if not rename:
+                    raise RequestError(NAME_NOT_UNIQUE, f"{path}.name: {name!r} is taken "
+                                                        "(allow_renaming: true picks a free name)")
+                spec["name"] = name = unique_name(name, names, suffixes)
+            if name is not None:
+                names.add(name)
+            check_inside(world, spec["position"], f"{path}.position")
+        added = []
+        try:
+            for _, vehicle, spec, _ in prepared:
+                if vehicle != "sensor":
+                    added.append(world.add_vehicle(spec) if vehicle else world.add_body(spec))
+        except Exception:
+            world.remove_bodies(added)  # all or nothing
+            raise
+        if sensors:  # a new list: whoever follows the sensors sees them change
+            world.sensor_specs = [*world.sensor_specs, *sensors]
+        return reply(OK, ", ".join(added + [s["name"] for s in sensors]))
+
+    @handled
+    def edit(self, text):
+        request = dict(as_mapping(parse(text), "edit"))
+        name = request.pop("entity", None)
+        if not isinstance(name, str):
+            raise RequestError(FAILED, "edit.entity: the name of the entity to edit is missing")
+        label = name if specs.NAME_PATTERN.fullmatch(name) else specs.quote(name)  # for messages
+        if self.sim.call(lambda world: sensor_named(world, name) is not None):
+            return self.sim.call(lambda world: self._edit_sensor(world, name, request))
+        state = as_mapping(request.pop("state", {}) or {}, "edit.state")
+        specs.mapping(state, "edit.state", {"pose", "twist", "header", "acceleration"})
+        set_pose = specs.boolean(request.pop("set_pose", "pose" in state), "edit.set_pose")
+        set_twist = specs.boolean(request.pop("set_twist", "twist" in state), "edit.set_twist")
+        vehicle_edit = request.pop("vehicle", None)
+        fields = dict(request)
+        if set_pose:
+            fields.update(pose_fields(as_mapping(state.get("pose", {}), "edit.state.pose"), "edit.state.pose"))
+        if set_twist:
+            twist = as_mapping(state.get("twist", {}), "edit.state.twist")
+            specs.mapping(twist, "edit.state.twist", {"linear", "angular"})
+            if "linear" in twist:
+                fields["linear_velocity"] = xyz(twist["linear"], "edit.state.twist.linear")
+            if "angular" in twist:
+                fields["angular_velocity"] = xyz(twist["angular"], "edit.state.twist.angular")
+        # Validate everything before changing anything.
+        fields = specs.validate_body_fields(fields, label, specs.BODY_KEYS - {"name", "shape"})
+        if vehicle_edit is not None:
+            specs.validate_vehicle_edit(as_mapping(vehicle_edit, f"{label}.vehicle"), f"{label}.vehicle")
+        return self.sim.call(lambda world: self._edit(world, name, label, fields, vehicle_edit))
+
+    @staticmethod
+    def _edit(world, name, label, fields, vehicle_edit):
+        if name not in world.body_names():
+            raise RequestError(NOT_FOUND, f"no entity named {label}")
+        if vehicle_edit is not None and name not in world.vehicle_names():
+            raise RequestError(FAILED, f"{label}.vehicle: {specs.quote(name)} is not a vehicle")
+        if "position" in fields:
+            check_inside(world, fields["position"], f"{label}.position")
+        if fields:
+            world.edit_body(name, **fields)
+        if vehicle_edit:
+            world.edit_vehicle(name, **vehicle_edit)
+        return reply(OK, f"edited {name}: {', '.join(sorted(fields) + (['vehicle'] if vehicle_edit else []))}")
+
+    @staticmethod
+    def _edit_sensor(world, name, fields):
+        """A sensor's keys replaced and the whole spec validated again (its name and type stay)."""
+        spec = sensor_named(world, name)
+        if spec is None:
+            raise RequestError(NOT_FOUND, f"no entity named {specs.quote(name)}")
+        for key in ("name", "type"):
+            if key in fields and fields[key] != spec[key]:
+                raise RequestError(FAILED, f"{name}.{key}: a sensor's {key} cannot be edited "
+                                           "(remove it and spawn another)")
+        parents = set(world.body_names())
+        edited = validate_sensor({**spec, **fields}, name, parents)
+        world.sensor_specs = [edited if s is spec else s for s in world.sensor_specs]
+        return reply(OK, f"edited {name}: {', '.join(sorted(set(fields) - {'name', 'type'}))}")
+
+    @handled
+    def remove(self, text):
+        request = as_mapping(parse(text), "remove")
+        specs.mapping(request, "remove", {"entity", "filter", "all"})
+        if len(request) != 1:
+            raise RequestError(FAILED, "remove takes exactly one of entity, filter, all")
+        if "entity" in request:
+            name = request["entity"]
+            if not isinstance(name, str):
+                raise RequestError(NOT_FOUND, f"no entity named {specs.quote(name)}")
+            return self.sim.call(lambda world: self._remove(world, [name], strict=True))
+        if "filter" in request:
+            pattern = request["filter"]
+            if not isinstance(pattern, str) or not pattern or len(pattern) > MAX_FILTER:
+                raise RequestError(FAILED, f"remove.filter: expected a regular expression of 1-{MAX_FILTER} "
+                                           f"characters, got {specs.quote(pattern)}")
+            names = self.sim.call(lambda world: world.body_names() + [s["name"] for s in world.sensor_specs])
+            doomed = match_names(pattern, names)  # here, not on the simulation thread
+            if not doomed:
+                raise RequestError(NOT_FOUND, f"no entity matches {specs.quote(pattern)}")
+            return self.sim.call(lambda world: self._remove(world, doomed, strict=False))
+        if request["all"] is not True:
+            raise RequestError(FAILED, "remove.all: must be true")
+        return self.sim.call(lambda world: self._remove(world, world.body_names(), strict=True))
+
+    @staticmethod
+    def _remove(world, doomed, strict):
+        present = set(world.body_names())
+        sensors = {s["name"] for s in world.sensor_specs} & set(doomed)
+        if strict and doomed and doomed[0] not in present and doomed[0] not in sensors:
+            raise RequestError(NOT_FOUND, f"no entity named {specs.quote(doomed[0])}")
+        doomed = [name for name in doomed if name in present]  # a filter's may have gone meanwhile
+        world.remove_bodies(doomed)
+        if sensors:
+            world.sensor_specs = [s for s in world.sensor_specs if s["name"] not in sensors]
+        orphans = drop_sensors_of(world, doomed)
+        return reply(OK, ", ".join(doomed + sorted(sensors) + orphans))
+
+    @handled
+    def get_entity(self, text):
+        request = as_mapping(parse(text), "get_entity")
+        specs.mapping(request, "get_entity", {"entity"})
+        name = request.get("entity")
+        if not isinstance(name, str):
+            raise RequestError(FAILED, f"get_entity.entity: expected an entity name, got {specs.quote(name)}")
+
+        def read(world):
+            sensor = sensor_named(world, name)
+            if sensor is not None and (sensor["parent"] == "world" or sensor["parent"] in world.body_names()):
+                return describe_sensor(world, sensor)
+            if name not in world.body_names():
+                raise RequestError(NOT_FOUND, f"no entity named {specs.quote(name)}")
+            return describe(world, name)
+        return True, yaml.dump(self.sim.call(read), Dumper=YAML_DUMPER, sort_keys=False)
+
+    def entities(self):
+        """[(name, description dict)] of every entity: the bodies in the order of
+        ~/bodies/poses, then the sensors."""
+        def read(world):
+            vehicles = set(world.vehicle_names())  # once, not per entity: 10,000 bodies stay linear
+            names = world.body_names()
+            present = set(names)
+            # A sensor whose parent left the world goes at its next sample: not listed meanwhile.
+            return ([(name, describe(world, name, vehicles)) for name in names]
+                    + [(s["name"], describe_sensor(world, s)) for s in world.sensor_specs
+                       if s["parent"] == "world" or s["parent"] in present])
+        return self.sim.call(read)

@@ -1,0 +1,59 @@
+"""Result codes and how every failure becomes a coded reply.
+
+Replies are (success, "CODE: message"). A handler raises RequestError with the code it means;
+errors from validation carry their code in their type (specs.InvalidName: NAME_INVALID), never
+in their text.
+"""
+import functools
+import logging
+
+from ..physics import specs
+
+OK = "RESULT_OK"
+NOT_FOUND = "RESULT_NOT_FOUND"
+INCORRECT_STATE = "RESULT_INCORRECT_STATE"
+FAILED = "RESULT_OPERATION_FAILED"
+NAME_NOT_UNIQUE = "NAME_NOT_UNIQUE"
+NAME_INVALID = "NAME_INVALID"
+INVALID_POSE = "INVALID_POSE"
+ALREADY = "ALREADY_IN_TARGET_STATE"
+
+# nav_msgs/srv/LoadMap result codes.
+MAP_SUCCESS, MAP_DOES_NOT_EXIST, INVALID_MAP_DATA, UNDEFINED_FAILURE = 0, 1, 2, 255
+
+log = logging.getLogger(__name__)
+
+
+class RequestError(Exception):
+    def __init__(self, code, message):
+        super().__init__(f"{code}: {message}")
+        self.code = code
+
+
+def reply(code, message):
+    return code == OK, f"{code}: {message}"
+
+
+def handled(fn):
+    """Turns every failure into a coded reply: the callers are services, whose node must not
+    fall over whatever it is sent."""
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        try:
+            return fn(*args, **kwargs)
+        except RequestError as error:
+            return False, str(error)
+        except specs.SpecError as error:
+            code = NAME_INVALID if isinstance(error, specs.InvalidName) else FAILED
+            return False, f"{code}: {error}"
+        except KeyError as error:
+            return False, f"{NOT_FOUND}: {error.args[0] if error.args else 'no such entity'}"
+        except TimeoutError as error:
+            return False, f"{FAILED}: {error}"
+        except ValueError as error:
+            return False, f"{FAILED}: {str(error)[:500]}"
+        except Exception as error:  # a bug: answered and logged, never a dead service
+            log.exception("%s failed", fn.__name__)
+            return False, f"{FAILED}: internal error: {type(error).__name__}: {str(error)[:300]}"
+    return wrapper
+
