@@ -183,7 +183,7 @@ class World(WorldQueries):
         if "position" in body:
             self.check_inside(body["position"], f"{name}.position")
         resized = shape.fields.keys() & body.keys()
-        solid = shapes.solid(shape.name, {**shape.fields, **body}) if resized else None
+        solid = shapes.solid(shape.name, {**shape.fields, **body}, name) if resized else None
         self._wake_touching([slot])
         self._forget_contacts([slot])
         b = self._bodies

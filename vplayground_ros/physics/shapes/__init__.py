@@ -141,12 +141,12 @@ def ray(kind, dims, hulls, h, o, d, reach):
 Solid = namedtuple("Solid", "dimensions fields volume unit_inertia hull")
 
 
-def solid(name, spec):
+def solid(name, spec, path="body"):
     """What a shape spec (its SPEC_KEYS, validated) makes: dimensions, the keys as a scene
     holds them, volume (m^3), inertia per kg (3, 3) about the centre of mass in the body frame,
     and the hull (convex.Hull, convex bodies only)."""
     if name == "convex":
-        hull = convex.build_hull(spec["points"])
+        hull = convex.build_hull(spec["points"], f"{path}.points")
         return Solid(convex.dimensions(hull), convex.spec_fields(hull), hull.volume, hull.unit_inertia, hull)
     module = SHAPES[name].module
     dims = module.dimensions(spec)
