@@ -363,6 +363,6 @@ def test_a_convex_body_is_drawn_as_its_hull_triangles():
     rows, types, _, _, scales = shape_markers(props["shapes"], props["dimensions"],
                                               np.array([[0, 0, 0, 0, 0, 0, 1.0]] * 2), np.array([1, 2]))
     assert list(types) == [11, 1] and scales[0].tolist() == [1, 1, 1]
-    points = hull_points(props["hull_triangles"])
+    points = hull_points(world.hull_triangles())
     assert points[1] is None and points[0].shape == (36, 3)  # a brick's 12 triangles
     assert np.allclose(np.abs(points[0]), [0.5, 0.25, 0.1])  # its corners, in its frame

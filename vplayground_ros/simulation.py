@@ -304,8 +304,8 @@ class Simulation:
         if layout is None or layout.world is not world or layout.version != version:
             properties = world.body_properties()
             for array in properties.values():
-                if isinstance(array, np.ndarray):
-                    array.flags.writeable = False
+                array.flags.writeable = False
+            properties["hull_triangles"] = world.hull_triangles()
             vehicle_names = world.vehicle_names()
             scenery = layout.scenery if layout is not None and layout.world is world else None
             if scenery is None or scenery.version != world.scenery_version:

@@ -64,17 +64,17 @@ class WorldQueries:
     def body_properties(self):
         """What only adding, removing and editing change (see layout_version), one row per
         body (copies): shapes (codes of physics.shapes), dimensions (each shape's three
-        numbers), sizes (full edges of the body-frame bounding box), masses, immovable, and
-        hull_triangles: a tuple of each convex body's hull as triangles (T, 3, 3) in its frame,
-        None for the other shapes."""
-        b, layout = self._bodies, self._current_layout()
-        rows = layout.rows
+        numbers), sizes (full edges of the body-frame bounding box), masses, immovable."""
+        b, rows = self._bodies, self._current_layout().rows
         return {"shapes": gather(b.shape, rows), "dimensions": gather(b.dimensions, rows),
                 "sizes": 2.0 * gather(b.half_extents, rows), "masses": gather(b.mass, rows),
-                "immovable": gather(b.immovable, rows),
-                "hull_triangles": tuple(self._solids[slot][1].hull.triangles
-                                        if self._solids[slot][1].hull is not None else None
-                                        for slot in layout.slots.tolist())}
+                "immovable": gather(b.immovable, rows)}
+
+    def hull_triangles(self):
+        """Each body's hull as triangles (T, 3, 3) in its frame, one row per body (None for the
+        shapes other than convex), as a tuple; for drawing."""
+        return tuple(self._solids[slot][1].hull.triangles if self._solids[slot][1].hull is not None
+                     else None for slot in self._current_layout().slots.tolist())
 
     def contacts(self):
         """The newest step's contact points; body_a/body_b are rows of state(), -1 the ground,
