@@ -1,6 +1,7 @@
 # make run  : set up .venv and run the simulator node on the built-in default scene
 # make test : set up .venv and run the whole test suite
-# make bench: this engine against PyBullet and MuJoCo, and the node's overhead (minutes; not in make test)
+# make bench: this engine against Rapier, Jolt, PyBullet and MuJoCo, and the node's overhead (minutes;
+#             not in make test; the Rust peers build first, bench-peers, and are skipped without cargo)
 # make fuzz : the hostile-input tests with FUZZ_EXAMPLES (default 5000) per property, randomised
 # make soak : the node under steady traffic for DURATION seconds (default 1200), a Foxglove client
 #             subscribed to everything (SOAK_ARGS= drops it); memory, RTF, late ticks
@@ -13,7 +14,7 @@ FUZZ_EXAMPLES ?= 5000
 DURATION      ?= 1200
 SOAK_ARGS     ?= --foxglove
 
-.PHONY: run test bench fuzz soak setup clean
+.PHONY: run test bench bench-peers fuzz soak setup clean
 
 setup: $(STAMP)
 
@@ -43,7 +44,11 @@ soak: $(STAMP)
 	mkdir -p bench/results
 	$(PY) bench/soak.py --duration $(DURATION) $(SOAK_ARGS) --output bench/results/soak_$$(date +%Y%m%d_%H%M%S).txt
 
-bench: $(STAMP)
+# Rapier and Jolt, a Rust program each (bench/peers); a failed build only leaves them out of the bench.
+bench-peers:
+	-sh bench/peers/build.sh
+
+bench: $(STAMP) bench-peers
 	$(PY) -m pip install --quiet -e ".[bench]"
 	$(PY) bench/compare.py
 

@@ -1,22 +1,31 @@
-"""Side by side, in one process: this engine, PyBullet (DIRECT, fixed step 1/128, one substep)
-and MuJoCo (timestep 1/128, boxes on free joints: its defaults, with its sleeping, and with its
-CG solver), on the same box lists (bench/scenes.py). Each engine is timed after its warm-up (our
-Numba compile or cache load is timed separately). Prints one table and writes JSON and a PNG of
-ms/step over simulated time.
+"""Side by side: this engine, PyBullet (DIRECT, fixed step 1/128, one substep) and MuJoCo
+(timestep 1/128, boxes on free joints: its defaults, with its sleeping, and with its CG solver) in
+this process, and Rapier and Jolt (bench/peers: a Rust program each, single-threaded, the
+engine's defaults, time step 1/128, sleeping on) in their own, on the same box lists
+(bench/scenes.py). Each engine is timed after its warm-up (our Numba compile or cache load is
+timed separately). Prints one table and writes JSON and a PNG of ms/step over simulated time.
+
+Materials: boxes 0.6 static / 0.4 dynamic friction and 0.2 elasticity, the ground 0.8 / 0.6 and
+0.1 (our defaults). Rapier and Jolt have one friction coefficient: they get the static one, and
+combine a pair their own way (Rapier: averages; Jolt: friction's geometric mean, the larger
+restitution). PyBullet and MuJoCo keep their default materials.
 
 Every step is timed twice: the thread's CPU time (time.thread_time_ns), which other processes on
 a shared machine do not inflate and which the ratios use, and wall time. A run that spends more
 than --budget CPU seconds stops early and says so (MuJoCo's default Newton solver factors each
 contact island's Hessian, which on one island of hundreds of boxes costs ~0.2 s a step here).
 
-    python bench/compare.py            # the full suite (~10 minutes)
-    python bench/compare.py --quick    # a few seconds: small scenes, for the regression guard
+    python bench/compare.py                   # the full suite (~13 minutes on a shared 2-core VM)
+    python bench/compare.py --quick           # a few seconds: small scenes, for the regression guard
+    python bench/compare.py --scenes columns  # the pile and the 5,000 asleep only (~5 minutes)
 
-PyBullet, MuJoCo and matplotlib come from `pip install .[bench]`; missing ones are skipped.
+PyBullet, MuJoCo and matplotlib come from `pip install .[bench]`, the Rust peers from
+`bench/peers/build.sh` (make bench runs both); missing ones are skipped.
 """
 import argparse
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -28,10 +37,12 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).parent))
 import scenes  # noqa: E402
 from pile import world_of  # noqa: E402
+from vplayground_ros.physics.specs import BODY_DEFAULTS, DEFAULT_GROUND  # noqa: E402
 
 RATE = 128
 DT = 1.0 / RATE
 FALLING_SECONDS = 2.0  # the falling phase of a pile (SPEC 8)
+PEER_PROGRAMS = Path(__file__).parent / "peers" / "target" / "release"
 
 
 class Ours:
@@ -110,10 +121,82 @@ class MuJoCo:
         return int(self.model.nbody - self.data.nbody_awake) if self.sleeping else None
 
 
-def engines(boxes, peers=True, sleep=True, cg=True, ours=None):
+class PeerMissing(ImportError):
+    """A Rust peer whose program has not been built."""
+
+
+class RustPeer:
+    """An engine in its own process (bench/peers): it gets the scene as a JSON file, runs all of
+    its steps, timing each on its thread's CPU clock and the wall clock, and prints the times,
+    the final positions and how many bodies sleep. Z up, SI units."""
+    program = None
+
+    def __init__(self, boxes, sleeping=True):
+        self.path = PEER_PROGRAMS / self.program
+        if not self.path.exists():
+            raise PeerMissing(self.path)
+        self.boxes, self.sleeping = boxes, sleeping
+        self.final_positions, self.asleep = None, None
+
+    def scene(self, steps, budget_s):
+        body, ground = BODY_DEFAULTS, DEFAULT_GROUND
+        return {"dt": DT, "steps": steps, "gravity": [0.0, 0.0, -9.81], "sleeping": self.sleeping,
+                "budget_s": budget_s,
+                "ground": {"height": ground["height"], "friction": ground["static_friction"],
+                           "restitution": ground["elasticity"]},
+                "boxes": [{"half_extents": (size / 2).tolist(), "position": position.tolist(),
+                           "quaternion": quaternion.tolist(), "mass": mass,
+                           "friction": body["static_friction"], "restitution": body["elasticity"]}
+                          for size, position, quaternion, mass in self.boxes]}
+
+    def run(self, steps, budget_s):
+        """The program's report on `steps` steps (it stops after budget_s CPU seconds)."""
+        with tempfile.NamedTemporaryFile("w", suffix=".json") as scene_file:
+            json.dump(self.scene(steps, budget_s), scene_file)
+            scene_file.flush()
+            result = subprocess.run([str(self.path), scene_file.name], capture_output=True, text=True,
+                                    timeout=max(600, 10 * budget_s))
+        if result.returncode != 0:
+            raise RuntimeError(f"{self.program} failed: {result.stderr[-1000:]}")
+        report = json.loads(result.stdout)
+        self.final_positions, self.asleep = np.array(report["positions"]), report["asleep"]
+        return report
+
+    def positions(self):
+        if self.final_positions is None:
+            return np.array([position for _, position, _, _ in self.boxes])
+        return self.final_positions
+
+    def resting_count(self):
+        return self.asleep if self.sleeping else None
+
+
+class Rapier(RustPeer):
+    name = "rapier"
+    program = "rapier_bench"
+
+
+class Jolt(RustPeer):
+    name = "jolt"
+    program = "jolt_bench"
+
+
+def rust_peers_status():
+    """A line saying which Rust peers will run, and why any will not."""
+    missing = [peer.program for peer in (Rapier, Jolt) if not (PEER_PROGRAMS / peer.program).exists()]
+    if not missing:
+        return "Rust peers: Rapier and Jolt (bench/peers)"
+    why = ("cargo is not installed" if shutil.which("cargo") is None
+           else "not built: run bench/peers/build.sh (make bench does)")
+    return f"Rust peers skipped ({', '.join(missing)}): {why}"
+
+
+def engines(boxes, peers=True, sleep=True, cg=True, ours=None, python_peers=True):
     """Every engine that is installed, built on the same boxes (ours: unless given)."""
     makers = [lambda: ours or Ours(boxes)]
     if peers:
+        makers += [lambda: Rapier(boxes), lambda: Jolt(boxes)]
+    if peers and python_peers:
         makers += [lambda: PyBullet(boxes), lambda: MuJoCo(boxes)]
         if sleep:
             makers.append(lambda: MuJoCo(boxes, sleeping=True))
@@ -144,10 +227,13 @@ class Timing:
     def __init__(self):
         self.cpu_ms, self.wall_ms = [], []
         self.cpu_spent_ms = 0.0
+        self.warnings = []
 
     def run(self, engine, seconds, budget_s):
         """Steps `engine` for `seconds` of simulated time, or until this timing has spent
         budget_s CPU seconds. Returns True when every step was run."""
+        if isinstance(engine, RustPeer):
+            return self.run_peer(engine, seconds, budget_s)
         for _ in range(int(round(seconds * RATE))):
             if self.cpu_spent_ms > budget_s * 1e3:
                 return False
@@ -158,12 +244,26 @@ class Timing:
             self.cpu_spent_ms += self.cpu_ms[-1]
         return True
 
+    def run_peer(self, peer, seconds, budget_s):
+        """A Rust peer times its own steps in its own process."""
+        report = peer.run(int(round(seconds * RATE)), budget_s - self.cpu_spent_ms / 1e3)
+        self.cpu_ms += report["cpu_ms"]
+        self.wall_ms += report["wall_ms"]
+        self.cpu_spent_ms += sum(report["cpu_ms"])
+        self.warnings += report["errors"]
+        # Its process's CPU time well above its thread's would mean the engine used more threads.
+        if report["process_cpu_s"] > 1.1 * self.cpu_spent_ms / 1e3 + 0.05:
+            self.warnings.append(f"process CPU {report['process_cpu_s']:.2f} s > thread CPU "
+                                 f"{self.cpu_spent_ms / 1e3:.2f} s")
+        return report["complete"]
+
     def phase(self, first, last):
         cpu, wall = np.array(self.cpu_ms[first:last]), np.array(self.wall_ms[first:last])
         if len(cpu) == 0:
             return None
-        return {"median_ms": round(float(np.median(cpu)), 3), "p95_ms": round(float(np.percentile(cpu, 95)), 3),
-                "max_ms": round(float(cpu.max()), 2), "wall_median_ms": round(float(np.median(wall)), 3),
+        # four decimals: a step of thousands of sleeping bodies in Rapier or Jolt is under 1 microsecond
+        return {"median_ms": round(float(np.median(cpu)), 4), "p95_ms": round(float(np.percentile(cpu, 95)), 4),
+                "max_ms": round(float(cpu.max()), 4), "wall_median_ms": round(float(np.median(wall)), 3),
                 "wall_max_ms": round(float(wall.max()), 2)}
 
     def row(self, scene, bodies, engine, complete, seconds, rtf_from=0):
@@ -175,18 +275,20 @@ class Timing:
                 "max_ms": round(max(self.cpu_ms), 2),  # the longest single step of the whole run
                 "rtf": significant(timed / (sum(self.cpu_ms[rtf_from:]) / 1e3)),
                 "rtf_wall": significant(timed / (sum(self.wall_ms[rtf_from:]) / 1e3)),
-                "note": "" if complete else f"CPU budget spent at {simulated:.1f} of {seconds:g} s"}
+                "note": "; ".join(self.warnings + ([] if complete else
+                                                   [f"CPU budget spent at {simulated:.1f} of {seconds:g} s"]))}
 
 
 def pile_scene(count, seconds, budget_s):
+    """Issue 20's loose pile (scenes.loose_pile) falling and settling."""
     rows, curves = [], {}
-    boxes = scenes.pile(count)
+    boxes = scenes.loose_pile(count)
     falling = int(FALLING_SECONDS * RATE)
     for engine in engines(boxes):
         timing = Timing()
         complete = timing.run(engine, seconds, budget_s)
         p = engine.positions()
-        row = timing.row(f"pile of {count}", count, engine, complete, seconds)
+        row = timing.row(f"loose pile of {count}", count, engine, complete, seconds)
         row["falling"] = timing.phase(0, falling)
         if complete:
             row["resting"] = timing.phase(-RATE, None)
@@ -226,16 +328,40 @@ def resting_scene(count, settle_seconds, rest_seconds, budget_s, peers):
     return progress(rows)
 
 
+def drift_figures(start, end):
+    """How far the boxes that should have stood still moved (m), and whether that is standing."""
+    drift = float(np.max(np.linalg.norm(end - start, axis=1)))
+    return {"max_drift_m": round(drift, 4), "stands_2cm": drift < 0.02, "stands_10cm": drift < 0.1}
+
+
+def columns_scene(count, settle_seconds, budget_s):
+    """`count` boxes standing in columns of two, exactly on each other (scenes.resting_columns):
+    every engine gets settle_seconds to put them to sleep (its own sleep timer), then one second
+    is timed. PyBullet and MuJoCo are left out: on thousands of boxes in contact each would spend
+    its whole CPU budget before sleeping."""
+    rows = []
+    boxes = scenes.resting_columns(count // 2)
+    for engine in engines(boxes, python_peers=False):
+        timing = Timing()
+        complete = timing.run(engine, settle_seconds + 1.0, budget_s)
+        row = timing.row(f"{count} in columns of two", count, engine, complete, settle_seconds + 1.0,
+                         rtf_from=-RATE)
+        row["resting"] = timing.phase(-RATE, None)
+        row.update(drift_figures(np.array([position for _, position, _, _ in boxes]), engine.positions()))
+        row["at_rest"] = engine.resting_count()
+        rows.append(row)
+    return progress(rows)
+
+
 def stack_scene(label, boxes, seconds, budget_s):
     rows = []
     for engine in engines(boxes, sleep=False, cg=False):
         start = engine.positions().copy()
         timing = Timing()
         complete = timing.run(engine, seconds, budget_s)
-        drift = float(np.max(np.linalg.norm(engine.positions() - start, axis=1)))
         row = timing.row(label, len(boxes), engine, complete, seconds)
-        row.update({"resting": timing.phase(0, None), "max_drift_m": round(drift, 4),
-                    "stands_2cm": drift < 0.02, "stands_10cm": drift < 0.1})
+        row["resting"] = timing.phase(0, None)
+        row.update(drift_figures(start, engine.positions()))
         rows.append(row)
     return progress(rows)
 
@@ -261,7 +387,7 @@ def car_scene(seconds, budget_s):
 def stage_breakdown(count, seconds):
     """Where our step's CPU time goes on the falling pile (per-stage timers inside the compiled
     step): {stage: [ms per step, % of the step]}."""
-    world = world_of(scenes.pile(count))
+    world = world_of(scenes.loose_pile(count))
     world.profiling = True
     steps = int(seconds * RATE)
     world.step(steps)
@@ -307,23 +433,23 @@ def stability(row):
 
 
 def print_table(rows):
-    print("ms/step are this thread's CPU time (median/p95; max: the run's longest step); RTF = simulated s "
-          "per CPU s, 'wall' per wall-clock s; 'ours x' = our RTF / the engine's (CPU)")
-    print(f"{'scene':<28} {'bodies':>6} {'engine':<14} {'sim s':>5} {'falling ms':>13} {'resting ms':>13} "
+    print("ms/step are this thread's CPU time (median/p95/max of the phase; max ms: the run's longest step); "
+          "RTF = simulated s per CPU s, 'wall' per wall-clock s; 'ours x' = our RTF / the engine's (CPU)")
+    print(f"{'scene':<28} {'bodies':>6} {'engine':<14} {'sim s':>5} {'falling ms':>18} {'resting ms':>18} "
           f"{'max ms':>7} {'RTF':>7} {'wall':>7} {'ours x':>7}  stability")
     for row in rows:
         ratio = f"{row['ours_x']:.{2 if row['ours_x'] < 100 else 0}f}" if "ours_x" in row else ""
         print(f"{row['scene']:<28} {row['bodies']:>6} {row['engine']:<14} {row['simulated_s']:>5.1f} "
-              f"{medians(row.get('falling')):>13} {medians(row.get('resting')):>13} {row['max_ms']:>7.4g} "
+              f"{medians(row.get('falling')):>18} {medians(row.get('resting')):>18} {row['max_ms']:>7.4g} "
               f"{row['rtf']:>7.2f} {row['rtf_wall']:>7.2f} {ratio:>7}  {stability(row)}")
 
 
 def medians(phase_figures):
     if not phase_figures:
         return ""
-    median, p95 = phase_figures["median_ms"], phase_figures["p95_ms"]
-    digits = 3 if median < 1 else (2 if median < 100 else 0)
-    return f"{median:.{digits}f}/{p95:.{digits}f}"
+    median, p95, longest = phase_figures["median_ms"], phase_figures["p95_ms"], phase_figures["max_ms"]
+    digits = 4 if median < 0.01 else (3 if median < 1 else (2 if median < 100 else 0))
+    return f"{median:.{digits}f}/{p95:.{digits}f}/{longest:.{digits}f}"
 
 
 def plot(curves, count, path):
@@ -341,7 +467,7 @@ def plot(curves, count, path):
     ax.set_yscale("log")
     ax.axhline(1e3 / RATE, color="grey", linestyle="--", linewidth=0.8, label="real time (7.8 ms)")
     ax.axvline(FALLING_SECONDS, color="grey", linestyle=":", linewidth=0.8)
-    ax.set_title(f"Pile of {count} boxes falling and settling, 128 steps/s (falling phase left of the dotted line)")
+    ax.set_title(f"Loose pile of {count} boxes falling and settling, 128 steps/s (falling phase left of the dotted line)")
     ax.legend(loc="center right")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -370,44 +496,57 @@ def compile_times(cold):
     return times
 
 
+SCENES = ("pile", "columns", "resting", "stacks", "car", "overhead")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small scenes, a few seconds in all")
+    parser.add_argument("--scenes", nargs="+", choices=SCENES, default=SCENES,
+                        help="run only these (default: all; the pile always runs, for the plot and the stage split)")
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
     parser.add_argument("--budget", type=float, default=50.0,
                         help="CPU seconds one engine may spend on one scene before its run stops (default 50)")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
+    print(rust_peers_status(), flush=True)
     compile_s = compile_times(cold=not args.quick)
     Ours(scenes.tower(2)).step()  # this process's own cache load, before any timing
 
     if args.quick:
-        pile_count, rows_and_curves = 150, pile_scene(150, 3.0, args.budget)
-        rows = rows_and_curves[0] + resting_scene(300, 3.0, 1.0, args.budget, peers=False)
-        rows += stack_scene("10-box tower", scenes.tower(10), 2.0, args.budget)
-        breakdown_s, breakdown = 1.0, stage_breakdown(150, 1.0)
-        overhead = None
+        pile_count, pile_seconds, columns, stacks = 150, 3.0, 300, (2.0, [10])
+        resting = {"count": 300, "settle_seconds": 3.0, "rest_seconds": 1.0, "peers": False}
+        breakdown_s = 1.0
     else:
-        pile_count, rows_and_curves = 1000, pile_scene(1000, 10.0, args.budget)
-        rows = rows_and_curves[0] + resting_scene(5000, 20.0, 2.0, args.budget, peers=True)
-        for label, boxes in (("10-box tower", scenes.tower(10)), ("20-box tower", scenes.tower(20)),
-                             ("55-box brick wall", scenes.brick_wall())):
-            rows += stack_scene(label, boxes, 20.0, args.budget)
+        pile_count, pile_seconds, columns, stacks = 1000, 10.0, 5000, (20.0, [10, 20])
+        resting = {"count": 5000, "settle_seconds": 20.0, "rest_seconds": 2.0, "peers": True}
+        breakdown_s = FALLING_SECONDS
+    rows, curves = pile_scene(pile_count, pile_seconds, args.budget)
+    if "columns" in args.scenes:
+        rows += columns_scene(columns, 3.0, args.budget)
+    if "resting" in args.scenes:
+        rows += resting_scene(budget_s=args.budget, **resting)
+    if "stacks" in args.scenes:
+        stack_seconds, towers = stacks
+        for count in towers:
+            rows += stack_scene(f"{count}-box tower", scenes.tower(count), stack_seconds, args.budget)
+        if not args.quick:
+            rows += stack_scene("55-box brick wall", scenes.brick_wall(), stack_seconds, args.budget)
+    if "car" in args.scenes and not args.quick:
         rows += car_scene(10.0, args.budget)
-        breakdown_s, breakdown = FALLING_SECONDS, stage_breakdown(1000, FALLING_SECONDS)
-        overhead = node_overhead(20.0)
-    curves = rows_and_curves[1]
+    breakdown = stage_breakdown(pile_count, breakdown_s)
+    overhead = node_overhead(20.0) if "overhead" in args.scenes and not args.quick else None
     ratios(rows)
     print("Numba, fresh interpreter to its first step (not in the figures): cache load (warm) "
           f"{compile_s['warm_s']} s" + (f", compile (empty cache) {compile_s['cold_s']} s" if "cold_s" in compile_s else ""))
     print_table(rows)
-    print(f"our step on the falling pile of {pile_count} (first {breakdown_s:g} s), CPU ms per step and share: "
+    print(f"our step on the falling loose pile of {pile_count} (first {breakdown_s:g} s), CPU ms per step and share: "
           + ", ".join(f"{stage} {ms:.3f} ({pct}%)" for stage, (ms, pct) in breakdown.items()))
     if overhead:
         print(f"node overhead (1,000 bodies, 30 Hz, bag on, every topic subscribed): {overhead}")
     name = "compare_quick" if args.quick else "compare"
-    result = {"quick": args.quick, "first_step_s": compile_s, "rows": rows,
+    result = {"quick": args.quick, "scenes": list(args.scenes), "first_step_s": compile_s, "rows": rows,
               "stages_ms_percent": breakdown, "node_overhead": overhead,
               "plot": plot(curves, pile_count, args.out / f"{name}.png"),
               "bench_wall_s": round(time.perf_counter() - started, 1)}

@@ -6,7 +6,13 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
+import pytest
+
 BENCH = Path(__file__).resolve().parent.parent / "bench"
+sys.path.insert(0, str(BENCH))
+import compare  # noqa: E402
+import scenes  # noqa: E402
 
 
 def test_quick_benchmark_reports_finite_figures(tmp_path):
@@ -15,7 +21,8 @@ def test_quick_benchmark_reports_finite_figures(tmp_path):
     assert result.returncode == 0, result.stderr[-2000:]
     report = json.loads((tmp_path / "compare_quick.json").read_text())
     ours = [row for row in report["rows"] if row["engine"] == "vplayground"]
-    assert {row["scene"] for row in ours} == {"pile of 150", "300 at rest", "10-box tower"}
+    assert {row["scene"] for row in ours} == {"loose pile of 150", "300 in columns of two", "300 at rest",
+                                              "10-box tower"}
     for row in report["rows"]:
         assert math.isfinite(row["rtf"]) and row["rtf"] > 0
         assert math.isfinite(row["max_ms"]) and row["max_ms"] > 0
@@ -25,3 +32,22 @@ def test_quick_benchmark_reports_finite_figures(tmp_path):
     stages = report["stages_ms_percent"].values()
     assert all(math.isfinite(ms) and ms >= 0 for ms, _ in stages)
     assert abs(sum(percent for _, percent in stages) - 100.0) < 1.0
+
+
+@pytest.mark.parametrize("peer_class", [compare.Rapier, compare.Jolt], ids=["rapier", "jolt"])
+def test_rust_peer_drops_boxes_onto_the_ground(peer_class):
+    """A Rust peer (bench/peers, built by its build.sh, never by the tests) reads the scene the
+    bench writes in our frame: four tilted 0.5 m boxes dropped side by side land flat on the ground
+    (centres at z = 0.25 m) where they fell, and fall asleep."""
+    boxes = [scenes.box((0.5, 0.5, 0.5), (x, y, 1.0), scenes.yaw_pitch_roll_quaternion((0.05, -0.05, 0.7)))
+             for x, y in ((0, 0), (2, 0), (0, -2), (-2, 2))]
+    try:
+        peer = peer_class(boxes)
+    except compare.PeerMissing:
+        pytest.skip(f"{peer_class.program} is not built (bench/peers/build.sh)")
+    report = peer.run(steps=4 * compare.RATE, budget_s=10.0)
+    assert report["complete"] and not report["errors"]
+    positions = peer.positions()
+    np.testing.assert_allclose(positions[:, 2], 0.25, atol=0.01)
+    np.testing.assert_allclose(positions[:, :2], [b[1][:2] for b in boxes], atol=0.05)
+    assert peer.resting_count() == len(boxes)
