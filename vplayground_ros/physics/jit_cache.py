@@ -13,7 +13,8 @@ import numba
 
 
 def use_source_keyed_cache():
-    sources = sorted(Path(__file__).parent.glob("*.py"))
-    digest = hashlib.sha256(b"".join(p.name.encode() + p.read_bytes() for p in sources))
+    engine = Path(__file__).parent
+    sources = sorted(engine.rglob("*.py"))  # the shapes/ package too
+    digest = hashlib.sha256(b"".join(str(p.relative_to(engine)).encode() + p.read_bytes() for p in sources))
     base = os.environ.get("VPLAYGROUND_JIT_CACHE") or Path.home() / ".cache" / "vplayground_ros" / "numba"
     numba.config.CACHE_DIR = str(Path(base) / digest.hexdigest()[:16])
