@@ -138,6 +138,9 @@ def test_a_ball_dropped_on_a_ball_rebounds_per_its_elasticity(elasticity):
 
 
 def mixed_pile(count, seed=3):
+    """Boxes, spheres, capsules and cylinders in turn, on a jittered grid in random
+    orientations, in a pen of four immovable walls (a ball rolling on a flat floor would roll
+    for ever: rigid bodies have no rolling resistance)."""
     rng = np.random.default_rng(seed)
     world = World()
     kinds = [{"size": [0.5, 0.4, 0.3]}, {"shape": "sphere", "radius": 0.25},
@@ -150,30 +153,35 @@ def mixed_pile(count, seed=3):
                         "position": [(x - 1.5) * 0.9 + rng.uniform(-0.1, 0.1),
                                      (y - 1.5) * 0.9 + rng.uniform(-0.1, 0.1), 0.6 + 0.9 * z],
                         "rpy": list(rng.uniform(-math.pi, math.pi, 3))})
+    for k, (x, y, sx, sy) in enumerate([(2.4, 0, 0.2, 5), (-2.4, 0, 0.2, 5), (0, 2.4, 5, 0.2), (0, -2.4, 5, 0.2)]):
+        world.add_body({"name": f"wall{k}", "size": [sx, sy, 1.5], "position": [x, y, 0.75], "immovable": True})
     return world
 
 
-def energy(world):
+def energies(world):
+    """(translational kinetic, potential) energy of the movable bodies, J."""
     s, masses = world.state(), np.array([world.body(n)["mass"] for n in world.body_names()])
-    kinetic = 0.5 * np.sum(masses * np.sum(s["linear_velocities"] ** 2, axis=1))
-    return kinetic + np.sum(masses * G * s["positions"][:, 2])
+    movable = ~s["immovable"]
+    kinetic = 0.5 * np.sum((masses * np.sum(s["linear_velocities"] ** 2, axis=1))[movable])
+    return kinetic, np.sum((masses * G * s["positions"][:, 2])[movable])
 
 
 def test_a_mixed_pile_comes_to_rest_without_interpenetration_or_energy_gain():
     world = mixed_pile(48)
-    start = energy(world)
+    start = sum(energies(world))
     worst_gain, deepest = -np.inf, 0.0
-    for _ in range(8 * 16):
+    for _ in range(10 * 16):
         world.step(8)
-        worst_gain = max(worst_gain, energy(world) - start)
+        worst_gain = max(worst_gain, sum(energies(world)) - start)
         depths = world.contacts()["depths"]
         deepest = max(deepest, float(depths.max()) if len(depths) else 0.0)
-    s = world.state()
-    # Rotational energy is left out of `energy`, so a gain would only show more clearly.
-    assert worst_gain < 1e-6 * abs(start) + 1.0
+    # Rotation is left out: the measured energy never exceeds the true total, which starts
+    # with none, so a rise above the start is a real gain.
+    assert worst_gain <= 1e-9 * abs(start)
     assert deepest < 0.03
-    assert s["frozen"].all() or np.abs(s["linear_velocities"]).max() < 0.05
-    assert s["positions"][:, 2].min() > 0.1  # nothing sank through the ground
+    kinetic, potential = energies(world)
+    assert kinetic < 1e-3 * (start - potential)  # all but a trace of the fall's energy is gone
+    assert world.state()["positions"][:, 2].min() > 0.1  # nothing sank through the ground
 
 
 @pytest.mark.parametrize("shape, origin, direction, distance, normal", [
