@@ -438,6 +438,20 @@ def test_a_convex_brick_sits_on_a_playground_across_its_seam():
     assert_at_rest(world, 0)
 
 
+def test_convex_bricks_stand_stacked():
+    # Hull on hull: no shrunk copies, so their resting overlap goes through EPA every step.
+    world = World()
+    for k in range(3):
+        world.add_body({"name": f"h{k}", "shape": "convex", "points": BRICK,
+                        "position": [0.02 * k, 0, 0.1 + 0.2 * k], "rpy": [0, 0, 0.2 * k],
+                        "allow_freezing": False})
+    world.step(4 * 128)
+    s = world.state()
+    for k in range(3):
+        assert np.linalg.norm(s["positions"][k] - [0.02 * k, 0, 0.1 + 0.2 * k]) < 0.01
+        assert_at_rest(world, k)
+
+
 @pytest.mark.parametrize("rpy", [[0.3, 0.5, 0.1], [2.5, -0.4, 1.0], [math.pi, 0.2, 0.0]])
 def test_a_dropped_tetrahedron_comes_to_rest_on_a_face(rpy):
     world = World()
