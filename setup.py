@@ -23,10 +23,10 @@ setup(
     python_requires=">=3.10",
     # mcap-ros2-support: CDR from message definitions (interfaces.py); foxglove-sdk: the built-in
     # Foxglove WebSocket server (--foxglove); zlib-ng: the bag's chunk checksums (recorder.py,
-    # which falls back on zlib without it).
+    # which falls back on zlib without it); scipy: the convex hulls of convex bodies (qhull).
     install_requires=["numpy>=1.24", "numba>=0.59", "pyyaml>=6", "trimesh>=4", "mcap>=1.1",
                       "zstandard>=0.22", "regex>=2022.1", "mcap-ros2-support>=0.5",
-                      "foxglove-sdk>=0.30,<0.31", "zlib-ng>=0.4"],
+                      "foxglove-sdk>=0.30,<0.31", "zlib-ng>=0.4", "scipy>=1.10"],
     extras_require={
         "test": ["pytest>=7", "hypothesis>=6.80", "websockets>=13"],
         # The ROS 2 Jazzy Python wheels, for machines without a ROS install (make does this).

@@ -10,9 +10,11 @@ from vplayground_ros.physics.math3d import quat_to_matrix, rpy_to_quat
 from vplayground_ros.physics.narrow_phase import (box_box, collide_ground, collide_pair,
                                                   collide_triangle, reduce_manifold)
 from vplayground_ros.physics.shapes import BOX, CAPSULE, CYLINDER, SPHERE
+from vplayground_ros.physics.shapes.convex import pack_hulls
 
 MARGIN = 0.02
 SCRATCH = allocate_scratch()
+NO_HULLS = pack_hulls([None])  # the hull table of a world without convex bodies (slot 0)
 POINTS, DEPTHS = np.empty((MAX_CLIP_POINTS, 3)), np.empty(MAX_CLIP_POINTS)
 KINDS = (BOX, SPHERE, CAPSULE, CYLINDER)
 
@@ -28,19 +30,19 @@ def vec(v):
 
 
 def body(kind, position, rpy=(0.0, 0.0, 0.0), dims=(0.5, 0.5, 0.0)):
-    """(kind, position, rotation rows, dims) as the engine passes them: tuples of floats. rpy
-    may be a 3x3 rotation instead."""
+    """(kind, position, rotation rows, dims, slot) as the engine passes them: tuples of floats
+and the slot (0: these bodies have no hull). rpy may be a 3x3 rotation instead."""
     rot = rotation(rpy) if np.shape(rpy) == (3,) else tuple(vec(r) for r in rpy)
-    return kind, vec(position), rot, vec(dims)
+    return kind, vec(position), rot, vec(dims), 0
 
 
 def pair(a, b, margin=MARGIN, reduce=False):
-    n, normal = collide_pair(*a, *b, margin, SCRATCH, POINTS, DEPTHS)
+    n, normal = collide_pair(NO_HULLS, *a, *b, margin, SCRATCH, POINTS, DEPTHS)
     return result(n, normal, reduce)
 
 
 def ground(a, height=0.0, margin=MARGIN, reduce=False):
-    n = collide_ground(*a, height, margin, SCRATCH, POINTS, DEPTHS)
+    n = collide_ground(NO_HULLS, *a, height, margin, SCRATCH, POINTS, DEPTHS)
     return result(n, (0.0, 0.0, -1.0), reduce)
 
 
@@ -48,8 +50,8 @@ def triangle(a, tri, margin=MARGIN):
     tri = np.asarray(tri, float)
     normal = np.cross(tri[1] - tri[0], tri[2] - tri[0])
     normal /= np.linalg.norm(normal)
-    n, normal = collide_triangle(*a, tuple(vec(v) for v in tri), vec(normal), margin, SCRATCH,
-                                 POINTS, DEPTHS)
+    n, normal = collide_triangle(NO_HULLS, *a, tuple(vec(v) for v in tri), vec(normal), margin,
+                                 SCRATCH, POINTS, DEPTHS)
     return result(n, normal, False)
 
 
@@ -125,7 +127,7 @@ def test_gjk_distance_of_a_box_below_a_cylinder(box_rpy, cylinder_rpy, separatio
                                   r * down[1] / side if side > 1e-9 else 0.0, h * np.sign(down[2])]
     cylinder = body(CYLINDER, highest - lowest + [0, 0, separation], cylinder_rpy, (r, h, 0))
     box = body(BOX, (0, 0, 0), box_rpy, half)
-    found, normal, point_a, point_b, depth = shape_contact(*box, *cylinder, 1.0, SCRATCH)
+    found, normal, point_a, point_b, depth = shape_contact(NO_HULLS, *box, *cylinder, 1.0, SCRATCH)
     assert found and -depth == pytest.approx(separation, abs=1e-6)
 
 
@@ -135,7 +137,7 @@ def test_gjk_distance_of_a_box_beside_a_cylinder(separation):
     reach = 0.6 / np.sqrt(2)
     box = body(BOX, (0.5 + reach + separation, 0, 0.1), (0, 0, np.pi / 4), (0.3, 0.3, 0.2))
     cylinder = body(CYLINDER, (0, 0, 0), dims=(0.5, 0.5, 0))
-    found, normal, point_a, point_b, depth = shape_contact(*cylinder, *box, 1.0, SCRATCH)
+    found, normal, point_a, point_b, depth = shape_contact(NO_HULLS, *cylinder, *box, 1.0, SCRATCH)
     assert found and -depth == pytest.approx(separation, abs=1e-6)
     assert normal == pytest.approx([1, 0, 0], abs=1e-5)
 
@@ -144,15 +146,15 @@ def test_gjk_distance_of_a_box_beside_a_cylinder(separation):
 def test_epa_depth_of_a_box_overlapping_a_cylinder(overlap):
     cylinder = body(CYLINDER, (0, 0, 0), dims=(0.5, 0.5, 0))
     on_top = body(BOX, (0.1, 0, 0.5 + 0.2 - overlap), (0, 0, 0.4), (0.3, 0.4, 0.2))
-    found, normal, _, _, depth = shape_contact(*cylinder, *on_top, MARGIN, SCRATCH)
+    found, normal, _, _, depth = shape_contact(NO_HULLS, *cylinder, *on_top, MARGIN, SCRATCH)
     assert found and depth == pytest.approx(overlap, abs=1e-4)
     assert normal == pytest.approx([0, 0, 1], abs=1e-4)
     beside = body(BOX, (0.5 + 0.3 - overlap, 0, 0), dims=(0.3, 0.4, 0.2))
-    found, normal, _, _, depth = shape_contact(*cylinder, *beside, MARGIN, SCRATCH)
+    found, normal, _, _, depth = shape_contact(NO_HULLS, *cylinder, *beside, MARGIN, SCRATCH)
     assert found and depth == pytest.approx(overlap, abs=1e-4)
     assert normal == pytest.approx([1, 0, 0], abs=1e-4)
     below = body(BOX, (0, 0.2, -0.5 - 1.0 + overlap), dims=(2, 2, 1))
-    found, normal, _, _, depth = shape_contact(*below, *cylinder, MARGIN, SCRATCH)
+    found, normal, _, _, depth = shape_contact(NO_HULLS, *below, *cylinder, MARGIN, SCRATCH)
     assert found and depth == pytest.approx(overlap, abs=1e-4)
     assert normal == pytest.approx([0, 0, 1], abs=1e-4)
 
@@ -288,7 +290,7 @@ def test_degenerate_simplices_divide_by_nothing():
     capsule = (CAPSULE, (-7.90653532629521, -0.9987272268885038, 0.2021571252939717),
                ((0.8929457611581519, 0.45016426242333185, -6.683222403269795e-05),
                 (-0.002926033117740451, 0.005655619987950611, -0.999979725940854),
-                (-0.4501547577887881, 0.892927853076277, 0.006367357435235754)), (0.2, 0.2, 0.0))
+                (-0.4501547577887881, 0.892927853076277, 0.006367357435235754)), (0.2, 0.2, 0.0), 0)
     points, depths, normal = triangle(capsule, [(-8, -2, 0), (-7.5, -2, 0), (-7.5, 2, 0)])
     assert normal == pytest.approx([0, 0, -1])
 
@@ -326,13 +328,13 @@ def test_box_pairs_are_box_box():
         a = body(BOX, rng.uniform(-0.3, 0.3, 3), rng.uniform(-3, 3, 3), rng.uniform(0.1, 0.5, 3))
         b = body(BOX, rng.uniform(-0.3, 0.3, 3) + [0, 0, 0.6], rng.uniform(-3, 3, 3),
                  rng.uniform(0.1, 0.5, 3))
-        n, normal = box_box(*a[1:], *b[1:], MARGIN, poly_a, poly_b, points, depths)
+        n, normal = box_box(*a[1:4], *b[1:4], MARGIN, poly_a, poly_b, points, depths)
         got_points, got_depths, got_normal = pair(a, b)
         assert len(got_points) == n and tuple(got_normal) == normal
         assert np.array_equal(got_points, points[:n]) and np.array_equal(got_depths, depths[:n])
 
 
-def support_value(kind, position, rot, dims, directions):
+def support_value(kind, position, rot, dims, slot, directions):
     """max over the shape of x . d, for each row d of `directions` (numpy, independent of the
     engine's support mappings)."""
     rot = np.array(rot)
@@ -382,7 +384,7 @@ def test_random_poses_agree_with_sampled_directions():
     for trial in range(400):
         a = random_body(rng, KINDS[trial % 4])
         b = random_body(rng, KINDS[(trial // 4) % 4])
-        found, normal, point_a, point_b, depth = shape_contact(*a, *b, 10.0, SCRATCH)
+        found, normal, point_a, point_b, depth = shape_contact(NO_HULLS, *a, *b, 10.0, SCRATCH)
         pair(a, b)  # finite (result() checks)
         assert found
         overlap = support_value(*a, directions) + support_value(*b, -directions)
@@ -409,12 +411,12 @@ def test_shallow_overlaps_of_random_poses():
     for trial in range(400):
         a = random_body(rng, KINDS[trial % 4])
         b = random_body(rng, KINDS[(trial // 4) % 4])
-        found, normal, _, _, depth = shape_contact(*a, *b, 10.0, SCRATCH)
+        found, normal, _, _, depth = shape_contact(NO_HULLS, *a, *b, 10.0, SCRATCH)
         if depth >= 0.0:
             continue
         push = rng.uniform(0.0005, 0.015)
-        b = (b[0], vec(np.array(b[1]) - (push - depth) * np.array(normal)), b[2], b[3])
-        found, normal, _, _, depth = shape_contact(*a, *b, 10.0, SCRATCH)
+        b = (b[0], vec(np.array(b[1]) - (push - depth) * np.array(normal)), b[2], b[3], b[4])
+        found, normal, _, _, depth = shape_contact(NO_HULLS, *a, *b, 10.0, SCRATCH)
         least = refined_overlap(a, b, np.array(normal), rng)
         assert least - 1e-9 <= depth <= least + 0.2 * SHRINK
         assert depth <= push + 0.2 * SHRINK
@@ -457,3 +459,47 @@ def test_degenerate_and_random_poses_never_fail():
             if len(points):
                 assert np.linalg.norm(normal) == pytest.approx(1.0)
                 assert np.all(depths >= -margin - 1e-12)
+
+
+def test_the_hull_of_a_box_touches_like_the_box():
+    """A convex body whose hull is a box's corners (its dims are then the box's half extents):
+    against random shapes its deepest contact (GJK, or EPA when they overlap: a hull is not
+    shrunk) is the box's, by sampled directions, and its manifolds are finite."""
+    from vplayground_ros.physics.shapes import CONVEX
+    from vplayground_ros.physics.shapes.convex import build_hull
+    rng = np.random.default_rng(11)
+    directions = rng.normal(size=(5000, 3))
+    directions /= np.linalg.norm(directions, axis=1)[:, None]
+    for trial in range(200):
+        half = rng.uniform(0.05, 0.6, 3)
+        corners = [[x * half[0], y * half[1], z * half[2]] for x in (-1, 1) for y in (-1, 1)
+                   for z in (-1, 1)]
+        hulls = pack_hulls([None, build_hull(corners)])  # the hull at slot 1
+        box = body(BOX, rng.uniform(-0.6, 0.6, 3), rng.uniform(-np.pi, np.pi, 3), half)
+        hull = (CONVEX,) + box[1:4] + (1,)
+        other = random_body(rng, KINDS[trial % 4])
+        found, normal, point_a, point_b, depth = shape_contact(hulls, *hull, *other, 10.0, SCRATCH)
+        assert found
+        overlap = support_value(*box, directions) + support_value(*other, -directions)
+        assert overlap.min() >= depth - 1e-9
+        exact = refined_overlap(box, other, np.array(normal), rng)
+        assert depth == pytest.approx(exact, abs=1e-6 if depth < 0 else 0.2 * SHRINK)
+        n, pair_normal = collide_pair(hulls, *hull, *other, MARGIN, SCRATCH, POINTS, DEPTHS)
+        result(n, pair_normal, False)
+        n = collide_ground(hulls, *hull, float(rng.uniform(-1, 1)), MARGIN, SCRATCH, POINTS, DEPTHS)
+        result(n, (0.0, 0.0, -1.0), False)
+
+
+def test_a_hull_brick_on_the_ground_and_on_a_triangle_gives_its_four_corners():
+    from vplayground_ros.physics.shapes import CONVEX
+    from vplayground_ros.physics.shapes.convex import build_hull
+    corners = [[x, y, z] for x in (-0.5, 0.5) for y in (-0.25, 0.25) for z in (-0.1, 0.1)]
+    hulls = pack_hulls([build_hull(corners)])
+    brick = (CONVEX, (0.0, 0.0, 0.098), rotation((0, 0, 0.3)), (0.5, 0.25, 0.1), 0)
+    n = collide_ground(hulls, *brick, 0.0, MARGIN, SCRATCH, POINTS, DEPTHS)
+    assert n == 4 and DEPTHS[:4] == pytest.approx([0.002] * 4)
+    tri = ((-3.0, -3.0, 0.0), (3.0, -3.0, 0.0), (0.0, 3.0, 0.0))
+    n, normal = collide_triangle(hulls, *brick, tri, (0.0, 0.0, 1.0), MARGIN, SCRATCH, POINTS,
+                                 DEPTHS)
+    assert n == 4 and DEPTHS[:4] == pytest.approx([0.002] * 4)
+    assert normal == pytest.approx((0, 0, -1))

@@ -7,6 +7,7 @@ aligned to its size counted from the end of the 4-byte header, strings as uint32
 (NUL included) + bytes + NUL, sequences as uint32 count + elements. Tests round-trip every
 encoder through rclpy.serialization.deserialize_message.
 """
+import itertools
 import struct
 
 import numpy as np
@@ -218,9 +219,10 @@ class BodyMarkerEncoder:
 
     def __init__(self):
         self._elements = TemplateEncoder(lambda w, key: w.marker(
-            (0, 0), key[0], key[1], 0, key[2], 0, [0.0] * 7, [0.0] * 3, [0.0] * 4, True))
+            (0, 0), key[0], key[1], 0, key[2], 0, [0.0] * 7, [0.0] * 3, [0.0] * 4, True,
+            np.frombuffer(key[3], "<f8").reshape(-1, 3)))
         self._head = (None, b"")  # (frame, the count and the DELETEALL marker with zero numbers)
-        self._identity = (None, None, None, None)  # (namespaces, types, frame, the layout identity they make)
+        self._identity = (None,) * 5  # (namespaces, types, points, frame, the layout identity they make)
 
     def head(self, frame, count, stamp_bytes):
         """The array's count and its DELETEALL marker, written once per frame and patched."""
@@ -235,23 +237,27 @@ class BodyMarkerEncoder:
         head[4:12] = stamp_bytes  # the DELETEALL's header stamp follows the count
         return head
 
-    def encode(self, seconds, frame, namespaces, types, ids, poses, sizes, colours):
+    def encode(self, seconds, frame, namespaces, types, ids, poses, sizes, colours, points=None):
         """namespaces (N,) str, types (N,) int Marker types, ids (N,) or (N, 1) int, poses (N, 7)
-        xyz + xyzw, sizes (N, 3), colours (N, 4) RGBA: the MarkerArray's CDR bytes. Read-only
-        arrays passed again unchanged (a settled world's) are neither compared nor rewritten."""
+        xyz + xyzw, sizes (N, 3), colours (N, 4) RGBA, points: None, or a tuple of each
+        marker's points as '<f8' bytes (b"" for none; part of the marker's template): the
+        MarkerArray's CDR bytes. Read-only arrays (and the same points tuple) passed again
+        unchanged (a settled world's) are neither compared nor rewritten."""
         stamp_bytes = struct.pack("<iI", *split_stamp(seconds))
         head = self.head(frame, len(ids) + 1, stamp_bytes)
         last = self._identity
-        if (last[0] is namespaces and last[1] is types and last[2] == frame
+        if (last[0] is namespaces and last[1] is types and last[2] is points and last[3] == frame
                 and not namespaces.flags.writeable and not types.flags.writeable):
-            identity = last[3]  # the same read-only arrays as last time
+            identity = last[4]  # the same read-only arrays as last time
         else:
             namespaces, types = np.asarray(namespaces, str), np.asarray(types, np.int32)
             identity = (frame, namespaces.dtype.str, len(namespaces), namespaces.tobytes(),
-                        types.tobytes())  # no loop per body
-            self._identity = (namespaces, types, frame, identity)
+                        types.tobytes(), points)  # no loop per body
+            self._identity = (namespaces, types, points, frame, identity)
         ids = np.asarray(ids, "<i4")
-        elements = self._elements.elements(stamp_bytes, ((frame, str(ns), int(t)) for ns, t in zip(namespaces, types)), {
+        keys = ((frame, str(ns), int(t), p) for ns, t, p in
+                zip(namespaces, types, points if points is not None else itertools.repeat(b"")))
+        elements = self._elements.elements(stamp_bytes, keys, {
             "id": ids if ids.ndim == 2 else ids.reshape(-1, 1), "pose": np.asarray(poses, "<f8"),
             "scale": np.asarray(sizes, "<f8"), "color": np.asarray(colours, "<f4")}, len(head) % 8, identity)
         return b"".join((ENCAPSULATION, head, elements))

@@ -90,7 +90,8 @@ def categories(snapshot):
 
 # The marker that draws each shape; a capsule is its cylinder plus a SPHERE on each end, whose
 # ids are the body's with CAPSULE_END_ID_BITS set (body ids stay far below them).
-SHAPE_MARKER_TYPES = np.array([CUBE, SPHERE, CAPSULE_MARKER, CYLINDER], np.int32)
+# A convex body is its hull's triangles (a TRIANGLE_LIST in its frame, scale 1).
+SHAPE_MARKER_TYPES = np.array([CUBE, SPHERE, CAPSULE_MARKER, CYLINDER, TRIANGLE_LIST], np.int32)
 CAPSULE_END_ID_BITS = (1 << 29, 1 << 30)
 
 # What drawing bodies' shapes takes beyond their poses (it changes only with the layout): the
@@ -99,10 +100,12 @@ ShapeMarkerLayout = namedtuple("ShapeMarkerLayout", "rows types ids scales capsu
 
 
 def shape_marker_layout(shape_codes, dimensions, ids):
-    """Vectorised (no Python loop per body: the node draws thousands at marker_rate)."""
+    """Vectorised (no Python loop per body: the node draws thousands at marker_rate). A convex
+    body's marker takes its hull's triangles as points (hull_points)."""
     r, half = dimensions[:, 0], dimensions[:, 1]
     scales = np.where((shape_codes == shapes.BOX)[:, None], 2.0 * dimensions,
                       np.stack([2.0 * r, 2.0 * r, np.where(shape_codes == shapes.SPHERE, 2.0 * r, 2.0 * half)], 1))
+    scales[shape_codes == shapes.CONVEX] = 1.0
     rows = np.arange(len(shape_codes))
     types, marker_ids = SHAPE_MARKER_TYPES[shape_codes], np.asarray(ids, np.int32).reshape(-1)
     capsules = np.nonzero(shape_codes == shapes.CAPSULE)[0]
@@ -144,14 +147,15 @@ class BodyMarkers:
 
     def __init__(self):
         self.encoder = cdr.BodyMarkerEncoder()
-        self._layout = None   # (key, drawn rows or None, kinds, namespaces, ShapeMarkerLayout)
+        self._layout = None   # (key, drawn rows or None, kinds, namespaces, ShapeMarkerLayout, points)
         self._colours = None  # (frozen flags, the layout entry, colours)
 
     def layout(self, snapshot, ids, car):
         s = snapshot.state
-        key = (snapshot.names, s["immovable"], s["shapes"], s["dimensions"], ids, tuple(snapshot.vehicles), car)
+        key = (snapshot.names, s["immovable"], s["shapes"], s["dimensions"], s["hull_triangles"], ids,
+               tuple(snapshot.vehicles), car)
         cached = self._layout
-        if cached is not None and all(a is b for a, b in zip(key[:5], cached[0][:5])) and key[5:] == cached[0][5:]:
+        if cached is not None and all(a is b for a, b in zip(key[:6], cached[0][:6])) and key[6:] == cached[0][6:]:
             return cached
         kinds = categories(snapshot)
         drawn = None if car is None else np.arange(len(kinds)) != snapshot.names.index(car)
@@ -162,13 +166,17 @@ class BodyMarkers:
         namespaces = CATEGORIES[kinds[markers.rows]]
         for array in (kinds, namespaces, *markers):
             array.flags.writeable = False
-        self._layout = (key, drawn, kinds, namespaces, markers)
+        hulls = hull_points(s["hull_triangles"], None if car is None else snapshot.names.index(car))
+        points = None if hulls is None else tuple(
+            b"" if hulls[row] is None else np.ascontiguousarray(hulls[row], "<f8").tobytes()
+            for row in markers.rows.tolist())
+        self._layout = (key, drawn, kinds, namespaces, markers, points)
         return self._layout
 
     def encode(self, snapshot, frame, ids, poses, car=None):
         """ids (N,) the bodies' marker ids, poses (N, 7) xyz + xyzw of every body."""
         layout = self.layout(snapshot, ids, car)
-        _, drawn, kinds, namespaces, markers = layout
+        _, drawn, kinds, namespaces, markers, points = layout
         frozen = snapshot.state["frozen"]
         cached = self._colours
         if cached is None or cached[0] is not frozen or cached[1] is not layout:
@@ -177,7 +185,18 @@ class BodyMarkers:
             self._colours = cached = (frozen, layout, colours)
         poses = shape_marker_poses(markers, poses if drawn is None else poses[drawn])
         return self.encoder.encode(snapshot.time, frame, namespaces, markers.types, markers.ids, poses,
-                                   markers.scales, cached[2])
+                                   markers.scales, cached[2], points)
+
+
+def hull_points(hull_triangles, left_out=None):
+    """Each row's TRIANGLE_LIST points (a convex body's hull triangles, (3T, 3)), None for the
+    other shapes; None when no body is convex. `left_out`: a row that is not drawn (the car)."""
+    if all(t is None for t in hull_triangles):
+        return None
+    rows = [t.reshape(-1, 3) if t is not None else None for t in hull_triangles]
+    if left_out is not None:
+        del rows[left_out]
+    return rows
 
 
 def marker_array(seconds, frame, markers):

@@ -78,7 +78,7 @@ def read_scene(path_or_dict):
     return data, str(path), path.resolve().parent
 
 
-def resolve_mesh(name, base, directories=None):
+def resolve_mesh(name, base, directories=None, key="playground.mesh"):
     """A mesh path as written in a scene: absolute, else relative to the scene file's folder,
     else one of the package's meshes/. With `directories` (scenes loaded for a service call),
     a mesh outside them and the package's meshes/ is refused, symbolic links resolved. Returns
@@ -87,7 +87,7 @@ def resolve_mesh(name, base, directories=None):
     tried = [candidate] if candidate.is_absolute() else [base / candidate]
     if tried[0].is_file():
         if directories is not None and not inside(tried[0], directories):
-            raise specs.SpecError("playground.mesh", f"mesh file {specs.quote(name)} resolves outside the "
+            raise specs.SpecError(key, f"mesh file {specs.quote(name)} resolves outside the "
                                                      "allowed directories")
         return tried[0]
     if not candidate.is_absolute():
@@ -95,7 +95,7 @@ def resolve_mesh(name, base, directories=None):
         if shared is not None:
             return shared
         tried.append(Path("<package>/meshes") / name)
-    raise specs.SpecError("playground.mesh", f"mesh file {specs.quote(name)} not found (looked in: "
+    raise specs.SpecError(key, f"mesh file {specs.quote(name)} not found (looked in: "
                                              f"{', '.join(str(p) for p in tried)})")
 
 
@@ -108,41 +108,42 @@ def inside(path, directories):
         return False
 
 
-def count_obj_triangles(data, path):
+def count_obj_triangles(data, path, key):
     """Triangles an .obj's faces make once fanned (a face of n corners is n - 2), counted from
     the raw bytes so a file of millions is refused before they are parsed one by one."""
     if data.count(b"\nf ") + data.count(b"\nf\t") > MAX_PLAYGROUND_TRIANGLES:
-        raise specs.SpecError("playground.mesh", f"mesh {path} has more than the "
+        raise specs.SpecError(key, f"mesh {path} has more than the "
                                                  f"{MAX_PLAYGROUND_TRIANGLES} triangles allowed")
     triangles = 0
     for match in re.finditer(rb"^f[ \t]([^\n]*)", data, re.MULTILINE):
         triangles += max(0, len(match.group(1).split()) - 2)
         if triangles > MAX_PLAYGROUND_TRIANGLES:
-            raise specs.SpecError("playground.mesh", f"mesh {path} has more than the "
+            raise specs.SpecError(key, f"mesh {path} has more than the "
                                                      f"{MAX_PLAYGROUND_TRIANGLES} triangles allowed")
     return triangles
 
 
-def read_mesh(path):
-    """(vertices (V, 3), faces (T, 3)) of a Wavefront .obj (or .stl, .ply, .off)."""
+def read_mesh(path, key="playground.mesh"):
+    """(vertices (V, 3), faces (T, 3)) of a Wavefront .obj (or .stl, .ply, .off); errors name
+    `key`, the scene key that gave the path."""
     file_type = MESH_TYPES.get(Path(path).suffix.lower())
     if file_type is None:
-        raise specs.SpecError("playground.mesh", f"mesh {path}: unsupported file type (supported: "
+        raise specs.SpecError(key, f"mesh {path}: unsupported file type (supported: "
                                                  f"{', '.join(sorted(MESH_TYPES))})")
     try:
         data = read_capped(Path(path), MAX_MESH_BYTES, "mesh file")
     except ValueError as error:
-        raise specs.SpecError("playground.mesh", f"mesh {path}: {error}") from None
+        raise specs.SpecError(key, f"mesh {path}: {error}") from None
     if file_type == "obj":
-        count_obj_triangles(data, path)
+        count_obj_triangles(data, path, key)
     try:
         vertices, faces = read_obj(data) if file_type == "obj" else read_with_trimesh(data, file_type)
     except MeshError as error:
-        raise specs.SpecError("playground.mesh", f"mesh {path}: {error}") from None
+        raise specs.SpecError(key, f"mesh {path}: {error}") from None
     if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
-        raise specs.SpecError("playground.mesh", f"mesh {path} has no triangles")
+        raise specs.SpecError(key, f"mesh {path} has no triangles")
     if len(faces) > MAX_PLAYGROUND_TRIANGLES:
-        raise specs.SpecError("playground.mesh", f"mesh {path} has {len(faces)} triangles, more "
+        raise specs.SpecError(key, f"mesh {path} has {len(faces)} triangles, more "
                                                  f"than the {MAX_PLAYGROUND_TRIANGLES} allowed")
     return vertices, faces
 
@@ -182,6 +183,23 @@ def validate_list(raw, key):
     return items
 
 
+def body_mesh_points(raw, path, base, directories=None):
+    """A convex body's `mesh:` (a file, found as the playground's is) read into its `points`
+    (the vertices its triangles use); any other body as it is."""
+    if not isinstance(raw, dict) or "mesh" not in raw:
+        return raw
+    key = f"{path}.mesh"
+    if raw.get("shape") != "convex":
+        raise specs.SpecError(key, "only a convex body takes a mesh (shape: convex)")
+    if "points" in raw:
+        raise specs.SpecError(path, "give either mesh or points, not both")
+    if not isinstance(raw["mesh"], str) or not raw["mesh"]:
+        raise specs.SpecError(key, "expected a file name")
+    vertices, faces = read_mesh(resolve_mesh(raw["mesh"], base, directories, key), key)
+    body = {k: v for k, v in raw.items() if k != "mesh"}
+    return {**body, "points": vertices[np.unique(faces)].tolist()}
+
+
 def validate_scene(scene, base, max_bodies=None, directories=None):
     """Checks the whole scene; returns what load_world builds from."""
     specs.mapping(scene, "", TOP_LEVEL_KEYS)
@@ -208,7 +226,8 @@ def validate_scene(scene, base, max_bodies=None, directories=None):
             names.add(entry["name"])
         return entry
 
-    bodies = [claim(specs.validate_body(raw, f"bodies[{k}]"), f"bodies[{k}]")
+    bodies = [claim(specs.validate_body(body_mesh_points(raw, f"bodies[{k}]", base, directories),
+                                        f"bodies[{k}]"), f"bodies[{k}]")
               for k, raw in enumerate(validate_list(scene, "bodies"))]
     vehicles = [claim(specs.validate_vehicle(raw, f"vehicles[{k}]"), f"vehicles[{k}]")
                 for k, raw in enumerate(validate_list(scene, "vehicles"))]

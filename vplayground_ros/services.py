@@ -10,7 +10,7 @@ import yaml
 from . import messages
 from .api import MAP_SUCCESS
 from .messages import header
-from .physics.shapes import SHAPES
+from .physics.shapes import SHAPES, solid
 
 Service = namedtuple("Service", "name type handler")
 
@@ -85,14 +85,16 @@ def entity_marker(runtime, name, description):
 def shape_markers(description):
     """The markers that draw an entity in its own frame (messages.shape_markers: a capsule is a
     cylinder and two spheres; a sensor a small cube)."""
-    shape = description["shape"]
+    shape, hull = description["shape"], None
     if shape == "box":
         dimensions = 0.5 * np.asarray(description["bounds"]["size"], float)
     else:
-        module = SHAPES[shape].module
-        dimensions = np.asarray(module.dimensions(description["properties"]), float)
+        solid_shape = solid(shape, description["properties"])
+        dimensions, hull = np.asarray(solid_shape.dimensions, float), solid_shape.hull
     _, types, _, poses, scales = messages.shape_markers(
         np.array([SHAPES[shape].code]), dimensions[None], np.array([[0.0] * 6 + [1.0]]), [0])
     return [{"type": int(t), "action": 0,  # ADD
              "pose": {"position": dict(zip("xyz", map(float, pose[:3]))), "orientation": dict(zip("xyzw", map(float, pose[3:])))},
-             "scale": dict(zip("xyz", map(float, scale)))} for t, pose, scale in zip(types, poses, scales)]
+             "scale": dict(zip("xyz", map(float, scale))),
+             "points": [] if hull is None else [dict(zip("xyz", map(float, p))) for p in hull.triangles.reshape(-1, 3)]}
+            for t, pose, scale in zip(types, poses, scales)]

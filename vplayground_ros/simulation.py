@@ -327,6 +327,7 @@ class Simulation:
             properties = world.body_properties()
             for array in properties.values():
                 array.flags.writeable = False
+            properties["hull_triangles"] = world.hull_triangles()
             vehicle_names = world.vehicle_names()
             scenery = layout.scenery if layout is not None and layout.world is world else None
             if scenery is None or scenery.version != world.scenery_version:

@@ -4,7 +4,7 @@ and bounds of a body, a vehicle or a sensor.
 import numpy as np
 
 from ..physics.math3d import rpy_to_quat
-from ..physics.shapes import SHAPES
+from ..physics.shapes import SHAPES, half_extents, solid
 from ..sensors import matrix_to_quaternion, pose_matrix
 
 SENSOR_SIZE = 0.1  # m: the cube ~/get_entities draws a sensor as
@@ -16,8 +16,7 @@ def describe(world, name, vehicles=None):
     is_vehicle = name in (world.vehicle_names() if vehicles is None else vehicles)
     props = world.vehicle(name) if is_vehicle else world.body(name)
     body = world.body(name)
-    module = SHAPES[body["shape"]].module
-    size = 2.0 * np.asarray(module.half_extents(module.dimensions(body)))
+    size = 2.0 * np.asarray(half_extents(SHAPES[body["shape"]].code, solid(body["shape"], body).dimensions))
     return {
         "name": name,
         "category": "vehicle" if is_vehicle else ("immovable" if body["immovable"] else "box"),

@@ -2,10 +2,13 @@
 vehicles and sensors are entities; their names are unique among all three.
 """
 import logging
+from pathlib import Path
 
 import yaml
 
 from ..physics import specs
+from ..physics.shapes import solid
+from ..scene import body_mesh_points
 from ..sensors import TYPES as SENSOR_TYPES, validate_sensor
 from .descriptions import describe, describe_sensor
 from .name_filter import MAX_FILTER, match_names
@@ -54,10 +57,11 @@ class EntityRequests:
                     for k, raw in enumerate(items)]
         return self.sim.call(lambda world: self._spawn(world, prepared, cap))
 
-    @staticmethod
-    def _prepare_spawn(raw, path):
-        """(path, is vehicle, validated spec, allow_renaming) of one spawn entry."""
-        item = dict(as_mapping(raw, path))
+    def _prepare_spawn(self, raw, path):
+        """(path, is vehicle, validated spec, allow_renaming) of one spawn entry. A convex
+        body's `mesh:` is read here (from the scene directories or the package's meshes/, as
+        a loaded scene's playground) and its hull taken, off the simulation thread."""
+        item = body_mesh_points(dict(as_mapping(raw, path)), path, Path.cwd(), self.scene_directories)
         rename = specs.boolean(item.pop("allow_renaming", False), f"{path}.allow_renaming")
         if "initial_pose" in item:
             pose = as_mapping(item.pop("initial_pose"), f"{path}.initial_pose")
@@ -68,6 +72,8 @@ class EntityRequests:
             return path, "sensor", item, rename
         vehicle = "wheels" in item or "chassis" in item
         spec = specs.validate_vehicle(item, path) if vehicle else specs.validate_body(item, path)
+        if not vehicle and spec["shape"] == "convex":
+            solid("convex", spec, path)  # a hull it cannot have is refused before the world is asked
         return path, vehicle, spec, rename
 
     def _spawn(self, world, prepared, cap):

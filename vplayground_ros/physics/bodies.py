@@ -17,7 +17,7 @@ BodyArrays = namedtuple("BodyArrays", [
                              # row is the static world (ground, mesh): always zero
     "mass",                  # (N,) kg (kept as given, so saving reproduces it exactly)
     "inv_mass",              # (N,) 1/kg
-    "inv_inertia",           # (N, 3) inverse principal inertia; the body frame is principal
+    "inv_inertia",           # (N, 3, 3) inverse inertia tensor about the centre of mass, body frame
     "shape",                 # (N,) int64 shape code (physics.shapes)
     "dimensions",            # (N, 3) the shape's numbers (physics.shapes.<shape>), m
     "half_extents",          # (N, 3) m, of the shape's bounding box in the body frame
@@ -50,7 +50,7 @@ def allocate_bodies(capacity):
     orientation[:, 3] = 1.0
     return BodyArrays(
         active=b(), position=f(3), orientation=orientation,
-        velocity=np.zeros((capacity + 1, 6)), mass=f(), inv_mass=f(), inv_inertia=f(3),
+        velocity=np.zeros((capacity + 1, 6)), mass=f(), inv_mass=f(), inv_inertia=f(3, 3),
         shape=np.zeros(capacity, np.int64), dimensions=f(3), half_extents=f(3),
         elasticity=f(), static_friction=f(), dynamic_friction=f(), immovable=b(),
         allow_freezing=b(), frozen=b(), freeze_timer=f(), static_indexed=b(),

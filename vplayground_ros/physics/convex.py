@@ -11,8 +11,11 @@ point's depth measured along the normal, those within the margin kept; and the e
 point when the faces miss it (a cylinder's end is an 8-gon inside its circle, so a tilted
 cylinder's lowest rim point can lie between two corners).
 
-A shape is passed as (kind, position, rotation as a tuple of rows, dims), tuples all; the
-arrays the algorithms work in come from allocate_scratch, once per collide call.
+A shape is passed as (kind, position, rotation as a tuple of rows, dims, slot): tuples, and the
+body's slot, where a convex body's hull is found in the hull table (`hulls`, shapes/convex.py)
+that every function taking shapes gets first. A convex hull has no shrunk copy (SHRINK): a
+shallow overlap of two hulls, or of a hull and a round shape, goes to EPA. The arrays the
+algorithms work in come from allocate_scratch, once per collide call.
 """
 from collections import namedtuple
 
@@ -26,6 +29,8 @@ from .shapes import BOX, CYLINDER, MAX_FACE_POINTS, core_radius, core_support, s
 # Not a body shape: a playground triangle in the convex path. Its "rotation" maps the unit
 # triangle (0, e_x, e_y) onto it: columns edge v1 - v0, edge v2 - v0, face normal.
 TRIANGLE = -1
+# The slot passed for a shape that has no hull (the triangle); bodies pass their own slot.
+NO_HULL = -1
 
 # The intersection of two convex 8-gons (two cylinder ends) has up to 16 corners, and the exact
 # deepest point may join them.
@@ -138,7 +143,7 @@ def triangle_frame(tri, normal):
 
 
 @njit(cache=True, nogil=True)
-def core_point(kind, p, r, dims, d):
+def core_point(hulls, kind, p, r, dims, slot, d):
     """The point of the shape's core farthest along the world direction d (support mapping;
     for a linear map M, support_MK(d) = M support_K(M^T d), so a triangle's frame works too)."""
     local = to_local(r, d)
@@ -149,7 +154,7 @@ def core_point(kind, p, r, dims, d):
         elif local[1] > 0.0:
             s = (0.0, 1.0, 0.0)
     else:
-        s = core_support(kind, dims, local)
+        s = core_support(kind, dims, hulls, slot, local)
     return to_world(p, r, s)
 
 
@@ -159,9 +164,9 @@ def radius_of(kind, dims):
 
 
 @njit(cache=True, nogil=True)
-def surface_point(kind, p, r, dims, d):
+def surface_point(hulls, kind, p, r, dims, slot, d):
     """The point of the whole shape farthest along the unit world direction d."""
-    return add_scaled(core_point(kind, p, r, dims, d), radius_of(kind, dims), d)
+    return add_scaled(core_point(hulls, kind, p, r, dims, slot, d), radius_of(kind, dims), d)
 
 
 # --- GJK --------------------------------------------------------------------------------------
@@ -291,11 +296,11 @@ def closest_on_simplex(simplex, n):
 
 
 @njit(cache=True, nogil=True)
-def put_support(kind_a, pa, ra, da, kind_b, pb, rb, db, d, store, block, i):
+def put_support(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, d, store, block, i):
     """Writes as point i of `store` the point of A - B farthest along d, with its points on the
     cores of A and B (rows block + i, 2 block + i). Returns the point of A - B."""
-    a = core_point(kind_a, pa, ra, da, d)
-    b = core_point(kind_b, pb, rb, db, (-d[0], -d[1], -d[2]))
+    a = core_point(hulls, kind_a, pa, ra, da, slot_a, d)
+    b = core_point(hulls, kind_b, pb, rb, db, slot_b, (-d[0], -d[1], -d[2]))
     w = sub(a, b)
     set_row(store, i, w)
     set_row(store, block + i, a)
@@ -315,7 +320,7 @@ def in_simplex(simplex, n, w):
 
 
 @njit(cache=True, nogil=True)
-def gjk(kind_a, pa, ra, da, kind_b, pb, rb, db, limit, simplex):
+def gjk(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, limit, simplex):
     """Distance between the cores of A and B (van den Bergen's GJK). Returns (outcome, simplex
     size, closest point on A's core, closest point on B's core): BEYOND as soon as a direction
     proves them farther apart than `limit`, OVERLAPPING when they intersect (or are closer than
@@ -323,15 +328,15 @@ def gjk(kind_a, pa, ra, da, kind_b, pb, rb, db, limit, simplex):
     d = sub(pb, pa)
     if dot(d, d) < 1e-24:
         d = (1.0, 0.0, 0.0)
-    v = put_support(kind_a, pa, ra, da, kind_b, pb, rb, db, d, simplex, 4, 0)
+    v = put_support(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, d, simplex, 4, 0)
     point_a, point_b = row(simplex, 4), row(simplex, 8)  # v's points on A and B
     n = 1
     for _ in range(GJK_MAX_ITERATIONS):
         vv = dot(v, v)
         if vv < GJK_OVERLAP_DISTANCE * GJK_OVERLAP_DISTANCE:
             return OVERLAPPING, n, point_a, point_b
-        w = put_support(kind_a, pa, ra, da, kind_b, pb, rb, db, (-v[0], -v[1], -v[2]),
-                        simplex, 4, n)
+        w = put_support(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b,
+                        (-v[0], -v[1], -v[2]), simplex, 4, n)
         vw = dot(v, w)
         if vw > 0.0 and vw * vw > vv * limit * limit:
             return BEYOND, n, point_a, point_b  # w's plane separates them by more than limit
@@ -374,7 +379,8 @@ def set_face(faces, planes, f, i, j, k, w):
 
 
 @njit(cache=True, nogil=True)
-def tetrahedron_from(kind_a, pa, ra, da, kind_b, pb, rb, db, simplex, n, store):
+def tetrahedron_from(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, simplex, n,
+                     store):
     """Copies GJK's simplex (n points) to EPA's store and grows it to a tetrahedron with new
     support points. False when A - B is flat (a point or segment core against a triangle)."""
     for k in range(n):
@@ -385,8 +391,8 @@ def tetrahedron_from(kind_a, pa, ra, da, kind_b, pb, rb, db, simplex, n, store):
             (0.0, 0.0, 1.0), (0.0, 0.0, -1.0))
     if n == 1:
         for d in axes:
-            gap = sub(put_support(kind_a, pa, ra, da, kind_b, pb, rb, db, d, store,
-                                  EPA_MAX_VERTICES, 1), row(store, 0))
+            gap = sub(put_support(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, d,
+                                  store, EPA_MAX_VERTICES, 1), row(store, 0))
             if dot(gap, gap) > 1e-18:
                 n = 2
                 break
@@ -396,8 +402,8 @@ def tetrahedron_from(kind_a, pa, ra, da, kind_b, pb, rb, db, simplex, n, store):
             side = cross(line, d)
             if dot(side, side) < 1e-6 * dot(line, line):
                 continue  # d along the line
-            x = put_support(kind_a, pa, ra, da, kind_b, pb, rb, db, side, store,
-                            EPA_MAX_VERTICES, 2)
+            x = put_support(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, side,
+                            store, EPA_MAX_VERTICES, 2)
             off = cross(line, sub(x, row(store, 0)))
             if dot(off, off) > 1e-18 * dot(line, line):
                 n = 3
@@ -405,8 +411,8 @@ def tetrahedron_from(kind_a, pa, ra, da, kind_b, pb, rb, db, simplex, n, store):
     if n == 3:
         normal = cross(sub(row(store, 1), row(store, 0)), sub(row(store, 2), row(store, 0)))
         for sign in (1.0, -1.0):
-            x = put_support(kind_a, pa, ra, da, kind_b, pb, rb, db, scaled(sign, normal),
-                            store, EPA_MAX_VERTICES, 3)
+            x = put_support(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b,
+                            scaled(sign, normal), store, EPA_MAX_VERTICES, 3)
             volume = dot(normal, sub(x, row(store, 0)))
             if abs(volume) > 1e-12 * dot(normal, normal) ** 0.75:
                 n = 4
@@ -415,13 +421,14 @@ def tetrahedron_from(kind_a, pa, ra, da, kind_b, pb, rb, db, simplex, n, store):
 
 
 @njit(cache=True, nogil=True)
-def epa(kind_a, pa, ra, da, kind_b, pb, rb, db, simplex, n, sc):
+def epa(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, simplex, n, sc):
     """Penetration of the overlapping cores of A and B (expanding polytope): returns (found,
     normal A -> B, depth, deepest point of A's core, deepest point of B's core); depth is how
     far B must move along the normal to separate them."""
     nothing = (0.0, 0.0, 0.0)
     w, faces, planes, edges = sc.polytope, sc.epa_face, sc.epa_plane, sc.epa_edge
-    if not tetrahedron_from(kind_a, pa, ra, da, kind_b, pb, rb, db, simplex, n, w):
+    if not tetrahedron_from(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, simplex,
+                            n, w):
         return False, nothing, 0.0, nothing, nothing
     centre = (0.0, 0.0, 0.0)
     for k in range(4):
@@ -445,8 +452,8 @@ def epa(kind_a, pa, ra, da, kind_b, pb, rb, db, simplex, n, sc):
         found = True
         if vertex_count == EPA_MAX_VERTICES:
             break
-        x = put_support(kind_a, pa, ra, da, kind_b, pb, rb, db, normal, w, EPA_MAX_VERTICES,
-                        vertex_count)
+        x = put_support(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, normal, w,
+                        EPA_MAX_VERTICES, vertex_count)
         if dot(x, normal) - planes[best, 3] <= EPA_TOLERANCE:
             break  # the closest face is on A - B's boundary
         # Remove the faces x sees; their boundary (edges not shared by two of them) is the
@@ -495,7 +502,8 @@ def epa(kind_a, pa, ra, da, kind_b, pb, rb, db, simplex, n, sc):
 
 @njit(cache=True, nogil=True)
 def shrink_of(kind, dims):
-    """How far the shallow-overlap test shrinks a shape without a radius (see SHRINK)."""
+    """How far the shallow-overlap test shrinks a shape without a radius (see SHRINK); a convex
+    hull is not shrunk (0)."""
     if kind == BOX:
         return min(SHRINK, 0.25 * min(dims[0], dims[1], dims[2]))
     if kind == CYLINDER:
@@ -514,7 +522,7 @@ def shrunk(kind, dims, by):
 
 
 @njit(cache=True, nogil=True)
-def shallow_contact(kind_a, pa, ra, da, kind_b, pb, rb, db, sc):
+def shallow_contact(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, sc):
     """The contact of overlapping A and B from the distance of their shrunk versions (see
     SHRINK): (found, normal A -> B, point on A, point on B, depth), found when the shrunk
     shapes are apart. The depth is the true shapes' overlap along the normal, the points are
@@ -523,14 +531,16 @@ def shallow_contact(kind_a, pa, ra, da, kind_b, pb, rb, db, sc):
     nothing = (0.0, 0.0, 0.0)
     if shrink_a + shrink_b == 0.0:
         return False, nothing, nothing, nothing, 0.0
-    outcome, n, core_a, core_b = gjk(kind_a, pa, ra, shrunk(kind_a, da, shrink_a), kind_b, pb, rb,
-                                     shrunk(kind_b, db, shrink_b), np.inf, sc.simplex)
+    outcome, n, core_a, core_b = gjk(hulls, kind_a, pa, ra, shrunk(kind_a, da, shrink_a), slot_a,
+                                     kind_b, pb, rb, shrunk(kind_b, db, shrink_b), slot_b, np.inf,
+                                     sc.simplex)
     if outcome != SEPARATED:
         return False, nothing, nothing, nothing, 0.0
     gap = sub(core_b, core_a)
     normal = scaled(1.0 / np.sqrt(dot(gap, gap)), gap)
-    reach_a = dot(surface_point(kind_a, pa, ra, da, normal), normal)
-    reach_b = dot(surface_point(kind_b, pb, rb, db, (-normal[0], -normal[1], -normal[2])), normal)
+    reach_a = dot(surface_point(hulls, kind_a, pa, ra, da, slot_a, normal), normal)
+    reach_b = dot(surface_point(hulls, kind_b, pb, rb, db, slot_b,
+                                (-normal[0], -normal[1], -normal[2])), normal)
     middle = scaled(0.5, add_scaled(core_a, 1.0, core_b))
     along = dot(middle, normal)
     return (True, normal, add_scaled(middle, reach_a - along, normal),
@@ -538,13 +548,13 @@ def shallow_contact(kind_a, pa, ra, da, kind_b, pb, rb, db, sc):
 
 
 @njit(cache=True, nogil=True)
-def shape_contact(kind_a, pa, ra, da, kind_b, pb, rb, db, margin, sc):
+def shape_contact(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, margin, sc):
     """The deepest contact of A and B: (found, normal A -> B, point on A's surface, point on
     B's surface, depth: positive overlapping, negative apart); not found when they are more
     than `margin` apart. Apart, GJK's closest points give it exactly; overlapping a little, the
     shrunk shapes' (shallow_contact); deeper, EPA's."""
     radius_a, radius_b = radius_of(kind_a, da), radius_of(kind_b, db)
-    outcome, n, core_a, core_b = gjk(kind_a, pa, ra, da, kind_b, pb, rb, db,
+    outcome, n, core_a, core_b = gjk(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b,
                                      radius_a + radius_b + margin, sc.simplex)
     nothing = (0.0, 0.0, 0.0)
     if outcome == BEYOND:
@@ -555,18 +565,19 @@ def shape_contact(kind_a, pa, ra, da, kind_b, pb, rb, db, margin, sc):
         normal = scaled(1.0 / distance, gap)
         depth = radius_a + radius_b - distance
     else:
-        shallow = shallow_contact(kind_a, pa, ra, da, kind_b, pb, rb, db, sc)
+        shallow = shallow_contact(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, sc)
         if shallow[0]:
             return shallow
-        found, normal, depth, core_a, core_b = epa(kind_a, pa, ra, da, kind_b, pb, rb, db,
-                                                   sc.simplex, n, sc)
+        found, normal, depth, core_a, core_b = epa(
+            hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, sc.simplex, n, sc)
         if not found:
             # A - B is flat: take the centres' direction and the overlap along it.
             normal = sub(pb, pa)
             length = np.sqrt(dot(normal, normal))
             normal = scaled(1.0 / length, normal) if length > 1e-12 else (0.0, 0.0, 1.0)
-            core_a = core_point(kind_a, pa, ra, da, normal)
-            core_b = core_point(kind_b, pb, rb, db, (-normal[0], -normal[1], -normal[2]))
+            core_a = core_point(hulls, kind_a, pa, ra, da, slot_a, normal)
+            core_b = core_point(hulls, kind_b, pb, rb, db, slot_b,
+                                (-normal[0], -normal[1], -normal[2]))
             depth = dot(sub(core_a, core_b), normal)
         depth += radius_a + radius_b
     if depth < -margin:
@@ -616,9 +627,9 @@ def clip_segment(poly, plane, offset):
 
 
 @njit(cache=True, nogil=True)
-def to_world_face(kind, p, r, dims, d, out):
+def to_world_face(hulls, kind, p, r, dims, slot, d, out):
     """The shape's supporting face along world d (shapes.supporting_face), in world points."""
-    count = supporting_face(kind, dims, to_local(r, d), out)
+    count = supporting_face(kind, dims, hulls, slot, to_local(r, d), out)
     for k in range(count):
         set_row(out, k, to_world(p, r, row(out, k)))
     return count
@@ -701,14 +712,16 @@ def add_deepest(count, point_a, point_b, depth, out_point, out_depth):
 
 
 @njit(cache=True, nogil=True)
-def convex_pair(kind_a, pa, ra, da, kind_b, pb, rb, db, margin, sc, out_point, out_depth):
+def convex_pair(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, margin, sc,
+                out_point, out_depth):
     """Manifold of any two shapes: (point count, normal A -> B)."""
-    found, normal, point_a, point_b, depth = shape_contact(kind_a, pa, ra, da, kind_b, pb, rb,
-                                                           db, margin, sc)
+    found, normal, point_a, point_b, depth = shape_contact(
+        hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, margin, sc)
     if not found:
         return 0, normal
-    count_a = to_world_face(kind_a, pa, ra, da, normal, sc.face_a)
-    count_b = to_world_face(kind_b, pb, rb, db, (-normal[0], -normal[1], -normal[2]), sc.face_b)
+    count_a = to_world_face(hulls, kind_a, pa, ra, da, slot_a, normal, sc.face_a)
+    count_b = to_world_face(hulls, kind_b, pb, rb, db, slot_b, (-normal[0], -normal[1], -normal[2]),
+                            sc.face_b)
     count = 0
     if count_a >= 2 and count_b >= 2:
         count = clip_faces(sc.face_a, count_a, sc.face_b, count_b, normal, margin, sc,
@@ -717,20 +730,20 @@ def convex_pair(kind_a, pa, ra, da, kind_b, pb, rb, db, margin, sc, out_point, o
 
 
 @njit(cache=True, nogil=True)
-def convex_ground(kind, p, r, dims, height, margin, sc, out_point, out_depth):
+def convex_ground(hulls, kind, p, r, dims, slot, height, margin, sc, out_point, out_depth):
     """Manifold of a shape and the ground z = height (normal (0, 0, -1)): the corners of its
     supporting face along -z within `margin` of the plane, and its lowest point when they miss
     it. Points halfway to the plane."""
     down = (0.0, 0.0, -1.0)
     count = 0
-    for k in range(to_world_face(kind, p, r, dims, down, sc.face_a)):
+    for k in range(to_world_face(hulls, kind, p, r, dims, slot, down, sc.face_a)):
         gap = sc.face_a[k, 2] - height
         if gap <= margin:
             out_point[count, 0], out_point[count, 1] = sc.face_a[k, 0], sc.face_a[k, 1]
             out_point[count, 2] = sc.face_a[k, 2] - 0.5 * gap
             out_depth[count] = -gap
             count += 1
-    lowest = surface_point(kind, p, r, dims, down)
+    lowest = surface_point(hulls, kind, p, r, dims, slot, down)
     if lowest[2] - height > margin:
         return count
     return add_deepest(count, lowest, (lowest[0], lowest[1], height), height - lowest[2],
@@ -761,7 +774,8 @@ def triangle_face(tri, tri_normal, d, out):
 
 
 @njit(cache=True, nogil=True)
-def convex_triangle(kind, p, r, dims, tri, tri_normal, margin, sc, out_point, out_depth):
+def convex_triangle(hulls, kind, p, r, dims, slot, tri, tri_normal, margin, sc, out_point,
+                    out_depth):
     """Manifold of a shape and a one-sided playground triangle: (point count, normal shape ->
     triangle). None when the shape's centre is behind the triangle's plane. While the shape is
     sunk at most SEAM_TOLERANCE below the plane the triangle's face normal is the normal (as
@@ -774,15 +788,15 @@ def convex_triangle(kind, p, r, dims, tri, tri_normal, margin, sc, out_point, ou
     if front <= 0.0:
         return 0, nothing
     origin, frame = triangle_frame(tri, n)
-    found, normal, point_a, point_b, depth = shape_contact(kind, p, r, dims, TRIANGLE, origin,
-                                                           frame, nothing, margin, sc)
+    found, normal, point_a, point_b, depth = shape_contact(
+        hulls, kind, p, r, dims, slot, TRIANGLE, origin, frame, nothing, NO_HULL, margin, sc)
     if not found:
         return 0, nothing
     into = (-n[0], -n[1], -n[2])
-    lowest = surface_point(kind, p, r, dims, into)
+    lowest = surface_point(hulls, kind, p, r, dims, slot, into)
     face_gap = dot(sub(lowest, tri[0]), n)
     if face_gap < -SEAM_TOLERANCE:
-        count_a = to_world_face(kind, p, r, dims, normal, sc.face_a)
+        count_a = to_world_face(hulls, kind, p, r, dims, slot, normal, sc.face_a)
         count_b = triangle_face(tri, n, (-normal[0], -normal[1], -normal[2]), sc.face_b)
         count = 0
         if count_a >= 2 and count_b >= 2:
@@ -791,7 +805,7 @@ def convex_triangle(kind, p, r, dims, tri, tri_normal, margin, sc, out_point, ou
         return add_deepest(count, point_a, point_b, depth, out_point, out_depth), normal
     for k in range(3):
         set_row(sc.face_b, k, tri[k])
-    count_a = to_world_face(kind, p, r, dims, into, sc.face_a)
+    count_a = to_world_face(hulls, kind, p, r, dims, slot, into, sc.face_a)
     count = 0
     if count_a >= 2:
         count = clip_faces(sc.face_a, count_a, sc.face_b, 3, into, margin, sc, out_point,

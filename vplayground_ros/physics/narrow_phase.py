@@ -389,9 +389,11 @@ def flipped(pair):
 
 
 @njit(cache=True, nogil=True)
-def collide_pair(kind_a, pa, ra, da, kind_b, pb, rb, db, margin, scratch, out_point, out_depth):
-    """Manifold of two bodies (shape code, position, rotation rows, dimensions each): (point
-    count, normal A -> B), the points in out_point/out_depth. Boxes first: most pairs are."""
+def collide_pair(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, margin, scratch,
+                 out_point, out_depth):
+    """Manifold of two bodies (shape code, position, rotation rows, dimensions, slot each; the
+    slot finds a convex body's hull in `hulls`): (point count, normal A -> B), the points in
+    out_point/out_depth. Boxes first: most pairs are."""
     if kind_a == BOX and kind_b == BOX:
         return box_box(pa, ra, da, pb, rb, db, margin, scratch.poly_a, scratch.poly_b,
                        out_point, out_depth)
@@ -401,12 +403,13 @@ def collide_pair(kind_a, pa, ra, da, kind_b, pb, rb, db, margin, scratch, out_po
         return sphere_box(pa, da[0], pb, rb, db, margin, out_point, out_depth)
     if kind_a == BOX and kind_b == SPHERE:
         return flipped(sphere_box(pb, db[0], pa, ra, da, margin, out_point, out_depth))
-    return convex_pair(kind_a, pa, ra, da, kind_b, pb, rb, db, margin, scratch, out_point,
-                       out_depth)
+    return convex_pair(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, margin,
+                       scratch, out_point, out_depth)
 
 
 @njit(cache=True, nogil=True)
-def collide_triangle(kind, p, r, dims, tri, tri_normal, margin, scratch, out_point, out_depth):
+def collide_triangle(hulls, kind, p, r, dims, slot, tri, tri_normal, margin, scratch, out_point,
+                     out_depth):
     """Manifold of a body and a one-sided playground triangle: (point count, normal body ->
     triangle)."""
     if kind == BOX:
@@ -414,22 +417,23 @@ def collide_triangle(kind, p, r, dims, tri, tri_normal, margin, scratch, out_poi
                             out_point, out_depth)
     if kind == SPHERE:
         return sphere_triangle(p, dims[0], tri, tri_normal, margin, out_point, out_depth)
-    return convex_triangle(kind, p, r, dims, tri, tri_normal, margin, scratch, out_point,
-                           out_depth)
+    return convex_triangle(hulls, kind, p, r, dims, slot, tri, tri_normal, margin, scratch,
+                           out_point, out_depth)
 
 
 @njit(cache=True, nogil=True)
-def collide_ground(kind, p, r, dims, height, margin, scratch, out_point, out_depth):
+def collide_ground(hulls, kind, p, r, dims, slot, height, margin, scratch, out_point, out_depth):
     """Points of a body within `margin` of the ground z = height (normal (0, 0, -1)): count."""
     if kind == BOX:
         return box_ground(p, r, dims, height, margin, out_point, out_depth)
     if is_round(kind):
         return round_ground(p, r, dims, height, margin, out_point, out_depth)
-    return convex_ground(kind, p, r, dims, height, margin, scratch, out_point, out_depth)
+    return convex_ground(hulls, kind, p, r, dims, slot, height, margin, scratch, out_point,
+                         out_depth)
 
 
 @njit(cache=True, nogil=True)
-def collide(contacts, bodies, broad, playground, ground_enabled, ground_height, live):
+def collide(contacts, bodies, hulls, broad, playground, ground_enabled, ground_height, live):
     """Manifolds of every candidate pair, of every (body, playground triangle) candidate and of
     every awake body among `live` (slots, ascending) with the ground, each reduced to at most 4 points and appended to
     `contacts`. Returns False when the contact buffers are full (nothing of the step has been
@@ -473,10 +477,11 @@ def collide(contacts, bodies, broad, playground, ground_enabled, ground_height, 
                                     matrix3(rotation, b), vector3(dimensions, b), margin, poly_a,
                                     poly_b, scratch_point, scratch_depth)
             else:
-                n, normal = collide_pair(shape[a], vector3(position, a), matrix3(rotation, a),
-                                         vector3(dimensions, a), shape[b], vector3(position, b),
-                                         matrix3(rotation, b), vector3(dimensions, b), margin,
-                                         scratch, scratch_point, scratch_depth)
+                n, normal = collide_pair(hulls, shape[a], vector3(position, a),
+                                         matrix3(rotation, a), vector3(dimensions, a), a,
+                                         shape[b], vector3(position, b), matrix3(rotation, b),
+                                         vector3(dimensions, b), b, margin, scratch,
+                                         scratch_point, scratch_depth)
         elif job < body_pairs + mesh_pairs:
             a, t = broad.playground_body[job - body_pairs], broad.playground_triangle[job - body_pairs]
             # Each triangle is its own manifold (its own warm-start key); all are the PLAYGROUND.
@@ -487,8 +492,8 @@ def collide(contacts, bodies, broad, playground, ground_enabled, ground_height, 
                                          vector3(playground.normals, t), CONTACT_MARGIN + reach[a],
                                          poly_a, poly_b, scratch_point, scratch_depth)
             else:
-                n, normal = collide_triangle(shape[a], vector3(position, a), matrix3(rotation, a),
-                                             vector3(dimensions, a),
+                n, normal = collide_triangle(hulls, shape[a], vector3(position, a),
+                                             matrix3(rotation, a), vector3(dimensions, a), a,
                                              matrix3(playground.triangles, t),
                                              vector3(playground.normals, t),
                                              CONTACT_MARGIN + reach[a], scratch, scratch_point,
@@ -503,9 +508,10 @@ def collide(contacts, bodies, broad, playground, ground_enabled, ground_height, 
                                ground_height, CONTACT_MARGIN + reach[a], scratch_point,
                                scratch_depth)
             else:
-                n = collide_ground(shape[a], vector3(position, a), matrix3(rotation, a),
-                                   vector3(dimensions, a), ground_height, CONTACT_MARGIN + reach[a],
-                                   scratch, scratch_point, scratch_depth)
+                n = collide_ground(hulls, shape[a], vector3(position, a), matrix3(rotation, a),
+                                   vector3(dimensions, a), a, ground_height,
+                                   CONTACT_MARGIN + reach[a], scratch, scratch_point,
+                                   scratch_depth)
         if n == 0:
             continue
         kept = reduce_manifold(scratch_point, scratch_depth, n, normal, keep)

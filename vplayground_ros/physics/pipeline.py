@@ -104,9 +104,9 @@ def static_index_outdated(bodies, broad, live):
 
 
 @njit(cache=True, nogil=True)
-def detect(bodies, broad, playground, contacts, settings, moving_ids):
+def detect(bodies, hulls, broad, playground, contacts, settings, moving_ids):
     """Broad phase then narrow phase for the current positions of the live bodies `moving_ids`
-    (list_live_bodies). Returns a status."""
+    (list_live_bodies); `hulls` is the World's hull table of convex bodies. Returns a status."""
     s = settings
     if not build_index(broad.moving, moving_ids, bodies.aabb_min, bodies.aabb_max,
                        bodies.octree_level, s.root_min, s.root_size):
@@ -122,7 +122,7 @@ def detect(bodies, broad, playground, contacts, settings, moving_ids):
     if pairs < 0:
         return GROW_PAIRS
     broad.playground_count[0] = pairs
-    if not collide(contacts, bodies, broad, playground, s.ground_enabled, s.ground_height,
+    if not collide(contacts, bodies, hulls, broad, playground, s.ground_enabled, s.ground_height,
                    moving_ids):
         return GROW_CONTACTS
     return DONE
@@ -149,7 +149,7 @@ def step_world(steps, ctx):
         t = lap(ctx, STAGE_DERIVED, t)
         # 2. Collision detection (octree broad phase, narrow phase per shape pair) at the current
         #    positions, with speculative margins covering this step's motion.
-        status = detect(bodies, broad, playground, current, s, live)
+        status = detect(bodies, ctx.hulls, broad, playground, current, s, live)
         if status != DONE:
             return done, status
         t = lap(ctx, STAGE_DETECTION, t)
@@ -160,7 +160,7 @@ def step_world(steps, ctx):
             live = list_live_bodies(bodies, broad, False)
             update_bodies(bodies, live, s.dt, s.root_size, s.octree_depth)
             broad.stale[0] += stale
-            status = detect(bodies, broad, playground, current, s, live)
+            status = detect(bodies, ctx.hulls, broad, playground, current, s, live)
             if status != DONE:
                 return done, status
         t = lap(ctx, STAGE_WAKE, t)

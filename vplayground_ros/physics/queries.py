@@ -39,7 +39,7 @@ class WorldQueries:
         """What rays can hit now (every body, the playground, the ground), for casting any
         number of batches at this instant: RayScene.cast(origins, directions, max_range,
         exclude). Stale once the world steps or changes."""
-        return RayScene(self._bodies, self._playground, self.ground, dict(self._slots))
+        return RayScene(self._bodies, self._hulls, self._playground, self.ground, dict(self._slots))
 
     def cast_rays(self, origins, directions, max_range, exclude=()):
         """RayHits (distance, point, normal, body row or GROUND/PLAYGROUND/NOTHING) of a batch
@@ -69,6 +69,12 @@ class WorldQueries:
         return {"shapes": gather(b.shape, rows), "dimensions": gather(b.dimensions, rows),
                 "sizes": 2.0 * gather(b.half_extents, rows), "masses": gather(b.mass, rows),
                 "immovable": gather(b.immovable, rows)}
+
+    def hull_triangles(self):
+        """Each body's hull as triangles (T, 3, 3) in its frame, one row per body (None for the
+        shapes other than convex), as a tuple; for drawing."""
+        return tuple(self._solids[slot][1].hull.triangles if self._solids[slot][1].hull is not None
+                     else None for slot in self._current_layout().slots.tolist())
 
     def contacts(self):
         """The newest step's contact points; body_a/body_b are rows of state(), -1 the ground,

@@ -18,7 +18,7 @@ from numba import njit, prange
 
 from .ids import GROUND, NOTHING, PLAYGROUND
 from .math3d import quat_to_matrix
-from .raycast import NO_HIT, ray_body, ray_triangle
+from .raycast import NO_HIT, RayBodies, ray_body, ray_triangle
 
 # Numba's OpenMP threads spin after each parallel batch by default: on a machine shared with the
 # node's other threads (or other processes) that spinning took several times the casting's own
@@ -211,8 +211,7 @@ def build_ray_grid(active, position, orientation, half_extents, triangles, tri_m
 
 
 @njit(cache=True, nogil=True, inline="always")
-def test_item(item, o, d, limit, excluded, position, rotation, half_extents, shape, dimensions,
-              triangles, normals):
+def test_item(item, o, d, limit, excluded, geometry, hulls, triangles, normals):
     """(t, what, normal) of grid item `item` (a body slot, or capacity + a triangle) if the ray
     hits it nearer than `limit`, else t NO_HIT."""
     capacity = len(excluded)
@@ -221,13 +220,14 @@ def test_item(item, o, d, limit, excluded, position, rotation, half_extents, sha
             return NO_HIT, item, (0.0, 0.0, 0.0)
         # Most bodies a ray meets in its cells it passes by: the bounding sphere rules those out
         # without the exact test (with a margin for the rounding of a far body).
+        position, half_extents = geometry.position, geometry.half_extents
         vx, vy, vz = position[item, 0] - o[0], position[item, 1] - o[1], position[item, 2] - o[2]
         along = vx * d[0] + vy * d[1] + vz * d[2]
         h = (half_extents[item, 0], half_extents[item, 1], half_extents[item, 2])
         radius2, away2 = h[0] * h[0] + h[1] * h[1] + h[2] * h[2], vx * vx + vy * vy + vz * vz
         if away2 - along * along > radius2 + 1e-9 * (radius2 + away2):
             return NO_HIT, item, (0.0, 0.0, 0.0)
-        t, face = ray_body(o, d, limit, position, rotation, half_extents, shape, dimensions, item)
+        t, face = ray_body(o, d, limit, geometry, hulls, item)
         return t, item, face
     tri = item - capacity
     t = ray_triangle(o, d, limit, triangles, normals, tri)
@@ -262,12 +262,11 @@ def axis_step(d):
 # error_model "numpy": no zero-division checks (every division here is guarded or meant to give
 # inf), which cost the walk a branch each.
 @njit(cache=True, nogil=True, error_model="numpy")
-def cast_chunk(start, stop, origins, directions, max_range, excluded, grid, position, half_extents,
-               shape, dimensions, triangles, normals, ground_enabled, ground_height, row_of_slot,
-               distance, point, normal, hit):
+def cast_chunk(start, stop, origins, directions, max_range, excluded, grid, geometry, hulls,
+               triangles, normals, ground_enabled, ground_height, row_of_slot, distance, point, normal, hit):
     """cast_ray_batch for rays start..stop; returns how many of them were invalid (a zero or
     non-finite direction, a non-finite origin, a NaN range): those are left unwritten."""
-    rotation, lower, cell, dims = grid.rotation, grid.lower, grid.cell_size[0], grid.dims
+    lower, cell, dims = grid.lower, grid.cell_size[0], grid.dims
     cell_start, items, wide, block_items = grid.cell_start, grid.items, grid.wide, grid.block_items
     nx, ny, nz = dims[0], dims[1], dims[2]
     by, bz = (ny + BLOCK - 1) // BLOCK, (nz + BLOCK - 1) // BLOCK
@@ -295,8 +294,8 @@ def cast_chunk(start, stop, origins, directions, max_range, excluded, grid, posi
                 best, what, n = t, GROUND, (0.0, 0.0, 1.0)
         limit = min(best, reach)
         for k in range(len(wide)):
-            t, obj, face = test_item(wide[k], o, d, limit, excluded, position, rotation,
-                                     half_extents, shape, dimensions, triangles, normals)
+            t, obj, face = test_item(wide[k], o, d, limit, excluded, geometry, hulls, triangles,
+                                     normals)
             if t < limit:
                 best, limit, what, n = t, t, obj, face
         # The ray's part inside the grid box, [t0, t1]. Per axis the direction of travel and
@@ -355,8 +354,8 @@ def cast_chunk(start, stop, origins, directions, max_range, excluded, grid, posi
                 if tested_by[item] == i:
                     continue  # its nearest hit, if any nearer than the limit then, is counted
                 tested_by[item] = i
-                t, obj, face = test_item(item, o, d, limit, excluded, position, rotation,
-                                         half_extents, shape, dimensions, triangles, normals)
+                t, obj, face = test_item(item, o, d, limit, excluded, geometry, hulls, triangles,
+                                         normals)
                 if t < limit:
                     best, limit, what, n = t, t, obj, face
             cell_exit = min(next_x, next_y, next_z)
@@ -389,9 +388,9 @@ def cast_chunk(start, stop, origins, directions, max_range, excluded, grid, posi
 
 
 @njit(cache=True, nogil=True, parallel=True, error_model="numpy")
-def cast_ray_batch(origins, directions, max_range, excluded, grid, position, half_extents, shape,
-                   dimensions, triangles, normals, ground_enabled, ground_height, row_of_slot, distance, point,
-                   normal, hit):
+def cast_ray_batch(origins, directions, max_range, excluded, grid, geometry, hulls, triangles,
+                   normals, ground_enabled, ground_height, row_of_slot, distance, point, normal,
+                   hit):
     """Nearest hit of each ray origins[i] + t directions[i] (normalised here), 0 <= t <=
     max_range[i] (origins or max_range may have one row for all rays), with the ground, the
     playground or a body not `excluded` (bool per slot). Writes distance (NO_HIT for nothing),
@@ -401,9 +400,8 @@ def cast_ray_batch(origins, directions, max_range, excluded, grid, position, hal
     invalid = np.zeros(chunks, np.int64)
     for chunk in prange(chunks):
         invalid[chunk] = cast_chunk(chunk * RAY_CHUNK, min(len(directions), (chunk + 1) * RAY_CHUNK),
-                                    origins, directions, max_range, excluded, grid, position,
-                                    half_extents, shape, dimensions, triangles, normals,
-                                    ground_enabled, ground_height,
+                                    origins, directions, max_range, excluded, grid, geometry,
+                                    hulls, triangles, normals, ground_enabled, ground_height,
                                     row_of_slot, distance, point, normal, hit)
     return invalid.sum()
 
@@ -420,12 +418,15 @@ class RayScene:
     """What rays can hit at one instant (World.ray_scene()): the grid is filed once, and any
     number of batches (the sensors due at that instant) cast through it."""
 
-    def __init__(self, bodies, playground, ground, slots):
+    def __init__(self, bodies, hulls, playground, ground, slots):
         self._bodies, self._playground, self._slots = bodies, playground, slots
         self._ground = ground
         self._grid = build_ray_grid(bodies.active, bodies.position, bodies.orientation,
                                     bodies.half_extents, playground.triangles,
                                     playground.aabb_min, playground.aabb_max)
+        self._geometry = RayBodies(bodies.position, self._grid.rotation, bodies.half_extents,
+                                   bodies.shape, bodies.dimensions)
+        self._hulls = hulls
         self._row_of_slot = np.cumsum(bodies.active) - 1
 
     def cast(self, origins, directions, max_range, exclude=(), out=None):
@@ -454,8 +455,8 @@ class RayScene:
             raise ValueError(f"cast_rays: out holds {len(out.distance)} rays, not {count}")
         g = self._ground
         invalid = cast_ray_batch(origins, directions, max_range, excluded, self._grid,
-                                 self._bodies.position, self._bodies.half_extents,
-                                 self._bodies.shape, self._bodies.dimensions, self._playground.triangles, self._playground.normals, g is not None,
+                                 self._geometry, self._hulls, self._playground.triangles,
+                                 self._playground.normals, g is not None,
                                  float(g["height"]) if g else 0.0, self._row_of_slot, *out)
         if invalid:
             raise ValueError(f"cast_rays: {invalid} rays with a zero or non-finite direction, a "

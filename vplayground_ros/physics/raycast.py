@@ -1,5 +1,7 @@
 """Ray casts (the wheels' contact with the world): against the ground plane, the playground's
 triangles and the bodies, each found through the octree rather than by testing everything."""
+from collections import namedtuple
+
 import numpy as np
 from numba import njit
 
@@ -8,6 +10,10 @@ from .broad_phase import cell_box, object_level, query_index
 from .ids import GROUND, PLAYGROUND
 
 NO_HIT = np.inf
+
+# What a ray needs of the bodies: their poses and shapes (flat: a parallel loop takes no nested
+# tuples; a convex body's hull comes in the shapes.Hulls table beside it).
+RayBodies = namedtuple("RayBodies", "position rotation half_extents shape dimensions")
 
 
 # Both exact tests take the arrays and an index rather than one body's rows, and are inlined
@@ -44,13 +50,14 @@ def ray_box(origin, direction, reach, position, rotation, half_extents, j):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def ray_body(origin, direction, reach, position, rotation, half_extents, shape, dimensions, j):
-    """The ray against body j of any shape: (distance, outward normal in the world), NO_HIT
-    when it misses or starts inside. Boxes take the slab test in world terms; the other shapes
-    are asked in their own frame (physics.shapes.ray)."""
-    if shape[j] == shapes.BOX:
-        return ray_box(origin, direction, reach, position, rotation, half_extents, j)
-    r = rotation
+def ray_body(origin, direction, reach, geometry, hulls, j):
+    """The ray against body j of RayBodies `geometry` (and the hull table): (distance, outward
+    normal in the world),
+    NO_HIT when it misses or starts inside. Boxes take the slab test in world terms; the other
+    shapes are asked in their own frame (physics.shapes.ray)."""
+    position, r, dimensions = geometry.position, geometry.rotation, geometry.dimensions
+    if geometry.shape[j] == shapes.BOX:
+        return ray_box(origin, direction, reach, position, r, geometry.half_extents, j)
     v = (origin[0] - position[j, 0], origin[1] - position[j, 1], origin[2] - position[j, 2])
     o = (v[0] * r[j, 0, 0] + v[1] * r[j, 1, 0] + v[2] * r[j, 2, 0],
          v[0] * r[j, 0, 1] + v[1] * r[j, 1, 1] + v[2] * r[j, 2, 1],
@@ -58,7 +65,8 @@ def ray_body(origin, direction, reach, position, rotation, half_extents, shape, 
     d = (direction[0] * r[j, 0, 0] + direction[1] * r[j, 1, 0] + direction[2] * r[j, 2, 0],
          direction[0] * r[j, 0, 1] + direction[1] * r[j, 1, 1] + direction[2] * r[j, 2, 1],
          direction[0] * r[j, 0, 2] + direction[1] * r[j, 1, 2] + direction[2] * r[j, 2, 2])
-    t, n = shapes.ray(shape[j], (dimensions[j, 0], dimensions[j, 1], dimensions[j, 2]), o, d, reach)
+    t, n = shapes.ray(geometry.shape[j], (dimensions[j, 0], dimensions[j, 1], dimensions[j, 2]),
+                      hulls, j, o, d, reach)
     if t == NO_HIT:
         return NO_HIT, (0.0, 0.0, 0.0)
     return t, (r[j, 0, 0] * n[0] + r[j, 0, 1] * n[1] + r[j, 0, 2] * n[2],
@@ -102,6 +110,8 @@ def cast_ray(origin, direction, reach, exclude, query_id, ctx):
     bodies, broad, playground, s = ctx.bodies, ctx.broad, ctx.playground, ctx.settings
     ground_enabled, ground_height = s.ground_enabled, s.ground_height
     root_min, root_size, depth = s.root_min, s.root_size, s.octree_depth
+    geometry = RayBodies(bodies.position, bodies.rotation, bodies.half_extents, bodies.shape,
+                         bodies.dimensions)
     best, hit, best_normal = NO_HIT, GROUND, (0.0, 0.0, 1.0)
     if ground_enabled and direction[2] < 0.0:
         t = (ground_height - origin[2]) / direction[2]
@@ -118,8 +128,7 @@ def cast_ray(origin, direction, reach, exclude, query_id, ctx):
             j = broad.scratch[m]
             if j == exclude or not bodies.active[j]:
                 continue
-            t, normal = ray_body(origin, direction, reach, bodies.position, bodies.rotation,
-                                 bodies.half_extents, bodies.shape, bodies.dimensions, j)
+            t, normal = ray_body(origin, direction, reach, geometry, ctx.hulls, j)
             if t < best:
                 best, hit, best_normal = t, j, normal
     if len(playground.triangles):

@@ -32,6 +32,7 @@ MAX_FRICTION = 10.0
 MAX_SIZE = 1.0e4       # m: larger boxes break the octree's and the solver's scales
 MAX_COORDINATE = 1.0e6  # m
 MAX_SPEED = 1.0e4      # m/s, rad/s
+MAX_POINTS = 100_000   # of a convex body's `points`, before its hull is taken
 
 
 # Values quoted in error messages: a few items of a few levels, whatever the caller sent (a YAML
@@ -227,6 +228,10 @@ def validate_body_fields(raw, path, allowed=BODY_KEYS):
             out[key] = number(value, p, 0.0, 0.5 * MAX_SIZE, low_open=True)
         elif key == "length":
             out[key] = number(value, p, 0.0, MAX_SIZE)
+        elif key == "points":
+            if not isinstance(value, (list, tuple)) or not 4 <= len(value) <= MAX_POINTS:
+                raise SpecError(p, f"expected a list of 4 to {MAX_POINTS} points [x, y, z], got {quote(value)}")
+            out[key] = [vector(point, child(p, k), 3, -MAX_SIZE, MAX_SIZE) for k, point in enumerate(value)]
         elif key in ("density", "mass"):
             out[key] = number(value, p, 0.0, 1.0e12, low_open=True)
         elif key == "elasticity":
@@ -249,6 +254,9 @@ def check_dimension_keys(shape, body, path):
             raise SpecError(child(path, key), f"a {shape} has no {key} (its keys: {', '.join(own)})")
     if shape == "cylinder" and body.get("length", 1.0) <= 0.0:
         raise SpecError(child(path, "length"), f"must be > 0 for a cylinder, got {body['length']:g}")
+    if shape == "convex" and "points" not in body:
+        raise SpecError(child(path, "points"), "missing (a convex body's vertices; in a scene file "
+                                               "`mesh:` names a file to take them from)")
 
 
 def validate_body(raw, path="body"):

@@ -61,6 +61,8 @@ class World(WorldQueries):
         self.step_count = 0
         self._bodies = allocate_bodies(capacity)
         self._names = [None] * capacity
+        self._solids = [None] * capacity  # (shape name, shapes.Solid) per slot
+        self._hulls = shapes.convex.pack_hulls(self._solids)  # convex bodies' hulls, by slot
         self._slots = {}
         self._free = list(range(capacity))
         self._generated = 0
@@ -99,6 +101,7 @@ class World(WorldQueries):
         """Adds a box from a SPEC 3 body spec; returns its (given or generated) unique name."""
         body = specs.validate_body(spec)
         self.check_inside(body["position"], "body.position")
+        solid = shapes.solid(body["shape"], body)  # a hull may still be refused: before any change
         name = body.get("name")
         if name is None:
             name = self._generate_name("box")
@@ -111,10 +114,9 @@ class World(WorldQueries):
         b.active[slot] = True
         b.position[slot] = body["position"]
         b.orientation[slot] = body["quaternion"] if "quaternion" in body else rpy_to_quat(body.get("rpy", (0, 0, 0)))
-        shape = shapes.SHAPES[body["shape"]]
-        b.shape[slot] = shape.code
-        self._set_dimensions(slot, shape.module.dimensions(body))
-        b.mass[slot] = body["mass"] if "mass" in body else body.get("density", specs.DEFAULT_DENSITY) * self._volume(slot)
+        b.shape[slot] = shapes.SHAPES[body["shape"]].code
+        self._set_solid(slot, body["shape"], solid)
+        b.mass[slot] = body["mass"] if "mass" in body else body.get("density", specs.DEFAULT_DENSITY) * solid.volume
         self._set_fields(slot, body)
         self._names[slot] = name
         self._slots[name] = slot
@@ -180,6 +182,8 @@ class World(WorldQueries):
         specs.check_dimension_keys(shape.name, {**shape.fields, **body}, name)
         if "position" in body:
             self.check_inside(body["position"], f"{name}.position")
+        resized = shape.fields.keys() & body.keys()
+        solid = shapes.solid(shape.name, {**shape.fields, **body}, name) if resized else None
         self._wake_touching([slot])
         self._forget_contacts([slot])
         b = self._bodies
@@ -189,12 +193,12 @@ class World(WorldQueries):
             b.orientation[slot] = rpy_to_quat(body["rpy"])
         if "quaternion" in body:
             b.orientation[slot] = body["quaternion"]
-        if shape.fields.keys() & body.keys():
-            self._set_dimensions(slot, shape.module.dimensions({**shape.fields, **body}))
+        if resized:
+            self._set_solid(slot, shape.name, solid)
         if "mass" in body:
             b.mass[slot] = body["mass"]
         elif "density" in body:
-            b.mass[slot] = body["density"] * self._volume(slot)
+            b.mass[slot] = body["density"] * self._solids[slot][1].volume
         self._set_fields(slot, body)
         self.layout_version += 1  # sizes, masses, flags
         if not body.get("frozen", False):
@@ -231,6 +235,10 @@ class World(WorldQueries):
         del self._slots[name]
         self._vehicles.remove(name)
         self._names[slot] = None
+        convex = self._solids[slot][1].hull is not None
+        self._solids[slot] = None
+        if convex:
+            self._pack_hulls()
         self.layout_version += 1
         heapq.heappush(self._free, slot)
 
@@ -338,7 +346,7 @@ class World(WorldQueries):
         counters = np.zeros(5, np.int64)
         done = 0
         while done < n:
-            ctx = StepContext(self._bodies, self._playground, self._vehicles.arrays, self._broad,
+            ctx = StepContext(self._bodies, self._hulls, self._playground, self._vehicles.arrays, self._broad,
                               self._contacts, kernel_settings(self.settings, self.ground, specs.DEFAULT_GROUND,
                                                               self._root),
                               counters, self._stage_ns, self.profiling)
@@ -405,8 +413,7 @@ class World(WorldQueries):
         if "angular_velocity" in body:
             b.velocity[slot, 3:] = body["angular_velocity"]
         b.inv_mass[slot] = 1.0 / b.mass[slot]
-        shape = self._shape(slot)
-        b.inv_inertia[slot] = 1.0 / (b.mass[slot] * np.asarray(shape.module.unit_inertia(shape.dimensions)))
+        b.inv_inertia[slot] = np.linalg.inv(b.mass[slot] * self._solids[slot][1].unit_inertia)
         if b.immovable[slot]:
             b.velocity[slot] = 0.0
         if body.get("frozen", False) and not b.immovable[slot]:
@@ -417,21 +424,24 @@ class World(WorldQueries):
             b.static_indexed[slot] = False
             self._broad.stale[0] += 1
 
-    def _set_dimensions(self, slot, dims):
+    def _set_solid(self, slot, name, solid):
+        """The body's shape from a shapes.Solid (the hull table follows a convex body's)."""
         b = self._bodies
-        b.dimensions[slot] = dims
-        b.half_extents[slot] = shapes.half_extents(int(b.shape[slot]), tuple(float(x) for x in dims))
+        was_convex = self._solids[slot] is not None and self._solids[slot][1].hull is not None
+        self._solids[slot] = (name, solid)
+        b.dimensions[slot] = solid.dimensions
+        b.half_extents[slot] = shapes.half_extents(int(b.shape[slot]), solid.dimensions)
+        if was_convex or solid.hull is not None:
+            self._pack_hulls()
+
+    def _pack_hulls(self):
+        self._hulls = shapes.convex.pack_hulls(
+            [entry[1].hull if entry is not None else None for entry in self._solids])
 
     def _shape(self, slot):
         """The body's shape: name, module, dimensions and their spec keys (`size: [...]`)."""
-        name = shapes.SHAPE_NAMES[int(self._bodies.shape[slot])]
-        module = shapes.SHAPES[name].module
-        dims = tuple(float(x) for x in self._bodies.dimensions[slot])
-        return BodyShape(name, module, dims, module.spec_fields(dims))
-
-    def _volume(self, slot):
-        shape = self._shape(slot)
-        return shape.module.volume(shape.dimensions)
+        name, solid = self._solids[slot]
+        return BodyShape(name, shapes.SHAPES[name].module, solid.dimensions, solid.fields)
 
     def _forget_contacts(self, slots):
         """Drops the warm-start impulses of the newest contacts of slots that are edited or
@@ -503,6 +513,7 @@ class World(WorldQueries):
         old = len(self._names)
         self._bodies = grow_bodies(self._bodies, capacity)
         self._names.extend([None] * (capacity - old))
+        self._solids.extend([None] * (capacity - old))
         self._unchecked = np.concatenate([self._unchecked, np.ones(capacity - old, dtype=bool)])
         self.layout_version += 1  # row_of_slot covers every slot
         for slot in range(old, capacity):

@@ -1,11 +1,12 @@
 """Body shapes. A body's shape is a code in `bodies.shape` and three numbers in
 `bodies.dimensions` (what they mean is the shape module's: half extents of a box, a radius and
-a half length); every shape-dependent question is answered here, by one dispatch each, from the
-shape's module.
+a half length); a convex body's hull is in the World's Hulls table at the body's slot. Every
+shape-dependent question is answered here, by one dispatch each, from the shape's module.
 
 Adding a shape: a module like box.py (spec keys, mass properties, bounds, support mapping and
 supporting face for the narrow phase's convex path, ray cast; all in the body's frame) and a
-row in SHAPES and in each dispatcher below.
+row in SHAPES and in each dispatcher below. The compiled dispatchers take the hull table and
+the body's slot (`hulls, h`) whatever the shape; only convex bodies read them.
 """
 from collections import namedtuple
 
@@ -14,18 +15,20 @@ from numba import njit
 
 from ..math3d import quat_to_matrix
 
-from . import box, capsule, cylinder, sphere
+from . import box, capsule, convex, cylinder, sphere
 from .geometry import NO_HIT, unit_or
 
-BOX, SPHERE, CAPSULE, CYLINDER = 0, 1, 2, 3
+BOX, SPHERE, CAPSULE, CYLINDER, CONVEX = 0, 1, 2, 3, 4
 
 Shape = namedtuple("Shape", "code module")
 SHAPES = {"box": Shape(BOX, box), "sphere": Shape(SPHERE, sphere),
-          "capsule": Shape(CAPSULE, capsule), "cylinder": Shape(CYLINDER, cylinder)}
+          "capsule": Shape(CAPSULE, capsule), "cylinder": Shape(CYLINDER, cylinder),
+          "convex": Shape(CONVEX, convex)}
 SHAPE_NAMES = {shape.code: name for name, shape in SHAPES.items()}
 
-# The most points a supporting face has (a cylinder's end).
-MAX_FACE_POINTS = cylinder.CAP_POINTS
+# The most points a supporting face has: a cylinder's end, or up to this many corners of a
+# hull's face (a face with more keeps this many, a convex part of it).
+MAX_FACE_POINTS = 16
 
 
 @njit(cache=True, nogil=True)
@@ -37,14 +40,17 @@ def half_extents(kind, dims):
         return sphere.half_extents(dims)
     if kind == CAPSULE:
         return capsule.half_extents(dims)
-    return cylinder.half_extents(dims)
+    if kind == CYLINDER:
+        return cylinder.half_extents(dims)
+    return dims
 
 
 @njit(cache=True, nogil=True)
 def world_extent(kind, dims, r, e):
     """Half the extent along world axis e of the shape turned by rotation r (3x3, columns the
-    body axes): the exact bounding box, not the box around the body-frame one."""
-    if kind == BOX:
+    body axes): the exact bounding box, not the box around the body-frame one (a hull's is the
+    box around its body-frame bounding box)."""
+    if kind == BOX or kind == CONVEX:  # a hull: its bounding box's
         return abs(r[e, 0]) * dims[0] + abs(r[e, 1]) * dims[1] + abs(r[e, 2]) * dims[2]
     if kind == SPHERE:
         return dims[0]
@@ -77,7 +83,7 @@ def core_radius(kind, dims):
 
 
 @njit(cache=True, nogil=True)
-def core_support(kind, dims, d):
+def core_support(kind, dims, hulls, h, d):
     """The point of the shape's core farthest along d (body frame)."""
     if kind == BOX:
         return box.support(dims, d)
@@ -85,13 +91,15 @@ def core_support(kind, dims, d):
         return sphere.core_support(dims, d)
     if kind == CAPSULE:
         return capsule.core_support(dims, d)
-    return cylinder.support(dims, d)
+    if kind == CYLINDER:
+        return cylinder.support(dims, d)
+    return convex.support(hulls, h, d)
 
 
 @njit(cache=True, nogil=True)
-def support(kind, dims, d):
+def support(kind, dims, hulls, h, d):
     """The point of the whole shape farthest along d (body frame)."""
-    p = core_support(kind, dims, d)
+    p = core_support(kind, dims, hulls, h, d)
     r = core_radius(kind, dims)
     if r == 0.0:
         return p
@@ -100,20 +108,23 @@ def support(kind, dims, d):
 
 
 @njit(cache=True, nogil=True)
-def supporting_face(kind, dims, d, out):
-    """Writes to out the shape's feature facing d (body frame): a polygon counter-clockwise seen
-    from outside, a segment or a point. Returns its point count."""
+def supporting_face(kind, dims, hulls, h, d, out):
+    """Writes to out (at least MAX_FACE_POINTS rows) the shape's feature facing d (body
+    frame): a polygon counter-clockwise seen from outside, a segment or a point. Returns its
+    point count."""
     if kind == BOX:
         return box.supporting_face(dims, d, out)
     if kind == SPHERE:
         return sphere.supporting_face(dims, d, out)
     if kind == CAPSULE:
         return capsule.supporting_face(dims, d, out)
-    return cylinder.supporting_face(dims, d, out)
+    if kind == CYLINDER:
+        return cylinder.supporting_face(dims, d, out)
+    return convex.supporting_face(hulls, h, d, out)
 
 
 @njit(cache=True, nogil=True)
-def ray(kind, dims, o, d, reach):
+def ray(kind, dims, hulls, h, o, d, reach):
     """The ray o + t d (body frame, d unit, 0 <= t <= reach) against the shape: (t, outward
     normal), t NO_HIT when it misses or starts inside."""
     if kind == BOX:
@@ -122,12 +133,21 @@ def ray(kind, dims, o, d, reach):
         return sphere.ray(dims, o, d, reach)
     if kind == CAPSULE:
         return capsule.ray(dims, o, d, reach)
-    return cylinder.ray(dims, o, d, reach)
+    if kind == CYLINDER:
+        return cylinder.ray(dims, o, d, reach)
+    return convex.ray(hulls, h, o, d, reach)
 
 
-def mass_properties(name, dims, mass=None, density=None):
-    """(mass kg, principal inertia kg m^2 (3,) in the body frame) from a mass or a density."""
+Solid = namedtuple("Solid", "dimensions fields volume unit_inertia hull")
+
+
+def solid(name, spec, path="body"):
+    """What a shape spec (its SPEC_KEYS, validated) makes: dimensions, the keys as a scene
+    holds them, volume (m^3), inertia per kg (3, 3) about the centre of mass in the body frame,
+    and the hull (convex.Hull, convex bodies only)."""
+    if name == "convex":
+        hull = convex.build_hull(spec["points"], f"{path}.points")
+        return Solid(convex.dimensions(hull), convex.spec_fields(hull), hull.volume, hull.unit_inertia, hull)
     module = SHAPES[name].module
-    if mass is None:
-        mass = density * module.volume(dims)
-    return mass, tuple(mass * i for i in module.unit_inertia(dims))
+    dims = module.dimensions(spec)
+    return Solid(dims, module.spec_fields(dims), module.volume(dims), np.diag(module.unit_inertia(dims)), None)
