@@ -4,7 +4,7 @@ against brute force over sampled directions."""
 import numpy as np
 import pytest
 
-from vplayground_ros.physics.convex import (MAX_CLIP_POINTS, SHRINK, allocate_scratch,
+from vplayground_ros.physics.convex_contact import (MAX_CLIP_POINTS, SHRINK, allocate_scratch,
                                             shape_contact, triangle_weights)
 from vplayground_ros.physics.math3d import quat_to_matrix, rpy_to_quat
 from vplayground_ros.physics.narrow_phase import (box_box, collide_ground, collide_pair,

@@ -8,7 +8,7 @@ import numpy as np
 from numba import njit
 
 from .constants import SEAM_TOLERANCE
-from .convex import (PARALLEL_SINE, add_scaled, dot, scaled, set_row, sub, to_local,
+from .convex_contact import (PARALLEL_SINE, add_scaled, dot, scaled, set_row, sub, to_local,
                      to_world, triangle_weights)
 from .math3d import cross
 

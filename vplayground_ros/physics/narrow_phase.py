@@ -2,7 +2,7 @@
 triangle, of a shape and the ground, each chosen in one place (collide_pair, collide_triangle,
 collide_ground): the box/box separating-axis test and its triangle and ground versions below,
 the closed forms of spheres and capsules (analytic.py), and the general convex path
-(convex.py) for the rest. Adding a shape means a row in each dispatcher.
+(convex_contact.py) for the rest. Adding a shape means a row in each dispatcher.
 
 Box/box tests the 15 axes (3 face normals of each box, 9 edge crosses) and leaves at the first
 one that separates by more than the speculative margin. On a face axis the incident face of the
@@ -15,7 +15,7 @@ from numba import njit
 
 from .analytic import round_ground, round_pair, sphere_box, sphere_triangle
 from .constants import CONTACT_MARGIN, EDGE_AXIS_TOLERANCE, SEAM_TOLERANCE
-from .convex import (MAX_CLIP_POINTS, allocate_scratch, clip_polygon, convex_ground,
+from .convex_contact import (MAX_CLIP_POINTS, allocate_scratch, clip_polygon, convex_ground,
                      convex_pair, convex_triangle)
 from .ids import GROUND, PLAYGROUND, triangle_key
 from .shapes import BOX, CAPSULE, SPHERE
