@@ -18,7 +18,8 @@ from numba import njit, prange
 
 from .ids import GROUND, NOTHING, PLAYGROUND
 from .math3d import quat_to_matrix
-from .raycast import NO_HIT, RayBodies, ray_body, ray_triangle
+from . import shapes
+from .raycast import NO_HIT, RayBodies, ray_body, ray_body_without_hull, ray_triangle
 
 # Numba's OpenMP threads spin after each parallel batch by default: on a machine shared with the
 # node's other threads (or other processes) that spinning took several times the casting's own
@@ -210,10 +211,15 @@ def build_ray_grid(active, position, orientation, half_extents, triangles, tri_m
     return RayGrid(lower, np.array((cell,)), dims, cell_start, items, wide, block_items, rotation)
 
 
+ASK_HULL = -1.0  # test_item's answer for a convex body: ask ray_body with the hull table
+
+
 @njit(cache=True, nogil=True, inline="always")
-def test_item(item, o, d, limit, excluded, geometry, hulls, triangles, normals):
+def test_item(item, o, d, limit, excluded, geometry, triangles, normals):
     """(t, what, normal) of grid item `item` (a body slot, or capacity + a triangle) if the ray
-    hits it nearer than `limit`, else t NO_HIT."""
+    hits it nearer than `limit`, else t NO_HIT; t ASK_HULL for a convex body the ray may hit,
+    which the caller tests with the hull table (handed to this inlined test, its arrays' reference
+    counts cost every item a quarter of the rays' speed)."""
     capacity = len(excluded)
     if item < capacity:
         if excluded[item]:
@@ -227,7 +233,9 @@ def test_item(item, o, d, limit, excluded, geometry, hulls, triangles, normals):
         radius2, away2 = h[0] * h[0] + h[1] * h[1] + h[2] * h[2], vx * vx + vy * vy + vz * vz
         if away2 - along * along > radius2 + 1e-9 * (radius2 + away2):
             return NO_HIT, item, (0.0, 0.0, 0.0)
-        t, face = ray_body(o, d, limit, geometry, hulls, item)
+        if geometry.shape[item] == shapes.CONVEX:
+            return ASK_HULL, item, (0.0, 0.0, 0.0)
+        t, face = ray_body_without_hull(o, d, limit, geometry, item)
         return t, item, face
     tri = item - capacity
     t = ray_triangle(o, d, limit, triangles, normals, tri)
@@ -294,8 +302,9 @@ def cast_chunk(start, stop, origins, directions, max_range, excluded, grid, geom
                 best, what, n = t, GROUND, (0.0, 0.0, 1.0)
         limit = min(best, reach)
         for k in range(len(wide)):
-            t, obj, face = test_item(wide[k], o, d, limit, excluded, geometry, hulls, triangles,
-                                     normals)
+            t, obj, face = test_item(wide[k], o, d, limit, excluded, geometry, triangles, normals)
+            if t == ASK_HULL:
+                t, face = ray_body(o, d, limit, geometry, hulls, obj)
             if t < limit:
                 best, limit, what, n = t, t, obj, face
         # The ray's part inside the grid box, [t0, t1]. Per axis the direction of travel and
@@ -354,8 +363,9 @@ def cast_chunk(start, stop, origins, directions, max_range, excluded, grid, geom
                 if tested_by[item] == i:
                     continue  # its nearest hit, if any nearer than the limit then, is counted
                 tested_by[item] = i
-                t, obj, face = test_item(item, o, d, limit, excluded, geometry, hulls, triangles,
-                                         normals)
+                t, obj, face = test_item(item, o, d, limit, excluded, geometry, triangles, normals)
+                if t == ASK_HULL:
+                    t, face = ray_body(o, d, limit, geometry, hulls, obj)
                 if t < limit:
                     best, limit, what, n = t, t, obj, face
             cell_exit = min(next_x, next_y, next_z)

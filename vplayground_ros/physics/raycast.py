@@ -16,57 +16,44 @@ NO_HIT = np.inf
 RayBodies = namedtuple("RayBodies", "position rotation half_extents shape dimensions")
 
 
-# Both exact tests take the arrays and an index rather than one body's rows, and are inlined
+# The exact tests take the arrays and an index rather than one body's rows, and are inlined
 # where they are called: a scan runs them millions of times a second, and every row view handed
 # to a call costs Numba reference counting that would outweigh the test itself.
 @njit(cache=True, nogil=True, inline="always")
-def ray_box(origin, direction, reach, position, rotation, half_extents, j):
-    """Slab test of the ray against box j in its frame: (distance, outward normal of the face
-    hit), or NO_HIT for a ray that misses or starts inside."""
-    p, r, h = position, rotation, half_extents
-    t_in, t_out = 0.0, reach
-    axis_in, sign_in = -1, 1.0
-    for k in range(3):
-        o = ((origin[0] - p[j, 0]) * r[j, 0, k] + (origin[1] - p[j, 1]) * r[j, 1, k]
-             + (origin[2] - p[j, 2]) * r[j, 2, k])
-        d = direction[0] * r[j, 0, k] + direction[1] * r[j, 1, k] + direction[2] * r[j, 2, k]
-        if abs(d) < 1e-12:
-            if abs(o) > h[j, k]:
-                return NO_HIT, (0.0, 0.0, 0.0)
-            continue
-        t0, t1 = (-h[j, k] - o) / d, (h[j, k] - o) / d
-        sign = -1.0
-        if t0 > t1:
-            t0, t1 = t1, t0
-            sign = 1.0
-        if t0 > t_in:
-            t_in, axis_in, sign_in = t0, k, sign
-        t_out = min(t_out, t1)
-        if t_in > t_out:
-            return NO_HIT, (0.0, 0.0, 0.0)
-    if axis_in < 0:
-        return NO_HIT, (0.0, 0.0, 0.0)  # the origin is inside the box
-    return t_in, (r[j, 0, axis_in] * sign_in, r[j, 1, axis_in] * sign_in, r[j, 2, axis_in] * sign_in)
+def ray_body(origin, direction, reach, geometry, hulls, j):
+    """The ray against body j of RayBodies `geometry` (and the hull table): (distance, outward
+    normal in the world), NO_HIT when it misses or starts inside. Every shape is asked in its
+    own frame (physics.shapes)."""
+    o, d = body_frame_ray(origin, direction, geometry, j)
+    dims = (geometry.dimensions[j, 0], geometry.dimensions[j, 1], geometry.dimensions[j, 2])
+    return world_normal(shapes.ray(geometry.shape[j], dims, hulls, j, o, d, reach), geometry.rotation, j)
 
 
 @njit(cache=True, nogil=True, inline="always")
-def ray_body(origin, direction, reach, geometry, hulls, j):
-    """The ray against body j of RayBodies `geometry` (and the hull table): (distance, outward
-    normal in the world),
-    NO_HIT when it misses or starts inside. Boxes take the slab test in world terms; the other
-    shapes are asked in their own frame (physics.shapes.ray)."""
-    position, r, dimensions = geometry.position, geometry.rotation, geometry.dimensions
-    if geometry.shape[j] == shapes.BOX:
-        return ray_box(origin, direction, reach, position, r, geometry.half_extents, j)
-    v = (origin[0] - position[j, 0], origin[1] - position[j, 1], origin[2] - position[j, 2])
+def ray_body_without_hull(origin, direction, reach, geometry, j):
+    """ray_body for a body that is not convex (see shapes.ray_without_hull)."""
+    o, d = body_frame_ray(origin, direction, geometry, j)
+    dims = (geometry.dimensions[j, 0], geometry.dimensions[j, 1], geometry.dimensions[j, 2])
+    return world_normal(shapes.ray_without_hull(geometry.shape[j], dims, o, d, reach), geometry.rotation, j)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def body_frame_ray(origin, direction, geometry, j):
+    p, r = geometry.position, geometry.rotation
+    v = (origin[0] - p[j, 0], origin[1] - p[j, 1], origin[2] - p[j, 2])
     o = (v[0] * r[j, 0, 0] + v[1] * r[j, 1, 0] + v[2] * r[j, 2, 0],
          v[0] * r[j, 0, 1] + v[1] * r[j, 1, 1] + v[2] * r[j, 2, 1],
          v[0] * r[j, 0, 2] + v[1] * r[j, 1, 2] + v[2] * r[j, 2, 2])
     d = (direction[0] * r[j, 0, 0] + direction[1] * r[j, 1, 0] + direction[2] * r[j, 2, 0],
          direction[0] * r[j, 0, 1] + direction[1] * r[j, 1, 1] + direction[2] * r[j, 2, 1],
          direction[0] * r[j, 0, 2] + direction[1] * r[j, 1, 2] + direction[2] * r[j, 2, 2])
-    t, n = shapes.ray(geometry.shape[j], (dimensions[j, 0], dimensions[j, 1], dimensions[j, 2]),
-                      hulls, j, o, d, reach)
+    return o, d
+
+
+@njit(cache=True, nogil=True, inline="always")
+def world_normal(hit, r, j):
+    """(t, the body-frame normal) -> (t, the world normal); a miss stays NO_HIT."""
+    t, n = hit
     if t == NO_HIT:
         return NO_HIT, (0.0, 0.0, 0.0)
     return t, (r[j, 0, 0] * n[0] + r[j, 0, 1] * n[1] + r[j, 0, 2] * n[2],

@@ -127,15 +127,22 @@ def supporting_face(kind, dims, hulls, h, d, out):
 def ray(kind, dims, hulls, h, o, d, reach):
     """The ray o + t d (body frame, d unit, 0 <= t <= reach) against the shape: (t, outward
     normal), t NO_HIT when it misses or starts inside."""
+    if kind == CONVEX:
+        return convex.ray(hulls, h, o, d, reach)
+    return ray_without_hull(kind, dims, o, d, reach)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def ray_without_hull(kind, dims, o, d, reach):
+    """ray() for every shape but convex: the sensors' ray loop asks these without handing the
+    hull table to every test (Numba counts references to each of its arrays per inlined call)."""
     if kind == BOX:
         return box.ray(dims, o, d, reach)
     if kind == SPHERE:
         return sphere.ray(dims, o, d, reach)
     if kind == CAPSULE:
         return capsule.ray(dims, o, d, reach)
-    if kind == CYLINDER:
-        return cylinder.ray(dims, o, d, reach)
-    return convex.ray(hulls, h, o, d, reach)
+    return cylinder.ray(dims, o, d, reach)
 
 
 Solid = namedtuple("Solid", "dimensions fields volume unit_inertia hull")
