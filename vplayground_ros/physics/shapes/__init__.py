@@ -16,7 +16,6 @@ from numba import njit
 from ..math3d import quat_to_matrix
 
 from . import box, capsule, convex, cylinder, sphere
-from .geometry import NO_HIT, unit_or
 
 BOX, SPHERE, CAPSULE, CYLINDER, CONVEX = 0, 1, 2, 3, 4
 
@@ -94,17 +93,6 @@ def core_support(kind, dims, hulls, h, d):
     if kind == CYLINDER:
         return cylinder.support(dims, d)
     return convex.support(hulls, h, d)
-
-
-@njit(cache=True, nogil=True)
-def support(kind, dims, hulls, h, d):
-    """The point of the whole shape farthest along d (body frame)."""
-    p = core_support(kind, dims, hulls, h, d)
-    r = core_radius(kind, dims)
-    if r == 0.0:
-        return p
-    n = unit_or(d, (0.0, 0.0, 1.0))
-    return (p[0] + r * n[0], p[1] + r * n[1], p[2] + r * n[2])
 
 
 @njit(cache=True, nogil=True)
