@@ -19,6 +19,22 @@ def wait_for(condition, timeout=WAIT_TIMEOUT):
     return True
 
 
+def rebound_apex(world, row, rest_height, seconds=3):
+    """Steps `world` until body `row` has bounced and starts to fall again: (whether it bounced,
+    the highest it rose above rest_height after the bounce)."""
+    bounced, apex = False, 0.0
+    for _ in range(seconds * 128):
+        world.step(1)
+        height = world.state()["positions"][row, 2] - rest_height
+        vz = world.state()["linear_velocities"][row, 2]
+        bounced = bounced or vz > 0.0
+        if bounced:
+            apex = max(apex, height)
+            if vz < 0.0:
+                break
+    return bounced, apex
+
+
 def kinetic_energy(world):
     s = world.state()
     v, w, m, size = s["linear_velocities"], s["angular_velocities"], s["masses"], s["sizes"]

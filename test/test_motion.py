@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from vplayground_ros.physics import World
+from helpers import rebound_apex
 
 G = 9.81
 
@@ -30,17 +31,7 @@ def test_bounce_height_matches_restitution(elasticity):
     world = World(ground={"elasticity": 0.0})
     world.add_body({"name": "b", "size": [0.5, 0.5, 0.5], "position": [0, 0, 0.25 + drop],
                     "elasticity": elasticity, "allow_freezing": False})
-    bounced, apex = False, 0.0
-    for _ in range(3 * 128):
-        world.step(1)
-        height = world.state()["positions"][0, 2] - 0.25
-        vz = world.state()["linear_velocities"][0, 2]
-        if vz > 0.0:
-            bounced = True
-        if bounced:
-            apex = max(apex, height)
-            if vz < 0.0:
-                break
+    bounced, apex = rebound_apex(world, 0, 0.25)
     assert bounced
     # The pair elasticity is the larger of the two (box vs ground 0): rebound = e^2 * drop.
     # Tolerance 8 %: the impact speed is sampled at 128 steps/s.

@@ -10,6 +10,7 @@ from vplayground_ros.messages import shape_markers
 from vplayground_ros.physics import World
 from vplayground_ros.physics import shapes
 from vplayground_ros.scene import load_world, save_world
+from helpers import rebound_apex
 
 G = 9.81
 ROUND = {"sphere": {"shape": "sphere", "radius": 0.4},
@@ -121,16 +122,7 @@ def test_a_ball_dropped_on_a_ball_rebounds_per_its_elasticity(elasticity):
                     "elasticity": 0.0})
     world.add_body({"name": "ball", "shape": "sphere", "radius": 0.25, "position": [0, 0, 0.75 + drop],
                     "elasticity": elasticity, "allow_freezing": False})
-    bounced, apex = False, 0.0
-    for _ in range(3 * 128):
-        world.step(1)
-        height = world.state()["positions"][1, 2] - 0.75
-        vz = world.state()["linear_velocities"][1, 2]
-        bounced = bounced or vz > 0.0
-        if bounced:
-            apex = max(apex, height)
-            if vz < 0.0:
-                break
+    bounced, apex = rebound_apex(world, 1, 0.75)
     assert bounced
     assert apex == pytest.approx(elasticity ** 2 * drop, rel=0.08)
     # Head on: no sideways kick.
