@@ -151,27 +151,27 @@ def spec_fields(hull):
 
 
 @njit(cache=True, nogil=True)
-def support(hulls, h, d):
-    start = hulls.point_start[h]
+def farthest_along(rows, start, count, d):
+    """The index in start..start + count of the row of `rows` (K, 3) with the largest dot with d."""
     best, best_dot = start, -np.inf
-    p = hulls.points
-    for k in range(start, start + hulls.point_count[h]):
-        dot = p[k, 0] * d[0] + p[k, 1] * d[1] + p[k, 2] * d[2]
+    for k in range(start, start + count):
+        dot = rows[k, 0] * d[0] + rows[k, 1] * d[1] + rows[k, 2] * d[2]
         if dot > best_dot:
             best, best_dot = k, dot
+    return best
+
+
+@njit(cache=True, nogil=True)
+def support(hulls, h, d):
+    p = hulls.points
+    best = farthest_along(p, hulls.point_start[h], hulls.point_count[h], d)
     return (p[best, 0], p[best, 1], p[best, 2])
 
 
 @njit(cache=True, nogil=True)
 def supporting_face(hulls, h, d, out):
     """The face whose outward normal is closest to d: its corners, counter-clockwise."""
-    start = hulls.face_start[h]
-    best, best_dot = start, -np.inf
-    n = hulls.face_normal
-    for f in range(start, start + hulls.face_count[h]):
-        dot = n[f, 0] * d[0] + n[f, 1] * d[1] + n[f, 2] * d[2]
-        if dot > best_dot:
-            best, best_dot = f, dot
+    best = farthest_along(hulls.face_normal, hulls.face_start[h], hulls.face_count[h], d)
     count = min(hulls.corner_count[best], len(out))
     first = hulls.corner_start[best]
     for k in range(count):
