@@ -129,6 +129,37 @@ def detect(bodies, hulls, broad, playground, contacts, settings, moving_ids):
 
 
 @njit(cache=True, nogil=True)
+def at_rest(bodies, live, vehicles):
+    """No live body is awake (those outside the static index are frozen ones waiting for it)
+    and no car drives: nothing can move or touch a moving body this step."""
+    if np.any(vehicles.active):
+        return False
+    for k in range(len(live)):
+        if bodies.awake[live[k]]:
+            return False
+    return True
+
+
+@njit(cache=True, nogil=True)
+def rest_step(bodies, broad, contacts, settings, live):
+    """What the stages leave behind in a step `at_rest`: the moving index (of the frozen bodies
+    not yet in the static one, which ray casts query), no pairs, no contacts (indexed, for the
+    next step's warm start). Stage by stage that cost several times the step's own work: Numba
+    counts references to every array of the tuples handed to each call. False when the moving
+    index is too small."""
+    if not build_index(broad.moving, live, bodies.aabb_min, bodies.aabb_max, bodies.octree_level,
+                       settings.root_min, settings.root_size):
+        return False
+    broad.pair_count[0] = 0
+    broad.playground_count[0] = 0
+    contacts.count[0] = 0
+    contacts.manifold_count[0] = 0
+    contacts.support_count[0] = 0
+    index_manifolds(contacts)
+    return True
+
+
+@njit(cache=True, nogil=True)
 def step_world(steps, ctx):
     """Runs up to `steps` steps of the StepContext `ctx`. Returns (steps done, status). A status
     other than DONE means a buffer was too small; that step has not been applied and the caller
@@ -146,6 +177,13 @@ def step_world(steps, ctx):
             if not rebuild_static_index(bodies, broad, s):
                 return done, GROW_INDEX
             live = list_live_bodies(bodies, broad, False)
+        if at_rest(bodies, live, ctx.vehicles):
+            # Every body asleep or immovable: the step is its empty result (no counters).
+            if not rest_step(bodies, broad, current, s, live):
+                return done, GROW_INDEX
+            lap(ctx, STAGE_DERIVED, t)
+            swap_contacts(ctx.contacts)
+            continue
         t = lap(ctx, STAGE_DERIVED, t)
         # 2. Collision detection (octree broad phase, narrow phase per shape pair) at the current
         #    positions, with speculative margins covering this step's motion.
