@@ -267,3 +267,39 @@ def test_resting_bodies_are_still_checked_for_escaping():
     # A playground 1,000 m the other way moves the world's centre: the wall is 2,500 m from it.
     world.set_playground(np.array([[-1001.0, 0, 0], [-999.0, 0, 0], [-1000.0, 1, 0]]), np.array([[0, 1, 2]]))
     assert world.remove_escaped() == ["wall"]
+
+
+def every_array(world):
+    """Each array the step writes (bodies, broad phase, both contact buffers), by name."""
+    out = {"newest": world._contacts.newest.copy()}
+    groups = {"bodies": world._bodies, "broad": world._broad, "contacts 0": world._contacts.pair[0],
+              "contacts 1": world._contacts.pair[1]}
+    for group, fields in groups.items():
+        for field, value in fields._asdict().items():
+            for name, array in (value._asdict().items() if hasattr(value, "_asdict") else [("", value)]):
+                out[f"{group}.{field}.{name}"] = np.array(array)
+    return out
+
+
+def test_a_world_at_rest_steps_alike_with_and_without_the_resting_shortcut():
+    """Calls that find every body asleep in the static index step in Python
+    (pipeline.resting_steps); the World they leave, and what comes after a push, must be what the
+    compiled step leaves."""
+    import copy
+    world = World()
+    for k in range(40):
+        for level in range(2):
+            world.add_body({"size": [0.5] * 3, "position": [(k % 8) * 0.75, (k // 8) * 0.75, 0.25 + 0.5 * level]})
+    world.step(3 * 128)
+    assert world.state()["frozen"].all() and world._bodies.static_indexed[world._bodies.active].all()
+    shortcut, compiled = world, copy.deepcopy(world)
+    compiled.resting_shortcut = False
+    for w in (shortcut, compiled):
+        for n in (1, 1, 2, 3, 128):
+            w.step(n)
+        w.apply_impulse(w.body_names()[1], [0.0, 40.0, 0.0])  # wakes the top of a column
+        w.step(64)
+    a, b = every_array(shortcut), every_array(compiled)
+    assert [k for k in a if not np.array_equal(a[k], b[k])] == []
+    assert (shortcut.time, shortcut.step_count, shortcut.stats) == (compiled.time, compiled.step_count, compiled.stats)
+    assert not shortcut.state()["frozen"][1]
