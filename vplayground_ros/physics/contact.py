@@ -108,14 +108,16 @@ def index_manifolds(contacts):
 
 
 @njit(cache=True, nogil=True)
-def find_manifold(contacts, a, b):
-    keys = contacts.table_key
+def find_manifold(keys, manifolds, a, b):
+    """The manifold of pair (a, b) in the hash table (table_key, table_manifold), or -1. Takes
+    the two arrays, not the Contacts: Numba counts references to every array of a tuple handed
+    to a call, and per manifold that was most of the warm start."""
     mask = len(keys) - 1
     key = pair_key(a, b)
     slot = table_slot(key, mask)
     while keys[slot] != -1:
         if keys[slot] == key:
-            return contacts.table_manifold[slot]
+            return manifolds[slot]
         slot = (slot + 1) & mask
     return -1
 
@@ -126,12 +128,14 @@ def warm_start_from(previous, current):
     (same pair, within WARM_START_MATCH_DISTANCE in A's frame). Stacks then start each solve
     from nearly the answer, which the fixed iteration count alone could not reach."""
     limit_sq = WARM_START_MATCH_DISTANCE * WARM_START_MATCH_DISTANCE
+    keys, manifolds = previous.table_key, previous.table_manifold
     for m in range(current.manifold_count[0]):
         start, size = current.manifold_start[m], current.manifold_size[m]
         for c in range(start, start + size):
             current.impulse[c] = 0.0
-            current.friction_world[c, :] = 0.0
-        old = find_manifold(previous, current.manifold_a[m], current.manifold_b[m])
+            for e in range(3):
+                current.friction_world[c, e] = 0.0
+        old = find_manifold(keys, manifolds, current.manifold_a[m], current.manifold_b[m])
         if old < 0:
             continue
         old_start, old_size = previous.manifold_start[old], previous.manifold_size[old]
@@ -146,4 +150,5 @@ def warm_start_from(previous, current):
                     best, best_sq = o, d_sq
             if best >= 0:
                 current.impulse[c] = previous.impulse[best]
-                current.friction_world[c, :] = previous.friction_world[best, :]
+                for e in range(3):
+                    current.friction_world[c, e] = previous.friction_world[best, e]
