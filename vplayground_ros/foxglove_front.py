@@ -23,10 +23,10 @@ HANDSHAKE_LIMIT = 64 * 1024  # bytes: an HTTP head larger than this is not a vie
 HANDSHAKE_TIMEOUT = 10.0  # s for a viewer (or the sdk) to send its handshake
 CHUNK = 256 * 1024  # bytes per copy: a scenery mesh message is megabytes
 # Towards the viewer: bytes per copy (a round of 10,000 bodies is ~4 MB), and how long the relay
-# lets the sdk's frames gather after a read that did not fill its buffer (s). Each read and
-# write wakes the relay and takes the GIL from the simulation's threads; the sdk sends a frame
-# per message (~400 a second at 1,000 bodies, mostly /clock), so reading them as they come cost
-# more than copying them. A frame waits at most this long (viewers draw at 30-60 Hz).
+# lets the sdk's frames gather after a read that did not fill its buffer (s). The sdk writes a
+# frame per message (~250 a second at 1,000 bodies), and each read and write woke the relay and
+# took the GIL from the simulation's threads; gathered, it wakes at most ~100 times a second
+# below a buffer's worth. A frame waits at most this long (viewers draw at 30-60 Hz).
 VIEWER_CHUNK = 1024 * 1024
 GATHER = 0.01
 # Viewers served at once (each holds two threads; one in the handshake holds its slot up to
