@@ -37,8 +37,8 @@ NAVIGATION_GOALS = {"/goal_pose", "/move_base_simple/goal"}
 # sent with each: the /clock messages are held and logged just before the next other message
 # (the next round of poses, ~30 Hz), or once this many are held, each at its own log time and
 # in order; the server time (the viewers' timeline) goes out once before them, at the last one,
-# and before a message of a newer time. A viewer gets /clock up to a round late, and no
-# message stamped after the server's time.
+# and before a message of a newer time (the sdk sends time and messages on separate paths, so a
+# viewer may still see a message a little ahead of it). A viewer gets /clock up to a round late.
 CLOCK_BATCH = 8
 # The sdk logs its own loopback port and the relay's connections: the relay logs the viewers.
 logging.getLogger("foxglove.websocket").setLevel(logging.WARNING)
