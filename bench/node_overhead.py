@@ -13,6 +13,7 @@ jostle in contact all along, so every pose, marker, transform and contact change
     python bench/node_overhead.py [--boxes 1000] [--seconds 20] [--foxglove] [--awake] [--scene PATH]
 """
 import argparse
+import atexit
 import json
 import os
 import subprocess
@@ -119,6 +120,9 @@ def measure(args, workspace):
                              "--scene", str(scene), "--record", str(bag),
                              *(["--foxglove", "0"] if args.foxglove else [])],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    # A run that fails (no /diagnostics, say) must not leave the node running: one left over from
+    # such a run once loaded every later measurement on the machine with ~15 % of a core.
+    atexit.register(lambda: node.poll() is None and node.kill())
     urls = []
 
     def drain():  # the node's log, read so its pipe never fills; the Foxglove URL noted

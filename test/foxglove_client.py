@@ -35,6 +35,7 @@ class FoxgloveClient:
         self.frames = defaultdict(lambda: deque(maxlen=keep))  # topic -> [(log time ns, payload)]
         self.received = 0         # frames received in all
         self.times = deque(maxlen=keep)  # server time messages, ns
+        self.arrivals = deque(maxlen=keep)  # (topic, or "time" for a server time; its time ns) in order
         self.statuses = []
         self.parameter_values = {}  # request id -> [parameters]
         self.parameter_updates = []
@@ -73,9 +74,11 @@ class FoxgloveClient:
         if data[0] == MESSAGE_DATA:
             subscription, stamp = struct.unpack_from("<IQ", data, 1)
             self.frames[self._subscriptions[subscription]].append((stamp, data[13:]))
+            self.arrivals.append((self._subscriptions[subscription], stamp))
             self.received += 1
         elif data[0] == TIME:
             self.times.append(struct.unpack_from("<Q", data, 1)[0])
+            self.arrivals.append(("time", self.times[-1]))
         elif data[0] == SERVICE_CALL_RESPONSE:
             _, call, length = struct.unpack_from("<III", data, 1)
             self.responses[call] = (data[13:13 + length].decode(), data[13 + length:])

@@ -67,6 +67,24 @@ def test_a_body_teleported_out_of_the_world_is_removed(sim):
     assert sim.call(lambda w: w.body_names()) == ["bystander", "neighbour"]
 
 
+def test_a_resting_world_still_finds_a_bad_state_within_a_simulated_second():
+    # With every body frozen and no command the loop does not look for escaped bodies after
+    # each batch (nothing moved); a state that goes bad anyway (an engine fault, here written
+    # behind the loop's back) is still found by the check of every body once a simulated second.
+    world = load_world({"version": 1, "bodies": [{**body, "frozen": True} for body in SCENE["bodies"]]})
+    world.step(1)
+    sim = Simulation(world, real_time_factor=0.0)
+    sim.start()
+    try:
+        wait_for(lambda: sim.snapshot.step > 300 and sim.snapshot.state["frozen"].all())
+        world._bodies.position[slot(world, "victim"), 2] = np.nan
+        wait_for(lambda: "victim" in sim.removed)
+        still_stepping(sim)
+        assert sim.removed == ["victim"]
+    finally:
+        sim.stop()
+
+
 def test_a_body_thrown_out_at_top_speed_leaves_and_is_removed(sim):
     requests = Requests(sim)
     ok, message = requests.spawn("{name: bullet, position: [0, 0, 50], linear_velocity: [10000, 0, 0]}")

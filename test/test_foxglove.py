@@ -165,6 +165,42 @@ def test_subscribed_frames_decode_to_their_types_stamped_with_sim_time(client):
     assert 0 < client.times[-1] < 3600 * 10**9 and client.times[-1] >= client.times[0]
 
 
+def test_every_clock_message_arrives_in_order_and_the_server_time_follows(client):
+    # /clock (every step) is handed to the sdk in bursts before the next round of data, and the
+    # server time goes out once a burst or a round, not once a step: nothing may be lost or
+    # reordered, and the timeline must still follow the simulation.
+    client.subscribe("/clock", f"{NS}/bodies/poses", "/tf")
+    assert client.wait(lambda: len(client.frames["/clock"]) >= 130)
+    clocks = list(client.frames["/clock"])
+    stamps = [stamp for stamp, _ in clocks]
+    decode = client.decoder("/clock")
+    assert all(stamp == decode(payload).clock.sec * 10**9 + decode(payload).clock.nanosec for stamp, payload in clocks)
+    steps = [(b - a) * 128 / 1e9 for a, b in zip(stamps, stamps[1:])]
+    # A step each, or a few when a late batch ran several (one /clock a batch): never back, never repeated.
+    assert all(step > 0.5 and abs(step - round(step)) < 1e-3 for step in steps) and steps.count(1) > len(steps) / 2
+    times = [stamp for topic, stamp in list(client.arrivals) if topic == "time"]
+    assert times == sorted(times)
+    # Each a simulated time that went out: a /clock's or a round's (times come from the connection
+    # on, /clock from the subscription on).
+    sent = set(stamps) | {stamp for stamp, _ in client.frames[f"{NS}/bodies/poses"]}
+    assert {t for t in times if stamps[0] <= t <= stamps[-1]} <= sent
+    assert len(stamps) / 8 <= len(times) < len(stamps)  # at least one a burst, not one a step
+    assert client.wait(lambda: client.times[-1] >= stamps[-1])  # and it catches up
+    # Paused, each ~/step runs one step and sends one /clock: all 20 arrive, one step apart,
+    # though fewer than a burst is held at a time and no round of data follows each.
+    assert client.call(f"{NS}/pause", {"data": True}).success
+    try:
+        time.sleep(0.3)
+        count = len(client.frames["/clock"])
+        for _ in range(20):
+            assert client.call(f"{NS}/step", {}).success
+        assert client.wait(lambda: len(client.frames["/clock"]) >= count + 20)
+        stepped = [stamp for stamp, _ in list(client.frames["/clock"])[count - 1:]]
+        assert [round((b - a) * 128 / 1e9, 6) for a, b in zip(stepped, stepped[1:])] == [1.0] * 20
+    finally:
+        assert client.call(f"{NS}/pause", {"data": False}).success
+
+
 def test_service_call_spawns_a_body_that_get_entities_then_lists(client):
     response = client.call(f"{NS}/spawn", {"load_namespace": "{name: socket_crate, size: [0.4, 0.4, 0.4], "
                                                              "position: [3, -6, 2]}"})

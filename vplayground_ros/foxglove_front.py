@@ -14,6 +14,7 @@ import json
 import socket
 import struct
 import threading
+import time
 
 SDK_SUBPROTOCOL = b"foxglove.sdk.v1"
 # Preferred first: a viewer offering both gets the sdk's own name.
@@ -21,6 +22,13 @@ SUBPROTOCOLS = [SDK_SUBPROTOCOL, b"foxglove.websocket.v1"]
 HANDSHAKE_LIMIT = 64 * 1024  # bytes: an HTTP head larger than this is not a viewer's
 HANDSHAKE_TIMEOUT = 10.0  # s for a viewer (or the sdk) to send its handshake
 CHUNK = 256 * 1024  # bytes per copy: a scenery mesh message is megabytes
+# Towards the viewer: bytes per copy (a round of 10,000 bodies is ~4 MB), and how long the relay
+# lets the sdk's frames gather after a read that did not fill its buffer (s). The sdk writes a
+# frame per message (~250 a second at 1,000 bodies), and each read and write woke the relay and
+# took the GIL from the simulation's threads; gathered, it wakes at most ~100 times a second
+# below a buffer's worth. A frame waits at most this long (viewers draw at 30-60 Hz).
+VIEWER_CHUNK = 1024 * 1024
+GATHER = 0.01
 # Viewers served at once (each holds two threads; one in the handshake holds its slot up to
 # HANDSHAKE_TIMEOUT): anyone who can reach the port could otherwise open connections without end.
 MAX_VIEWERS = 16
@@ -125,15 +133,19 @@ def refuse(sock, status, text):
         pass
 
 
-def copy(source, target):
-    """Bytes from source to target until either side closes; then both are shut."""
-    buffer = memoryview(bytearray(CHUNK))
+def copy(source, target, size=CHUNK, gather=0.0):
+    """Bytes from source to target until either side closes; then both are shut. With
+    `gather`, a read that did not fill the buffer is followed by that long a pause, so what
+    arrives meanwhile goes in one read and one write."""
+    buffer = memoryview(bytearray(size))
     try:
         while True:
             count = source.recv_into(buffer)
             if not count:
                 break
             target.sendall(buffer[:count])
+            if gather and count < size:
+                time.sleep(gather)
     except OSError:
         pass
     finally:
@@ -222,7 +234,7 @@ class ProtocolFront:
                 sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             upstream = threading.Thread(target=copy, args=(viewer, sdk), daemon=True)
             upstream.start()
-            copy(sdk, viewer)
+            copy(sdk, viewer, VIEWER_CHUNK, GATHER)
             upstream.join()  # it ends at once: copy() shut both sockets
             if upgraded:
                 self.log.info(f"foxglove: viewer {peer} left")

@@ -32,6 +32,14 @@ METADATA = {"ROS_DISTRO": "jazzy"}
 # Topics the 3D panel's pose tool publishes a navigation goal on (Nav2's goal_pose; older
 # layouts' default /move_base_simple/goal). The simulator has no planner: it takes them quietly.
 NAVIGATION_GOALS = {"/goal_pose", "/move_base_simple/goal"}
+# /clock goes out at every step (128 Hz), and each log (a WebSocket frame) wakes the sdk's
+# sender thread and the relay (~25 µs on the simulation thread alone), as did the server time
+# sent with each: the /clock messages are held and logged just before the next other message
+# (the next round of poses, ~30 Hz), or once this many are held, each at its own log time and
+# in order; the server time (the viewers' timeline) goes out once before them, at the last one,
+# and before a message of a newer time (the sdk sends time and messages on separate paths, so a
+# viewer may still see a message a little ahead of it). A viewer gets /clock up to a round late.
+CLOCK_BATCH = 8
 # The sdk logs its own loopback port and the relay's connections: the relay logs the viewers.
 logging.getLogger("foxglove.websocket").setLevel(logging.WARNING)
 
@@ -52,6 +60,10 @@ class FoxgloveServer:
                        for sub in subscriptions(runtime.parameters["cmd_vel_stamped"])}
         self.client_channels = {}  # (client id, channel id) -> (subscription key, decode)
         self.subscriptions = 0
+        self._time_sent = -1  # ns: the last server time sent (two threads send: under _time_lock)
+        self._time_lock = threading.Lock()
+        self._clocks = []     # [(data, stamp)] of the /clock messages held (under _clock_lock)
+        self._clock_lock = threading.Lock()
         self.watched_parameters = set()  # names some client subscribed to updates of
         self._setting = threading.local()  # .names: a Foxglove client's set, on this thread
         self._lock = threading.Lock()
@@ -75,15 +87,48 @@ class FoxgloveServer:
         runtime.broadcaster.add_sink(self)
 
     def stop(self):
+        self.flush_clock()
         self.front.stop()
         self.server.stop()
 
     # ------------------------------------------------------------- the Broadcaster sink
     def publish(self, topic, data, seconds):
         stamp = int(round(seconds * 1e9))
-        self.channel(topic).log(data, log_time=stamp)
         if topic.key == "clock":
-            self.server.broadcast_time(stamp)
+            with self._clock_lock:
+                self._clocks.append((data, stamp))
+                if len(self._clocks) < CLOCK_BATCH:
+                    return
+            self.flush_clock()
+            return
+        if self._clocks:
+            self.flush_clock()
+        if stamp > self._time_sent:
+            self._send_time(stamp)
+        self.channel(topic).log(data, log_time=stamp)
+
+    def flush_clock(self):
+        """Logs the /clock messages held, in order, after the server time at the last of them
+        (backwards too: the simulation's time went back, a reset or another scene). Under the
+        lock: the simulation and the publisher thread never interleave them."""
+        with self._clock_lock:
+            if not self._clocks:
+                return
+            last = self._clocks[-1][1]
+            if last != self._time_sent:
+                self._send_time(last, back=last < self._time_sent)
+            channel = self.channels["clock"]
+            for data, stamp in self._clocks:
+                channel.log(data, log_time=stamp)
+            self._clocks = []
+
+    def _send_time(self, stamp, back=False):
+        """The server time, forward only (checked again under the lock: another thread may
+        have sent a later one meanwhile) unless `back`."""
+        with self._time_lock:
+            if stamp > self._time_sent or back:
+                self._time_sent = stamp
+                self.server.broadcast_time(stamp)
 
     def subscribed(self, topic):
         return self.channel(topic).has_sinks()

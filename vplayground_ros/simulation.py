@@ -195,6 +195,7 @@ class Simulation:
             if self.paused:
                 self._pending_steps -= steps
             if steps > 0:
+                resting, second = self._resting(world), world.step_count // rate
                 started, engine_before = time.perf_counter(), world.engine_cpu_seconds
                 try:
                     world.step(steps)
@@ -212,7 +213,10 @@ class Simulation:
                     first_batch = False
                     origin_wall, origin_sim = time.perf_counter(), world.time
                     rtf_wall, rtf_sim, rtf_measured = origin_wall, world.time, False
-                self.removed += world.remove_escaped()
+                if not resting or world.step_count // rate != second:
+                    # At rest nothing moved, nothing can have escaped; the World's check of
+                    # every body once a simulated second still runs.
+                    self.removed += world.remove_escaped()
                 self._publish(self._read_sensors(world))
             if self.duration is not None and world.time >= self.duration - 0.5 / rate:
                 break
@@ -300,6 +304,12 @@ class Simulation:
             vehicles={name: world.vehicle_state(name) for name in layout.vehicle_names},
             contacts=world.contacts() if self.with_contacts else None,
             wheels=layout.wheels, scenery=layout.scenery)
+
+    def _resting(self, world):
+        """Every body was frozen or immovable in the last snapshot of this world and no command
+        ran since: a step moves nothing (see _motion_state)."""
+        rest = self._at_rest
+        return rest is not None and rest[0].world is world and not self._touched
 
     def _motion_state(self, world, layout):
         """The bodies' motion columns (read-only): the last snapshot's arrays again when nothing
