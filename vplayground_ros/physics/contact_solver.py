@@ -29,16 +29,30 @@ stick start sliding, and never stop. Pair rule: friction coefficients combine as
 geometric mean (SPEC 4), elasticity as the larger of the two (a bouncy body bounces on anything).
 """
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
+from .atomics import atomic_add, atomic_load, spin_pause, yield_thread
 from .constants import (LINEAR_SLOP, MAX_CORRECTION_SPEED, POSITION_CORRECTION,
                         RESTITUTION_THRESHOLD, SHOCK_SWEEPS, SHOCK_TOLERANCE,
                         STICKING_SPEED)
 from .contact import ARM_A, ARM_B, DIRECTION, TURN_A, TURN_B
 from .math3d import cross
+from .solve_schedule import PHASES, TASKS, plan_groups, split_points
 
 # A row whose target is this low is not solved in that pass.
 INACTIVE = -1.0e30
+
+# Passes with fewer points than this are solved by one thread: sharing a pass costs a parallel
+# region (5-20 us to start) and a wait per phase, more than two threads save on a small world.
+PARALLEL_MIN_POINTS = 256
+
+# The two threads' counters stand this many int64 apart, a cache line each, so one thread's
+# count does not evict the line the other is spinning on.
+SYNC_STRIDE = 8
+
+# A waiting thread spins this many pauses (tens of microseconds) before giving up its core once:
+# by then the thread it waits for has lost its own core to another process.
+SPINS_BEFORE_YIELD = 2000
 
 
 @njit(cache=True, nogil=True)
@@ -183,19 +197,15 @@ def order_supports(contacts, bodies, gravity):
 
 
 @njit(cache=True, nogil=True)
-def solve_rows(velocity, contacts, sweeps, target, normal_impulse, friction, with_friction):
+def solve_rows(velocity, contacts, sweeps, target, normal_impulse, friction, with_friction, position,
+               gravity, threads):
     """Sequential impulses over every point, `sweeps` times. Points are visited bottom to top
     along gravity, then top to bottom, alternating as the 2008 program alternated its order (no
     contact is always solved last, and so always wins): upward sweeps hand a stack's support up,
     downward ones its weight down, which converges tall stacks and walls in the 2008 iteration
-    counts. Within a manifold that also puts the lowest (most loaded) corner first. Per point: the
-    friction circle (when asked), then the normal row driven to at least its target with a
-    non-negative accumulated impulse. A row's relative velocity is d . (v_B - v_A) + arm_B . w_B
-    - arm_A . w_A; an impulse j along it changes v by -/+ inv_mass j d and w by -/+ j turn.
-    (Per-point work is inlined: Numba would pay reference counting for each array passed to a
-    helper.)"""
-    rows, row_mass, row_inv_mass = contacts.rows, contacts.row_mass, contacts.row_inv_mass
-    rows_a, rows_b, mu = contacts.velocity_a, contacts.velocity_b, contacts.friction_coefficient
+    counts. Within a manifold that also puts the lowest (most loaded) corner first. With
+    `threads` > 1 and enough points, two threads share the sweeps (solve_schedule: each keeps
+    this order among the points it solves)."""
     # The points this pass solves, once: the collision pass takes only fast closing contacts and
     # the position pass only penetrating ones, and re-skipping the rest in every sweep cost more
     # than solving them.
@@ -205,52 +215,149 @@ def solve_rows(velocity, contacts, sweeps, target, normal_impulse, friction, wit
         if target[order[k]] > INACTIVE:
             points[count] = order[k]
             count += 1
+    if threads > 1 and count >= PARALLEL_MIN_POINTS:
+        solve_rows_shared(velocity, contacts, sweeps, target, normal_impulse, friction,
+                          with_friction, position, gravity, points, count, threads)
+        return
+    rows, row_mass, row_inv_mass = contacts.rows, contacts.row_mass, contacts.row_inv_mass
+    rows_a, rows_b, mu = contacts.velocity_a, contacts.velocity_b, contacts.friction_coefficient
     for sweep in range(sweeps):
-        for k in range(count):
-            c = points[k] if sweep % 2 == 0 else points[count - 1 - k]
-            goal = target[c]
-            a, b = rows_a[c], rows_b[c]
-            m_a, m_b = row_inv_mass[c, 0], row_inv_mass[c, 1]
-            if with_friction:
-                v1 = v2 = 0.0
-                for e in range(3):
-                    dv, wa, wb = velocity[b, e] - velocity[a, e], velocity[a, 3 + e], velocity[b, 3 + e]
-                    v1 += rows[c, 1, DIRECTION + e] * dv - rows[c, 1, ARM_A + e] * wa + rows[c, 1, ARM_B + e] * wb
-                    v2 += rows[c, 2, DIRECTION + e] * dv - rows[c, 2, ARM_A + e] * wa + rows[c, 2, ARM_B + e] * wb
-                old1, old2 = friction[c, 0], friction[c, 1]
-                new1, new2 = old1 - row_mass[c, 1] * v1, old2 - row_mass[c, 2] * v2
-                magnitude = np.sqrt(new1 * new1 + new2 * new2)
-                limit = mu[c] * normal_impulse[c]
-                if magnitude > limit:
-                    new1 *= limit / magnitude
-                    new2 *= limit / magnitude
-                friction[c, 0], friction[c, 1] = new1, new2
-                d1, d2 = new1 - old1, new2 - old2
-                for e in range(3):
-                    linear = rows[c, 1, DIRECTION + e] * d1 + rows[c, 2, DIRECTION + e] * d2
+        solve_span(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, points, 0, count,
+                   sweep % 2 == 1, target, normal_impulse, friction, with_friction)
+
+
+@njit(cache=True, nogil=True)
+def solve_span(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, points, start, end,
+               backwards, target, normal_impulse, friction, with_friction):
+    """One sweep of sequential impulses over points[start:end] (backwards: from the end). Per
+    point: the friction circle (when asked), then the normal row driven to at least its target
+    with a non-negative accumulated impulse. A row's relative velocity is d . (v_B - v_A) +
+    arm_B . w_B - arm_A . w_A; an impulse j along it changes v by -/+ inv_mass j d and w by -/+
+    j turn. Static sides (no inverse mass, so no turn either) are not written: their change is
+    zero, and two threads may share one (the ground). (Per-point work is inlined: Numba would
+    pay reference counting for each array passed to a helper.)"""
+    for k in range(start, end):
+        c = points[end - 1 - (k - start)] if backwards else points[k]
+        goal = target[c]
+        a, b = rows_a[c], rows_b[c]
+        m_a, m_b = row_inv_mass[c, 0], row_inv_mass[c, 1]
+        if with_friction:
+            v1 = v2 = 0.0
+            for e in range(3):
+                dv, wa, wb = velocity[b, e] - velocity[a, e], velocity[a, 3 + e], velocity[b, 3 + e]
+                v1 += rows[c, 1, DIRECTION + e] * dv - rows[c, 1, ARM_A + e] * wa + rows[c, 1, ARM_B + e] * wb
+                v2 += rows[c, 2, DIRECTION + e] * dv - rows[c, 2, ARM_A + e] * wa + rows[c, 2, ARM_B + e] * wb
+            old1, old2 = friction[c, 0], friction[c, 1]
+            new1, new2 = old1 - row_mass[c, 1] * v1, old2 - row_mass[c, 2] * v2
+            magnitude = np.sqrt(new1 * new1 + new2 * new2)
+            limit = mu[c] * normal_impulse[c]
+            if magnitude > limit:
+                new1 *= limit / magnitude
+                new2 *= limit / magnitude
+            friction[c, 0], friction[c, 1] = new1, new2
+            d1, d2 = new1 - old1, new2 - old2
+            for e in range(3):
+                linear = rows[c, 1, DIRECTION + e] * d1 + rows[c, 2, DIRECTION + e] * d2
+                if m_a != 0.0:
                     velocity[a, e] -= m_a * linear
-                    velocity[b, e] += m_b * linear
                     velocity[a, 3 + e] -= rows[c, 1, TURN_A + e] * d1 + rows[c, 2, TURN_A + e] * d2
+                if m_b != 0.0:
+                    velocity[b, e] += m_b * linear
                     velocity[b, 3 + e] += rows[c, 1, TURN_B + e] * d1 + rows[c, 2, TURN_B + e] * d2
-            vn = 0.0
-            for e in range(3):
-                vn += (rows[c, 0, DIRECTION + e] * (velocity[b, e] - velocity[a, e])
-                       - rows[c, 0, ARM_A + e] * velocity[a, 3 + e] + rows[c, 0, ARM_B + e] * velocity[b, 3 + e])
-            old = normal_impulse[c]
-            new = max(old + row_mass[c, 0] * (goal - vn), 0.0)
-            normal_impulse[c] = new
-            d = new - old
-            for e in range(3):
+        vn = 0.0
+        for e in range(3):
+            vn += (rows[c, 0, DIRECTION + e] * (velocity[b, e] - velocity[a, e])
+                   - rows[c, 0, ARM_A + e] * velocity[a, 3 + e] + rows[c, 0, ARM_B + e] * velocity[b, 3 + e])
+        old = normal_impulse[c]
+        new = max(old + row_mass[c, 0] * (goal - vn), 0.0)
+        normal_impulse[c] = new
+        d = new - old
+        for e in range(3):
+            if m_a != 0.0:
                 velocity[a, e] -= m_a * d * rows[c, 0, DIRECTION + e]
-                velocity[b, e] += m_b * d * rows[c, 0, DIRECTION + e]
                 velocity[a, 3 + e] -= d * rows[c, 0, TURN_A + e]
+            if m_b != 0.0:
+                velocity[b, e] += m_b * d * rows[c, 0, DIRECTION + e]
                 velocity[b, 3 + e] += d * rows[c, 0, TURN_B + e]
 
 
 @njit(cache=True, nogil=True)
-def collision_pass(contacts, bodies, iterations):
+def solve_rows_shared(velocity, contacts, sweeps, target, normal_impulse, friction, with_friction,
+                      position, gravity, points, count, threads):
+    """solve_rows' sweeps over points[:count] shared by up to two threads: the points split into
+    tasks on disjoint bodies (solve_schedule), run phase after phase, each task in the serial
+    sweep order. The same bytes with one thread or two."""
+    items = np.empty(count, np.int64)
+    task_start = np.empty(TASKS + 1, np.int64)
+    split_points(points, count, contacts, position, gravity, items, task_start)
+    phase_tasks = np.empty((PHASES, 2), np.int64)
+    phase_task_count = np.empty(PHASES, np.int64)
+    group_phase = np.empty(sweeps * PHASES, np.int64)
+    group_first_sweep = np.empty(sweeps * PHASES, np.int64)
+    group_sweeps = np.empty(sweeps * PHASES, np.int64)
+    groups = plan_groups(task_start, sweeps, phase_tasks, phase_task_count, group_phase,
+                         group_first_sweep, group_sweeps)
+    # Per group, a count of tasks taken and one of tasks finished, each on its own cache line.
+    claimed = np.zeros(groups * SYNC_STRIDE, np.int64)
+    finished = np.zeros(groups * SYNC_STRIDE, np.int64)
+    run_workers(min(threads, 2), velocity, contacts.rows, contacts.row_mass, contacts.row_inv_mass,
+                contacts.velocity_a, contacts.velocity_b, contacts.friction_coefficient, target,
+                normal_impulse, friction, with_friction, items, task_start, phase_tasks,
+                phase_task_count, group_phase, group_first_sweep, group_sweeps, groups, claimed,
+                finished)
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def run_workers(workers, velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, target,
+                normal_impulse, friction, with_friction, items, task_start, phase_tasks,
+                phase_task_count, group_phase, group_first_sweep, group_sweeps, groups, claimed,
+                finished):
+    """One parallel region for a whole pass: Numba starts a region in 5-20 us, a wait between
+    phases costs about one."""
+    for _ in prange(workers):
+        work_groups(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, target,
+                    normal_impulse, friction, with_friction, items, task_start, phase_tasks,
+                    phase_task_count, group_phase, group_first_sweep, group_sweeps, groups,
+                    claimed, finished)
+
+
+@njit(cache=True, nogil=True)
+def work_groups(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, target,
+                normal_impulse, friction, with_friction, items, task_start, phase_tasks,
+                phase_task_count, group_phase, group_first_sweep, group_sweeps, groups, claimed,
+                finished):
+    """One worker: group after group, takes tasks of the group until none is left, then waits
+    until the tasks others took are finished. A worker only ever waits for a task another one
+    is running, so one thread alone (the other late, or never started) runs everything itself."""
+    for g in range(groups):
+        p = group_phase[g]
+        tasks = phase_task_count[p]
+        slot = g * SYNC_STRIDE
+        while True:
+            k = atomic_add(claimed, slot, 1)
+            if k >= tasks:
+                break
+            t = phase_tasks[p, k]
+            for s in range(group_sweeps[g]):
+                sweep = group_first_sweep[g] + s
+                solve_span(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, items,
+                           task_start[t], task_start[t + 1], sweep % 2 == 1, target,
+                           normal_impulse, friction, with_friction)
+            atomic_add(finished, slot, 1)
+        spins = 0
+        while atomic_load(finished, slot) < tasks:
+            spin_pause()
+            spins += 1
+            if spins == SPINS_BEFORE_YIELD:
+                yield_thread()
+                spins = 0
+
+
+@njit(cache=True, nogil=True)
+def collision_pass(contacts, bodies, iterations, gravity, threads):
     solve_rows(bodies.velocity, contacts, iterations, contacts.collision_target,
-               contacts.collision_impulse, contacts.collision_friction, True)
+               contacts.collision_impulse, contacts.collision_friction, True, bodies.position,
+               gravity, threads)
 
 
 @njit(cache=True, nogil=True)
@@ -343,15 +450,15 @@ def shock_propagation(contacts, bodies):
 
 
 @njit(cache=True, nogil=True)
-def contact_pass(contacts, bodies, iterations):
+def contact_pass(contacts, bodies, iterations, gravity, threads):
     """Velocities (zero elasticity, friction), shock propagation, then the split-impulse
     position pass on the pseudo velocities; keeps the friction as a world vector for the next
     step's warm start."""
     solve_rows(bodies.velocity, contacts, iterations, contacts.contact_target, contacts.impulse,
-               contacts.friction, True)
+               contacts.friction, True, bodies.position, gravity, threads)
     shock_propagation(contacts, bodies)
     solve_rows(bodies.pseudo_velocity, contacts, iterations, contacts.position_target,
-               contacts.position_impulse, contacts.friction, False)
+               contacts.position_impulse, contacts.friction, False, bodies.position, gravity, threads)
     rows = contacts.rows
     for c in range(contacts.count[0]):
         f1, f2 = contacts.friction[c, 0], contacts.friction[c, 1]
