@@ -1,9 +1,9 @@
 """Atomic counters for the threads of one parallel region (the contact solve's workers): Numba
 has no atomics of its own, so these emit LLVM's atomic instructions on an int64 array element.
 
-A worker publishes finished work with atomic_add (sequentially consistent: its writes before it
-are visible to whoever sees the new count) and waits for others' with atomic_load (acquire: what
-it reads after it is what they wrote before their add).
+A worker publishes its progress with atomic_store (release: its writes before it are visible to
+whoever sees the new value), claims work with atomic_add, and waits for others' progress with
+atomic_load (acquire: what it reads after it is what they wrote before their store).
 """
 import platform
 
@@ -46,6 +46,22 @@ def atomic_load(typingctx, array, index):
         array_value, index_value = args
         pointer = _element_pointer(context, builder, signature.args[0], array_value, index_value)
         return builder.load_atomic(pointer, "acquire", 8)
+    return sig, codegen
+
+
+@intrinsic
+def atomic_store(typingctx, array, index, value):
+    """array[index] = value, written atomically (release: what this thread wrote before it is
+    visible to whoever reads the new value)."""
+    if not (isinstance(array, types.Array) and array.dtype == types.int64):
+        return None
+    sig = types.void(array, types.intp, types.int64)
+
+    def codegen(context, builder, signature, args):
+        array_value, index_value, stored = args
+        pointer = _element_pointer(context, builder, signature.args[0], array_value, index_value)
+        builder.store_atomic(stored, pointer, "release", 8)
+        return context.get_dummy_value()
     return sig, codegen
 
 

@@ -31,13 +31,13 @@ geometric mean (SPEC 4), elasticity as the larger of the two (a bouncy body boun
 import numpy as np
 from numba import njit, prange
 
-from .atomics import atomic_add, atomic_load, spin_pause, yield_thread
+from .atomics import atomic_add, atomic_load, atomic_store, spin_pause, yield_thread
 from .constants import (LINEAR_SLOP, MAX_CORRECTION_SPEED, POSITION_CORRECTION,
                         RESTITUTION_THRESHOLD, SHOCK_SWEEPS, SHOCK_TOLERANCE,
                         STICKING_SPEED)
 from .contact import ARM_A, ARM_B, DIRECTION, TURN_A, TURN_B
 from .math3d import cross
-from .solve_schedule import PHASES, TASKS, plan_groups, split_points
+from .solve_schedule import split_chains
 
 # A row whose target is this low is not solved in that pass.
 INACTIVE = -1.0e30
@@ -46,13 +46,18 @@ INACTIVE = -1.0e30
 # region (5-20 us to start) and a wait per phase, more than two threads save on a small world.
 PARALLEL_MIN_POINTS = 256
 
-# The two threads' counters stand this many int64 apart, a cache line each, so one thread's
-# count does not evict the line the other is spinning on.
+# The threads' shared counters stand this many int64 apart, a cache line each, so one thread's
+# writes do not evict the line the other is spinning on.
 SYNC_STRIDE = 8
 
 # A waiting thread spins this many pauses (tens of microseconds) before giving up its core once:
 # by then the thread it waits for has lost its own core to another process.
 SPINS_BEFORE_YIELD = 2000
+
+# A thread blocked on a chain that no thread has taken takes it after this many pauses: Numba's
+# second thread, asleep between regions, usually starts within 5-20 us; one that comes later
+# finds nothing left to take (the results are the same whoever runs what).
+SPINS_BEFORE_TAKING = 1000
 
 
 @njit(cache=True, nogil=True)
@@ -204,8 +209,8 @@ def solve_rows(velocity, contacts, sweeps, target, normal_impulse, friction, wit
     contact is always solved last, and so always wins): upward sweeps hand a stack's support up,
     downward ones its weight down, which converges tall stacks and walls in the 2008 iteration
     counts. Within a manifold that also puts the lowest (most loaded) corner first. With
-    `threads` > 1 and enough points, two threads share the sweeps (solve_schedule: each keeps
-    this order among the points it solves)."""
+    `threads` > 1 and enough points, two threads share the sweeps, with the same result
+    (solve_schedule)."""
     # The points this pass solves, once: the collision pass takes only fast closing contacts and
     # the position pass only penetrating ones, and re-skipping the rest in every sweep cost more
     # than solving them.
@@ -226,7 +231,7 @@ def solve_rows(velocity, contacts, sweeps, target, normal_impulse, friction, wit
                    sweep % 2 == 1, target, normal_impulse, friction, with_friction)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def solve_span(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, points, start, end,
                backwards, target, normal_impulse, friction, with_friction):
     """One sweep of sequential impulses over points[start:end] (backwards: from the end). Per
@@ -234,8 +239,9 @@ def solve_span(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, point
     with a non-negative accumulated impulse. A row's relative velocity is d . (v_B - v_A) +
     arm_B . w_B - arm_A . w_A; an impulse j along it changes v by -/+ inv_mass j d and w by -/+
     j turn. Static sides (no inverse mass, so no turn either) are not written: their change is
-    zero, and two threads may share one (the ground). (Per-point work is inlined: Numba would
-    pay reference counting for each array passed to a helper.)"""
+    zero, and two threads may share one (the ground). (Inlined into its callers, and the
+    per-point work inlined here: Numba would pay reference counting for each array passed to a
+    call, and the two-thread solve calls this for every stretch of points between waits.)"""
     for k in range(start, end):
         c = points[end - 1 - (k - start)] if backwards else points[k]
         goal = target[c]
@@ -284,73 +290,121 @@ def solve_span(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, point
 @njit(cache=True, nogil=True)
 def solve_rows_shared(velocity, contacts, sweeps, target, normal_impulse, friction, with_friction,
                       position, gravity, points, count, threads):
-    """solve_rows' sweeps over points[:count] shared by up to two threads: the points split into
-    tasks on disjoint bodies (solve_schedule), run phase after phase, each task in the serial
-    sweep order. The same bytes with one thread or two."""
+    """solve_rows' sweeps over points[:count] on up to two threads, bit for bit the serial
+    result: the points go into two chains that wait for each other only where they share a body
+    (solve_schedule), in one parallel region."""
     items = np.empty(count, np.int64)
-    task_start = np.empty(TASKS + 1, np.int64)
-    split_points(points, count, contacts, position, gravity, items, task_start)
-    phase_tasks = np.empty((PHASES, 2), np.int64)
-    phase_task_count = np.empty(PHASES, np.int64)
-    group_phase = np.empty(sweeps * PHASES, np.int64)
-    group_first_sweep = np.empty(sweeps * PHASES, np.int64)
-    group_sweeps = np.empty(sweeps * PHASES, np.int64)
-    groups = plan_groups(task_start, sweeps, phase_tasks, phase_task_count, group_phase,
-                         group_first_sweep, group_sweeps)
-    # Per group, a count of tasks taken and one of tasks finished, each on its own cache line.
-    claimed = np.zeros(groups * SYNC_STRIDE, np.int64)
-    finished = np.zeros(groups * SYNC_STRIDE, np.int64)
+    chain_start = np.empty(3, np.int64)
+    need_up = np.empty(count, np.int64)
+    need_down = np.empty(count, np.int64)
+    publish_up = np.empty(count, np.bool_)
+    publish_down = np.empty(count, np.bool_)
+    split_chains(points, count, contacts, position, gravity, items, chain_start, need_up,
+                 need_down, publish_up, publish_down)
+    # Which chains are taken, and each chain's progress, each on its own cache line.
+    sync = np.zeros(3 * SYNC_STRIDE, np.int64)
     run_workers(min(threads, 2), velocity, contacts.rows, contacts.row_mass, contacts.row_inv_mass,
                 contacts.velocity_a, contacts.velocity_b, contacts.friction_coefficient, target,
-                normal_impulse, friction, with_friction, items, task_start, phase_tasks,
-                phase_task_count, group_phase, group_first_sweep, group_sweeps, groups, claimed,
-                finished)
+                normal_impulse, friction, with_friction, items, chain_start, need_up, need_down,
+                publish_up, publish_down, sweeps, sync)
 
 
 @njit(cache=True, nogil=True, parallel=True)
 def run_workers(workers, velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, target,
-                normal_impulse, friction, with_friction, items, task_start, phase_tasks,
-                phase_task_count, group_phase, group_first_sweep, group_sweeps, groups, claimed,
-                finished):
-    """One parallel region for a whole pass: Numba starts a region in 5-20 us, a wait between
-    phases costs about one."""
+                normal_impulse, friction, with_friction, items, chain_start, need_up, need_down,
+                publish_up, publish_down, sweeps, sync):
+    """One parallel region for a whole pass: Numba starts one in 5-20 us."""
     for _ in prange(workers):
-        work_groups(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, target,
-                    normal_impulse, friction, with_friction, items, task_start, phase_tasks,
-                    phase_task_count, group_phase, group_first_sweep, group_sweeps, groups,
-                    claimed, finished)
+        work_chains(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, target,
+                    normal_impulse, friction, with_friction, items, chain_start, need_up,
+                    need_down, publish_up, publish_down, sweeps, sync)
 
 
 @njit(cache=True, nogil=True)
-def work_groups(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, target,
-                normal_impulse, friction, with_friction, items, task_start, phase_tasks,
-                phase_task_count, group_phase, group_first_sweep, group_sweeps, groups, claimed,
-                finished):
-    """One worker: group after group, takes tasks of the group until none is left, then waits
-    until the tasks others took are finished. A worker only ever waits for a task another one
-    is running, so one thread alone (the other late, or never started) runs everything itself."""
-    for g in range(groups):
-        p = group_phase[g]
-        tasks = phase_task_count[p]
-        slot = g * SYNC_STRIDE
-        while True:
-            k = atomic_add(claimed, slot, 1)
-            if k >= tasks:
-                break
-            t = phase_tasks[p, k]
-            for s in range(group_sweeps[g]):
-                sweep = group_first_sweep[g] + s
+def work_chains(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, target,
+                normal_impulse, friction, with_friction, items, chain_start, need_up, need_down,
+                publish_up, publish_down, sweeps, sync):
+    """One worker: takes a chain and runs its sweeps, each stretch of points that need not wait
+    in one go, publishing its progress where the other chain may wait for it. A worker that has
+    waited long for a chain nobody took, or has finished its own, takes that one too and runs
+    both, interleaved: so one thread alone (the other late, or never started: Numba with one
+    thread runs the region's iterations one after the other) does everything itself."""
+    taken, progress = 0, SYNC_STRIDE  # sync[taken]: chains taken; sync[progress + c * SYNC_STRIDE]
+    own = np.zeros(2, np.bool_)
+    sweep = np.zeros(2, np.int64)
+    done = np.zeros(2, np.int64)  # points done this sweep, per chain
+    seen = np.zeros(2, np.int64)  # the other chain's progress, as last read
+    length = np.empty(2, np.int64)
+    for c in range(2):
+        length[c] = chain_start[c + 1] - chain_start[c]
+    c = atomic_add(sync, taken, 1)
+    if c >= 2:
+        return
+    own[c] = True
+    spins = 0
+    while True:
+        moved = False
+        busy = False
+        for c in range(2):
+            if not own[c]:
+                continue
+            other = 1 - c
+            while sweep[c] < sweeps:
+                busy = True
+                if done[c] == length[c]:
+                    sweep[c] += 1
+                    done[c] = 0
+                    atomic_store(sync, progress + c * SYNC_STRIDE, sweep[c] * length[c])
+                    continue
+                upward = sweep[c] % 2 == 0
+                base = sweep[c] * length[other]
+                # The stretch of points that may run now, up to one the other chain may wait for.
+                first = done[c]
+                last = first
+                while last < length[c]:
+                    slot = chain_start[c] + (last if upward else length[c] - 1 - last)
+                    need = base + (need_up[slot] if upward else need_down[slot])
+                    if need > seen[other]:
+                        if own[other]:
+                            seen[other] = sweep[other] * length[other] + done[other]
+                        else:
+                            seen[other] = atomic_load(sync, progress + other * SYNC_STRIDE)
+                        if need > seen[other]:
+                            break
+                    last += 1
+                    if publish_up[slot] if upward else publish_down[slot]:
+                        break
+                if last == first:
+                    break  # waits for the other chain
+                if upward:
+                    start, end = chain_start[c] + first, chain_start[c] + last
+                else:
+                    start, end = chain_start[c + 1] - last, chain_start[c + 1] - first
                 solve_span(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, items,
-                           task_start[t], task_start[t + 1], sweep % 2 == 1, target,
-                           normal_impulse, friction, with_friction)
-            atomic_add(finished, slot, 1)
-        spins = 0
-        while atomic_load(finished, slot) < tasks:
-            spin_pause()
-            spins += 1
-            if spins == SPINS_BEFORE_YIELD:
-                yield_thread()
-                spins = 0
+                           start, end, not upward, target, normal_impulse, friction, with_friction)
+                done[c] = last
+                atomic_store(sync, progress + c * SYNC_STRIDE, sweep[c] * length[c] + last)
+                moved = True
+        if not busy:
+            # Own chains finished: take the other if nobody has (it cannot wait for ours).
+            if own[0] and own[1] or atomic_load(sync, taken) >= 2:
+                return
+            c = atomic_add(sync, taken, 1)
+            if c >= 2:
+                return
+            own[c] = True
+            continue
+        if moved:
+            spins = 0
+            continue
+        spins += 1
+        spin_pause()
+        if spins % SPINS_BEFORE_YIELD == 0:
+            yield_thread()
+        if spins >= SPINS_BEFORE_TAKING and atomic_load(sync, taken) < 2:
+            c = atomic_add(sync, taken, 1)
+            if c < 2:
+                own[c] = True
 
 
 @njit(cache=True, nogil=True)

@@ -1,40 +1,38 @@
-"""How two threads share a solver pass: the pass's points split into tasks that touch disjoint
-bodies, and the tasks into phases that run one after another.
+"""How two threads share a solver pass and still get the serial solve's result bit for bit.
 
-The world is cut in two by a vertical plane through the median contact point (along the
-horizontal axis the points spread most along); each moving body belongs to the side its centre is
-on. Points whose moving bodies all lie on one side are that side's interior; the two interiors
-share no body, so two threads solve them at once (phase 0). The points across the cut (the
-boundary) are cut again, along the other horizontal axis: those whose two bodies lie on the same
-side of the second cut form two more independent tasks (phase 1), and the few left (phase 2) are
-one task. Static bodies (the ground, the playground, frozen and immovable bodies) never tie two
-points together: the solver does not write to them.
+The serial solve visits the pass's points in one order (bottom to top along gravity, then top to
+bottom, sweep after sweep), and a point reads and writes only its two bodies' velocities. Any
+schedule in which every point runs after the earlier points (in that order) that share a moving
+body with it therefore computes the same numbers. Here the points go into two chains, each kept
+in the serial order, and a point waits for the other chain only where the two share a body:
 
-Why a cut and not Box2D v3's graph colouring: inside a task the points keep the sweep order of
-the serial solve (bottom to top along gravity, then top to bottom), which is what stacks and
-walls need; a body's points all lie in one interior or on the boundary, so a cluster of bodies
-the cut does not cross (a tower, a wall beside the cut) gets bit for bit the serial result. And
-each phase ends in one wait of one thread for the other, about a microsecond on a quiet 2-core
-machine: a colouring (or a level schedule that keeps the exact order) needs a wait per colour
-(level) per sweep, a few hundred to a few thousand a step. The split depends on the points and the
-bodies alone, never on the thread count, so one thread running every task gets the same bytes as
-two.
+- The world is cut by a vertical plane through the median contact point (across the horizontal
+  axis the points spread most along); a moving body belongs to the side its centre is on. Points
+  whose moving bodies lie on one side go to that side's chain; points across the cut go to the
+  shorter chain so far. Static bodies (the ground, the playground, frozen and immovable bodies)
+  never tie points together: the solver does not write to them.
+- For every point, `need` says how far the other chain must have got before it may run: past the
+  last point before it (this sweep) that shares a body with it, or, when there is none this
+  sweep, past the other chain's last such point of the sweep before. Points that share no body
+  with the other chain never wait, so a world the cut does not cross (bodies landing apart, two
+  stacks side by side) runs its two halves with no wait at all.
+- Each chain publishes its progress (points done since the pass began) after the points the other
+  chain waits for, and runs the points between them in one go.
+
+Why not Box2D v3's graph colouring: it changes the order in which the points are solved (the
+stacks and walls depend on the height order) and needs a wait per colour per sweep; a level
+schedule keeps the order but needs a wait per level (tens to hundreds a sweep on a pile). Two
+chains wait only at the bodies the cut crosses.
 """
 import numpy as np
 from numba import njit
 
-# The tasks, and the phases that run them (the tasks of a phase run at once).
-INTERIOR_LOW, INTERIOR_HIGH, BOUNDARY_LOW, BOUNDARY_HIGH, ACROSS = range(5)
-TASKS = 5
-PHASES = 3
-PHASE_OF_TASK = (0, 0, 1, 1, 2)
+# `need` of a point that shares no body with the other chain: never waits.
+NO_WAIT = -(1 << 62)
 
-# Bins of the histograms that place the cuts: the halves differ by at most about one bin's share
-# of the points (1/128 of them where they spread evenly).
+# Bins of the histogram that places the cut: the halves differ by about one bin's share of the
+# points at most (1/128 of them where they spread evenly).
 CUT_BINS = 128
-
-# A static side of a point: no body the solver moves.
-STATIC = -1
 
 
 @njit(cache=True, nogil=True)
@@ -58,9 +56,9 @@ def median_cut(values, count):
 
 
 @njit(cache=True, nogil=True)
-def horizontal_axes(gravity, coordinates, points, count):
-    """The two world axes across gravity (x and y under the usual gravity), the one the points
-    spread more along first."""
+def cut_axis(gravity, coordinates, points, count):
+    """Of the two world axes across gravity (x and y under the usual gravity), the one the points
+    spread more along: a cut along gravity would split stacks into top and bottom."""
     down = 0
     for e in range(3):
         if abs(gravity[e]) > abs(gravity[down]):
@@ -72,89 +70,98 @@ def horizontal_axes(gravity, coordinates, points, count):
         p = coordinates[points[k]]
         lo1, hi1 = min(lo1, p[first]), max(hi1, p[first])
         lo2, hi2 = min(lo2, p[second]), max(hi2, p[second])
-    return (first, second) if hi1 - lo1 >= hi2 - lo2 else (second, first)
+    return first if hi1 - lo1 >= hi2 - lo2 else second
 
 
 @njit(cache=True, nogil=True)
-def side(body, inv_mass, position, axis, cut):
-    if inv_mass == 0.0:
-        return STATIC
-    return 1 if position[body, axis] >= cut else 0
-
-
-@njit(cache=True, nogil=True)
-def split_points(points, count, contacts, position, gravity, items, task_start):
-    """Sorts points[:count] (a pass's points in sweep order) into the tasks: items[:count] holds
-    them task by task, each task in sweep order; task t is items[task_start[t]:task_start[t + 1]]."""
+def split_chains(points, count, contacts, position, gravity, items, chain_start, need_up,
+                 need_down, publish_up, publish_down):
+    """Puts points[:count] (a pass's points in sweep order) into the two chains: chain c is
+    items[chain_start[c]:chain_start[c + 1]], in sweep order. For the item in slot i: need_up[i]
+    and need_down[i] (upward and downward sweeps), each relative to the other chain's progress
+    at the start of the sweep (sweep x its length); publish_up[i], publish_down[i]: the other
+    chain waits for it in an upward (downward) sweep, or the sweep after."""
     rows_a, rows_b, inv_mass = contacts.velocity_a, contacts.velocity_b, contacts.row_inv_mass
-    task = np.empty(count, np.int64)
+    axis = cut_axis(gravity, contacts.point, points, count)
     values = np.empty(count)
-    first, second = horizontal_axes(gravity, contacts.point, points, count)
     for k in range(count):
-        values[k] = contacts.point[points[k], first]
+        values[k] = contacts.point[points[k], axis]
     cut = median_cut(values, count)
-    boundary = 0
+    chain = np.empty(count, np.int64)
+    lengths = np.zeros(2, np.int64)
     for k in range(count):
         c = points[k]
-        side_a = side(rows_a[c], inv_mass[c, 0], position, first, cut)
-        side_b = side(rows_b[c], inv_mass[c, 1], position, first, cut)
-        if side_a == STATIC or side_b == STATIC or side_a == side_b:
-            task[k] = INTERIOR_HIGH if max(side_a, side_b) == 1 else INTERIOR_LOW
+        side_a = -1 if inv_mass[c, 0] == 0.0 else int(position[rows_a[c], axis] >= cut)
+        side_b = -1 if inv_mass[c, 1] == 0.0 else int(position[rows_b[c], axis] >= cut)
+        if side_a >= 0 and side_b >= 0 and side_a != side_b:
+            chain[k] = 0 if lengths[0] <= lengths[1] else 1  # across the cut
         else:
-            task[k] = ACROSS
-            values[boundary] = contacts.point[c, second]
-            boundary += 1
-    cut = median_cut(values, boundary)
+            chain[k] = max(side_a, side_b, 0)
+        lengths[chain[k]] += 1
+    chain_start[0], chain_start[1], chain_start[2] = 0, lengths[0], count
+    # Per body (velocity row) and chain: the first and last upward position of the chain's
+    # points on it, and the latest one so far in the walk. Only the entries of this pass's
+    # bodies are set, so a large world with few contacts pays for its contacts alone.
+    rows = len(position) + 1
+    first_up = np.empty((2, rows), np.int64)
+    last_up = np.empty((2, rows), np.int64)
+    latest = np.empty((2, rows), np.int64)
     for k in range(count):
-        if task[k] == ACROSS:
+        c = points[k]
+        for body in (rows_a[c], rows_b[c]):
+            first_up[0, body] = first_up[1, body] = last_up[0, body] = last_up[1, body] = -1
+    filled = np.zeros(2, np.int64)
+    place = np.empty(count, np.int64)  # each point's position in its chain (upward order)
+    for k in range(count):
+        c, own = points[k], chain[k]
+        position_up = place[k] = filled[own]
+        items[chain_start[own] + position_up] = c
+        filled[own] += 1
+        for side in range(2):
+            if inv_mass[c, side] == 0.0:
+                continue
+            body = rows_a[c] if side == 0 else rows_b[c]
+            if first_up[own, body] < 0:
+                first_up[own, body] = position_up
+            last_up[own, body] = position_up
+    # Upward sweeps walk the points in sweep order, downward ones backwards; `latest` holds
+    # positions in the walk's direction.
+    publish_up[:count] = False
+    publish_down[:count] = False
+    for direction in range(2):
+        for k in range(count):
             c = points[k]
-            side_a = side(rows_a[c], inv_mass[c, 0], position, second, cut)
-            side_b = side(rows_b[c], inv_mass[c, 1], position, second, cut)
-            if side_a == side_b:
-                task[k] = BOUNDARY_HIGH if side_a == 1 else BOUNDARY_LOW
-    # Stable counting sort by task.
-    task_start[:] = 0
-    for k in range(count):
-        task_start[task[k] + 1] += 1
-    for t in range(TASKS):
-        task_start[t + 1] += task_start[t]
-    filled = task_start[:TASKS].copy()
-    for k in range(count):
-        items[filled[task[k]]] = points[k]
-        filled[task[k]] += 1
-
-
-@njit(cache=True, nogil=True)
-def plan_groups(task_start, sweeps, phase_tasks, phase_task_count, group_phase, group_first_sweep,
-                group_sweeps):
-    """The order the phases run in over `sweeps` sweeps: upward sweeps run phases 0, 1, 2 and
-    downward ones 2, 1, 0 (each task backwards), the serial solve's sweep order kept inside every
-    task. Phases without points are left out, and a phase that ends one sweep and begins the next
-    runs as one group (a task then does its two sweeps back to back): there is a wait between
-    groups only. Fills phase_tasks (PHASES, 2) with each phase's non-empty tasks and returns the
-    number of groups."""
-    phases = np.empty(PHASES, np.int64)
-    used = 0
-    for p in range(PHASES):
-        phase_task_count[p] = 0
-    for t in range(TASKS):
-        if task_start[t + 1] > task_start[t]:
-            p = PHASE_OF_TASK[t]
-            phase_tasks[p, phase_task_count[p]] = t
-            phase_task_count[p] += 1
-    for p in range(PHASES):
-        if phase_task_count[p] > 0:
-            phases[used] = p
-            used += 1
-    groups = 0
-    for sweep in range(sweeps):
-        for q in range(used):
-            p = phases[q] if sweep % 2 == 0 else phases[used - 1 - q]
-            if groups > 0 and group_phase[groups - 1] == p:
-                group_sweeps[groups - 1] += 1
+            latest[0, rows_a[c]] = latest[1, rows_a[c]] = latest[0, rows_b[c]] = latest[1, rows_b[c]] = -1
+        for step in range(count):
+            k = step if direction == 0 else count - 1 - step
+            c, own = points[k], chain[k]
+            other = 1 - own
+            other_length = chain_start[other + 1] - chain_start[other]
+            need = NO_WAIT
+            for side in range(2):
+                if inv_mass[c, side] == 0.0:
+                    continue
+                body = rows_a[c] if side == 0 else rows_b[c]
+                if first_up[other, body] < 0:
+                    continue  # the other chain never touches this body
+                if latest[other, body] >= 0:  # its last point on the body, this sweep
+                    need = max(need, latest[other, body] + 1)
+                    if direction == 0:
+                        publish_up[chain_start[other] + latest[other, body]] = True
+                    else:
+                        publish_down[chain_start[other + 1] - 1 - latest[other, body]] = True
+                elif direction == 0:  # ... the sweep before (downward): its first upward one
+                    need = max(need, -first_up[other, body])
+                    publish_down[chain_start[other] + first_up[other, body]] = True
+                else:  # ... the sweep before (upward)
+                    need = max(need, last_up[other, body] + 1 - other_length)
+                    publish_up[chain_start[other] + last_up[other, body]] = True
+            slot = chain_start[own] + place[k]
+            here = place[k] if direction == 0 else chain_start[own + 1] - chain_start[own] - 1 - place[k]
+            for side in range(2):
+                if inv_mass[c, side] != 0.0:
+                    latest[own, rows_a[c] if side == 0 else rows_b[c]] = here
+            if direction == 0:
+                need_up[slot] = need
             else:
-                group_phase[groups] = p
-                group_first_sweep[groups] = sweep
-                group_sweeps[groups] = 1
-                groups += 1
-    return groups
+                need_down[slot] = need
