@@ -13,6 +13,7 @@ stepping thread's CPU and the CPU of the whole process (both solver threads), wi
 and the load average; the two settings' final states are compared too.
 
     python bench/pile.py [--scene loose|dense] [--boxes 1000] [--seconds 10] [--asleep 5000]
+                         [--solver-threads 1|2]
     python bench/pile.py --compare-threads [--scene loose|dense] [--boxes 1000] [--rounds 3]
 """
 import argparse
@@ -88,25 +89,24 @@ def compare_threads(scene, count, rounds):
               f"p95 {np.percentile(one, 95) / np.percentile(two, 95):.2f}, "
               f"max {one.max() / two.max():.2f}, total {one.sum() / two.sum():.2f}")
     same = all(np.array_equal(finals[1][key], finals[2][key]) for key in finals[1])
-    print(f"  final states of 1 and 2 threads {'bit-identical' if same else 'differ'} "
-          "(2 threads keep the serial order inside each half of the world; points across the cut "
-          "are solved after the halves)")
+    print(f"  final states of 1 and 2 threads {'bit-identical' if same else 'DIFFER'}")
 
 
-def stage_split(scene, count, rate):
-    """ms per step of each stage over the falling phase, from the stage timers."""
-    world = build_pile(count, scene=scene)
+def stage_split(scene, count, rate, solver_threads=1):
+    """ms per step of each stage over the falling phase, from the stage timers (the stepping
+    thread's CPU time)."""
+    world = build_pile(count, scene=scene, solver_threads=solver_threads)
     world.profiling = True
     steps = FALLING_SECONDS * rate
     world.step(steps)
     return {stage: 1e3 * s / steps for stage, s in world.stage_seconds().items()}
 
 
-def asleep_step(count, steps=2000):
+def asleep_step(count, steps=2000, solver_threads=1):
     """Thread CPU ms of a step with `count` boxes standing in columns of two, all frozen: a
     World.step(1) call's median and max (Python and Numba's argument unboxing included), the
     compiled step alone (one call of `steps` steps), and how many were frozen."""
-    world = world_of(resting_columns(count // 2))
+    world = world_of(resting_columns(count // 2), solver_threads=solver_threads)
     rate = world.settings["steps_per_second"]
     for _ in range(10):  # the columns stand still and freeze after freezing.time
         world.step(rate)
@@ -125,6 +125,8 @@ def main():
     parser.add_argument("--boxes", type=int, default=1000)
     parser.add_argument("--seconds", type=float, default=10.0)
     parser.add_argument("--asleep", type=int, default=5000, help="boxes of the resting step (0: skip)")
+    parser.add_argument("--solver-threads", type=int, default=1, choices=(1, 2),
+                        help="World.solver_threads of the runs (1: one core, as issue 20 measures)")
     parser.add_argument("--compare-threads", action="store_true",
                         help="falling phase with 1 and 2 solver threads, and the speed-up")
     parser.add_argument("--rounds", type=int, default=3, help="rounds of --compare-threads")
@@ -138,7 +140,7 @@ def main():
     World().step(1)  # compile (or load from the cache) before timing
     compile_s = time.perf_counter() - started
 
-    world = build_pile(args.boxes, scene=args.scene)
+    world = build_pile(args.boxes, scene=args.scene, solver_threads=args.solver_threads)
     rate = world.settings["steps_per_second"]
     steps = int(args.seconds * rate)
     clocks = dict(zip(("cpu", "wall"), timed_steps(world, steps)))
@@ -156,11 +158,11 @@ def main():
     print(f"{frozen}/{args.boxes} frozen at the end, "
           f"{world.stats['points'] / steps:.0f} contact points and {world.stats['pairs'] / steps:.0f} "
           "pairs per step on average")
-    split = stage_split(args.scene, args.boxes, rate)
+    split = stage_split(args.scene, args.boxes, rate, args.solver_threads)
     print(f"falling-phase stages, ms/step (total {sum(split.values()):.3f}): "
           + ", ".join(f"{stage} {ms:.3f}" for stage, ms in split.items()))
     if args.asleep:
-        median, longest, batched, asleep = asleep_step(args.asleep)
+        median, longest, batched, asleep = asleep_step(args.asleep, solver_threads=args.solver_threads)
         print(f"{args.asleep} boxes in columns of two, {asleep} frozen, thread CPU: compiled step "
               f"{batched:.4f} ms; a step(1) call median {median:.4f} ms, max {longest:.3f} ms")
 

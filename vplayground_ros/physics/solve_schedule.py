@@ -36,29 +36,25 @@ CUT_BINS = 128
 
 
 @njit(cache=True, nogil=True)
-def median_cut(values, count):
-    """A value that about half of values[:count] lie below (a histogram's, O(count))."""
-    lo, hi = np.inf, -np.inf
-    for k in range(count):
-        lo, hi = min(lo, values[k]), max(hi, values[k])
-    if not hi > lo:
-        return hi
-    bins = np.zeros(CUT_BINS, np.int64)
-    scale = CUT_BINS / (hi - lo)
-    for k in range(count):
-        bins[min(int((values[k] - lo) * scale), CUT_BINS - 1)] += 1
-    seen = 0
-    for k in range(CUT_BINS):
-        seen += bins[k]
-        if 2 * seen >= count:
-            return lo + (k + 1) / scale
-    return hi
-
-
-@njit(cache=True, nogil=True)
-def cut_axis(gravity, coordinates, points, count):
-    """Of the two world axes across gravity (x and y under the usual gravity), the one the points
-    spread more along: a cut along gravity would split stacks into top and bottom."""
+def split_chains(points, count, contacts, position, gravity, items, chain_start, need_up,
+                 need_down, publish_up, publish_down):
+    """Puts points[:count] (a pass's points in sweep order) into the two chains: chain c is
+    items[chain_start[c]:chain_start[c + 1]], in sweep order. For the item in slot i: need_up[i]
+    and need_down[i] (upward and downward sweeps), each relative to the other chain's progress
+    at the start of the sweep (sweep x its length); publish_up[i], publish_down[i]: the other
+    chain waits for it in an upward (downward) sweep, or the sweep after. Six passes over the
+    points (this runs before every shared pass, on one thread)."""
+    rows_a, rows_b, inv_mass, point = contacts.velocity_a, contacts.velocity_b, contacts.row_inv_mass, contacts.point
+    # Per body (velocity row): which chains touch it (bits), and per chain the first and last
+    # upward position of its points on it and the latest in the current walk. Only this pass's
+    # bodies' entries are set, so a large world with few contacts pays for its contacts alone.
+    rows = len(position) + 1
+    touch = np.empty(rows, np.int64)
+    first_up = np.empty((2, rows), np.int64)
+    last_up = np.empty((2, rows), np.int64)
+    latest = np.empty((2, 2, rows), np.int64)  # [walk direction, chain, body]
+    # The cut: across the horizontal axis the points spread more along (a cut along gravity
+    # would split stacks into top and bottom), through their median (a histogram's).
     down = 0
     for e in range(3):
         if abs(gravity[e]) > abs(gravity[down]):
@@ -67,26 +63,24 @@ def cut_axis(gravity, coordinates, points, count):
     lo1 = lo2 = np.inf
     hi1 = hi2 = -np.inf
     for k in range(count):
-        p = coordinates[points[k]]
-        lo1, hi1 = min(lo1, p[first]), max(hi1, p[first])
-        lo2, hi2 = min(lo2, p[second]), max(hi2, p[second])
-    return first if hi1 - lo1 >= hi2 - lo2 else second
-
-
-@njit(cache=True, nogil=True)
-def split_chains(points, count, contacts, position, gravity, items, chain_start, need_up,
-                 need_down, publish_up, publish_down):
-    """Puts points[:count] (a pass's points in sweep order) into the two chains: chain c is
-    items[chain_start[c]:chain_start[c + 1]], in sweep order. For the item in slot i: need_up[i]
-    and need_down[i] (upward and downward sweeps), each relative to the other chain's progress
-    at the start of the sweep (sweep x its length); publish_up[i], publish_down[i]: the other
-    chain waits for it in an upward (downward) sweep, or the sweep after."""
-    rows_a, rows_b, inv_mass = contacts.velocity_a, contacts.velocity_b, contacts.row_inv_mass
-    axis = cut_axis(gravity, contacts.point, points, count)
-    values = np.empty(count)
-    for k in range(count):
-        values[k] = contacts.point[points[k], axis]
-    cut = median_cut(values, count)
+        c = points[k]
+        touch[rows_a[c]] = touch[rows_b[c]] = 0
+        lo1, hi1 = min(lo1, point[c, first]), max(hi1, point[c, first])
+        lo2, hi2 = min(lo2, point[c, second]), max(hi2, point[c, second])
+    axis, lo, hi = (first, lo1, hi1) if hi1 - lo1 >= hi2 - lo2 else (second, lo2, hi2)
+    cut = hi
+    if hi > lo:
+        bins = np.zeros(CUT_BINS, np.int64)
+        scale = CUT_BINS / (hi - lo)
+        for k in range(count):
+            bins[min(int((point[points[k], axis] - lo) * scale), CUT_BINS - 1)] += 1
+        seen = 0
+        for k in range(CUT_BINS):
+            seen += bins[k]
+            if 2 * seen >= count:
+                cut = lo + (k + 1) / scale
+                break
+    # The chains: a side's interior, points across the cut to the shorter chain so far.
     chain = np.empty(count, np.int64)
     lengths = np.zeros(2, np.int64)
     for k in range(count):
@@ -94,74 +88,62 @@ def split_chains(points, count, contacts, position, gravity, items, chain_start,
         side_a = -1 if inv_mass[c, 0] == 0.0 else int(position[rows_a[c], axis] >= cut)
         side_b = -1 if inv_mass[c, 1] == 0.0 else int(position[rows_b[c], axis] >= cut)
         if side_a >= 0 and side_b >= 0 and side_a != side_b:
-            chain[k] = 0 if lengths[0] <= lengths[1] else 1  # across the cut
+            chain[k] = 0 if lengths[0] <= lengths[1] else 1
         else:
             chain[k] = max(side_a, side_b, 0)
         lengths[chain[k]] += 1
     chain_start[0], chain_start[1], chain_start[2] = 0, lengths[0], count
-    # Per body (velocity row) and chain: the first and last upward position of the chain's
-    # points on it, and the latest one so far in the walk. Only the entries of this pass's
-    # bodies are set, so a large world with few contacts pays for its contacts alone.
-    rows = len(position) + 1
-    first_up = np.empty((2, rows), np.int64)
-    last_up = np.empty((2, rows), np.int64)
-    latest = np.empty((2, rows), np.int64)
-    for k in range(count):
-        c = points[k]
-        for body in (rows_a[c], rows_b[c]):
-            first_up[0, body] = first_up[1, body] = last_up[0, body] = last_up[1, body] = -1
-    filled = np.zeros(2, np.int64)
     place = np.empty(count, np.int64)  # each point's position in its chain (upward order)
+    filled = np.zeros(2, np.int64)
     for k in range(count):
         c, own = points[k], chain[k]
-        position_up = place[k] = filled[own]
-        items[chain_start[own] + position_up] = c
+        here = place[k] = filled[own]
         filled[own] += 1
+        slot = chain_start[own] + here
+        items[slot] = c
+        publish_up[slot] = publish_down[slot] = False
         for side in range(2):
             if inv_mass[c, side] == 0.0:
                 continue
             body = rows_a[c] if side == 0 else rows_b[c]
-            if first_up[own, body] < 0:
-                first_up[own, body] = position_up
-            last_up[own, body] = position_up
-    # Upward sweeps walk the points in sweep order, downward ones backwards; `latest` holds
-    # positions in the walk's direction.
-    publish_up[:count] = False
-    publish_down[:count] = False
+            if touch[body] & (1 << own) == 0:
+                touch[body] |= 1 << own
+                first_up[own, body] = here
+                latest[0, own, body] = latest[1, own, body] = -1
+            last_up[own, body] = here
+    # Upward sweeps walk the points in sweep order, downward ones backwards (`latest` holds
+    # positions in the walk's direction); only bodies both chains touch tie points together.
     for direction in range(2):
-        for k in range(count):
-            c = points[k]
-            latest[0, rows_a[c]] = latest[1, rows_a[c]] = latest[0, rows_b[c]] = latest[1, rows_b[c]] = -1
+        need_of = need_up if direction == 0 else need_down
         for step in range(count):
             k = step if direction == 0 else count - 1 - step
             c, own = points[k], chain[k]
+            slot = chain_start[own] + place[k]
+            need_of[slot] = NO_WAIT
+            shared_a = inv_mass[c, 0] != 0.0 and touch[rows_a[c]] == 3
+            shared_b = inv_mass[c, 1] != 0.0 and touch[rows_b[c]] == 3
+            if not (shared_a or shared_b):
+                continue
             other = 1 - own
             other_length = chain_start[other + 1] - chain_start[other]
+            here = place[k] if direction == 0 else lengths[own] - 1 - place[k]
             need = NO_WAIT
             for side in range(2):
-                if inv_mass[c, side] == 0.0:
+                if not (shared_a if side == 0 else shared_b):
                     continue
                 body = rows_a[c] if side == 0 else rows_b[c]
-                if first_up[other, body] < 0:
-                    continue  # the other chain never touches this body
-                if latest[other, body] >= 0:  # its last point on the body, this sweep
-                    need = max(need, latest[other, body] + 1)
+                before = latest[direction, other, body]
+                if before >= 0:  # the other chain's last point on the body, this sweep
+                    need = max(need, before + 1)
                     if direction == 0:
-                        publish_up[chain_start[other] + latest[other, body]] = True
+                        publish_up[chain_start[other] + before] = True
                     else:
-                        publish_down[chain_start[other + 1] - 1 - latest[other, body]] = True
+                        publish_down[chain_start[other + 1] - 1 - before] = True
                 elif direction == 0:  # ... the sweep before (downward): its first upward one
                     need = max(need, -first_up[other, body])
                     publish_down[chain_start[other] + first_up[other, body]] = True
                 else:  # ... the sweep before (upward)
                     need = max(need, last_up[other, body] + 1 - other_length)
                     publish_up[chain_start[other] + last_up[other, body]] = True
-            slot = chain_start[own] + place[k]
-            here = place[k] if direction == 0 else chain_start[own + 1] - chain_start[own] - 1 - place[k]
-            for side in range(2):
-                if inv_mass[c, side] != 0.0:
-                    latest[own, rows_a[c] if side == 0 else rows_b[c]] = here
-            if direction == 0:
-                need_up[slot] = need
-            else:
-                need_down[slot] = need
+                latest[direction, own, body] = here
+            need_of[slot] = need
