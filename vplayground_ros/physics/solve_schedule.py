@@ -53,6 +53,10 @@ def split_chains(points, count, contacts, position, gravity, items, chain_start,
     first_up = np.empty((2, rows), np.int64)
     last_up = np.empty((2, rows), np.int64)
     latest = np.empty((2, 2, rows), np.int64)  # [walk direction, chain, body]
+    # What the passes need of each point, gathered once in sweep order (the points lie all over
+    # the contact arrays): its moving bodies (-1: a static side) and where it is across gravity.
+    moving = np.empty((count, 2), np.int64)
+    across = np.empty((count, 2))
     # The cut: across the horizontal axis the points spread more along (a cut along gravity
     # would split stacks into top and bottom), through their median (a histogram's).
     down = 0
@@ -64,16 +68,21 @@ def split_chains(points, count, contacts, position, gravity, items, chain_start,
     hi1 = hi2 = -np.inf
     for k in range(count):
         c = points[k]
+        a = rows_a[c] if inv_mass[c, 0] != 0.0 else -1
+        b = rows_b[c] if inv_mass[c, 1] != 0.0 else -1
+        moving[k, 0], moving[k, 1] = a, b
         touch[rows_a[c]] = touch[rows_b[c]] = 0
-        lo1, hi1 = min(lo1, point[c, first]), max(hi1, point[c, first])
-        lo2, hi2 = min(lo2, point[c, second]), max(hi2, point[c, second])
-    axis, lo, hi = (first, lo1, hi1) if hi1 - lo1 >= hi2 - lo2 else (second, lo2, hi2)
+        x1, x2 = point[c, first], point[c, second]
+        across[k, 0], across[k, 1] = x1, x2
+        lo1, hi1 = min(lo1, x1), max(hi1, x1)
+        lo2, hi2 = min(lo2, x2), max(hi2, x2)
+    along, axis, lo, hi = (0, first, lo1, hi1) if hi1 - lo1 >= hi2 - lo2 else (1, second, lo2, hi2)
     cut = hi
     if hi > lo:
         bins = np.zeros(CUT_BINS, np.int64)
         scale = CUT_BINS / (hi - lo)
         for k in range(count):
-            bins[min(int((point[points[k], axis] - lo) * scale), CUT_BINS - 1)] += 1
+            bins[min(int((across[k, along] - lo) * scale), CUT_BINS - 1)] += 1
         seen = 0
         for k in range(CUT_BINS):
             seen += bins[k]
@@ -84,9 +93,9 @@ def split_chains(points, count, contacts, position, gravity, items, chain_start,
     chain = np.empty(count, np.int64)
     lengths = np.zeros(2, np.int64)
     for k in range(count):
-        c = points[k]
-        side_a = -1 if inv_mass[c, 0] == 0.0 else int(position[rows_a[c], axis] >= cut)
-        side_b = -1 if inv_mass[c, 1] == 0.0 else int(position[rows_b[c], axis] >= cut)
+        a, b = moving[k, 0], moving[k, 1]
+        side_a = -1 if a < 0 else int(position[a, axis] >= cut)
+        side_b = -1 if b < 0 else int(position[b, axis] >= cut)
         if side_a >= 0 and side_b >= 0 and side_a != side_b:
             chain[k] = 0 if lengths[0] <= lengths[1] else 1
         else:
@@ -96,16 +105,16 @@ def split_chains(points, count, contacts, position, gravity, items, chain_start,
     place = np.empty(count, np.int64)  # each point's position in its chain (upward order)
     filled = np.zeros(2, np.int64)
     for k in range(count):
-        c, own = points[k], chain[k]
+        own = chain[k]
         here = place[k] = filled[own]
         filled[own] += 1
         slot = chain_start[own] + here
-        items[slot] = c
+        items[slot] = points[k]
         publish_up[slot] = publish_down[slot] = False
         for side in range(2):
-            if inv_mass[c, side] == 0.0:
+            body = moving[k, side]
+            if body < 0:
                 continue
-            body = rows_a[c] if side == 0 else rows_b[c]
             if touch[body] & (1 << own) == 0:
                 touch[body] |= 1 << own
                 first_up[own, body] = here
@@ -117,11 +126,12 @@ def split_chains(points, count, contacts, position, gravity, items, chain_start,
         need_of = need_up if direction == 0 else need_down
         for step in range(count):
             k = step if direction == 0 else count - 1 - step
-            c, own = points[k], chain[k]
+            own = chain[k]
             slot = chain_start[own] + place[k]
             need_of[slot] = NO_WAIT
-            shared_a = inv_mass[c, 0] != 0.0 and touch[rows_a[c]] == 3
-            shared_b = inv_mass[c, 1] != 0.0 and touch[rows_b[c]] == 3
+            a, b = moving[k, 0], moving[k, 1]
+            shared_a = a >= 0 and touch[a] == 3
+            shared_b = b >= 0 and touch[b] == 3
             if not (shared_a or shared_b):
                 continue
             other = 1 - own
@@ -131,7 +141,7 @@ def split_chains(points, count, contacts, position, gravity, items, chain_start,
             for side in range(2):
                 if not (shared_a if side == 0 else shared_b):
                     continue
-                body = rows_a[c] if side == 0 else rows_b[c]
+                body = a if side == 0 else b
                 before = latest[direction, other, body]
                 if before >= 0:  # the other chain's last point on the body, this sweep
                     need = max(need, before + 1)
