@@ -82,7 +82,9 @@ def split_chains(points, count, contacts, position, gravity, items, chain_start,
         bins = np.zeros(CUT_BINS, np.int64)
         scale = CUT_BINS / (hi - lo)
         for k in range(count):
-            bins[min(int((across[k, along] - lo) * scale), CUT_BINS - 1)] += 1
+            f = (across[k, along] - lo) * scale
+            # Clamped, a non-finite one too: an index out of the bins would write anywhere.
+            bins[0 if not f > 0.0 else (int(f) if f < CUT_BINS - 1 else CUT_BINS - 1)] += 1
         seen = 0
         for k in range(CUT_BINS):
             seen += bins[k]
