@@ -58,24 +58,50 @@ def timed_steps(world, steps, process=None):
     return cpu, wall
 
 
+def machine_cpu_seconds():
+    """(busy, total) CPU seconds of the whole machine so far, summed over its cores, from
+    /proc/stat (Linux); None elsewhere."""
+    try:
+        with open("/proc/stat") as stat:
+            ticks = [int(v) for v in stat.readline().split()[1:]]
+    except OSError:
+        return None
+    hz = os.sysconf("SC_CLK_TCK")
+    idle = ticks[3] + ticks[4]
+    return (sum(ticks) - idle) / hz, sum(ticks) / hz
+
+
 def compare_threads(scene, count, rounds):
     """The falling phase with the contact solve on 1 and on 2 threads, interleaved `rounds`
     times: per setting, the steps of every round pooled."""
     rate = World().settings["steps_per_second"]
     steps = FALLING_SECONDS * rate
     clocks = {threads: {"wall": [], "thread CPU": [], "process CPU": []} for threads in (1, 2)}
-    loads, finals = [], {}
+    loads, finals, others = [], {}, []
     for _ in range(rounds):
         for threads in (1, 2):
             world = build_pile(count, scene=scene, solver_threads=threads)
             process = np.empty(steps)
             loads.append(os.getloadavg()[0])
+            machine0, process0 = machine_cpu_seconds(), time.process_time()
             cpu, wall = timed_steps(world, steps, process)
+            machine1, process1 = machine_cpu_seconds(), time.process_time()
+            if machine0 is not None and machine1[1] > machine0[1]:
+                # Cores busy with other processes meanwhile (the machine's busy time not ours,
+                # over the round's wall time): a second solver thread only helps with a free core.
+                cores = os.cpu_count() or 1
+                others.append(cores * ((machine1[0] - machine0[0]) - (process1 - process0))
+                              / (machine1[1] - machine0[1]))
             for clock, values in (("wall", wall), ("thread CPU", cpu), ("process CPU", process)):
                 clocks[threads][clock].append(values)
             finals[threads] = world.state()
+            busy = f", other processes busy {others[-1]:.2f} cores" if others else ""
+            print(f"  round {len(loads) // 2 + len(loads) % 2}, {threads} thread{'s' if threads > 1 else ''}: "
+                  f"wall {wall.sum():.0f} ms (median {np.median(wall):.3f}, p95 {np.percentile(wall, 95):.3f}, "
+                  f"max {wall.max():.3f}), process CPU {process.sum():.0f} ms, load {loads[-1]:.2f}{busy}")
     print(f"{scene} pile of {count} boxes, falling phase (first {FALLING_SECONDS} s), {rounds} rounds "
-          f"of 1 and 2 solver threads interleaved, load average (1 min) {min(loads):.2f}-{max(loads):.2f}")
+          f"of 1 and 2 solver threads interleaved, load average (1 min) {min(loads):.2f}-{max(loads):.2f}"
+          + (f", other processes busy {min(others):.2f}-{max(others):.2f} cores" if others else ""))
     summary = {}
     for threads in (1, 2):
         for clock, rounds_of in clocks[threads].items():
