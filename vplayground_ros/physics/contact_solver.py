@@ -42,9 +42,17 @@ from .solve_schedule import split_chains
 # A row whose target is this low is not solved in that pass.
 INACTIVE = -1.0e30
 
-# Passes with fewer points than this are solved by one thread: sharing a pass costs a parallel
-# region (5-20 us to start) and a wait per phase, more than two threads save on a small world.
-PARALLEL_MIN_POINTS = 256
+# Passes with fewer points than this are solved by one thread: sharing a pass costs the split
+# (about 12 ns a point) and a parallel region, whose second thread wakes some tens of us late;
+# on a free core 10 sweeps over 4,000 points took 1.26-1.36 -> 0.85-1.10 ms, while the loose
+# pile's median step (about 400 points) got slower with a threshold of 256.
+PARALLEL_MIN_POINTS = 1000
+
+# A pass in which more than 1/MAX_WAITING_SHARE of the points may wait for the other thread is
+# solved by one thread after all: each wait hands a cache line across and stalls a thread, and
+# the 20-row pyramid (a fifth of its points waiting) stepped 2.04-2.14 -> 2.22-2.40 ms with two
+# threads on a free core. Piles have a few per cent.
+MAX_WAITING_SHARE = 16
 
 # The threads' shared counters stand this many int64 apart, a cache line each, so one thread's
 # writes do not evict the line the other is spinning on.
@@ -299,8 +307,15 @@ def solve_rows_shared(velocity, contacts, sweeps, target, normal_impulse, fricti
     need_down = np.empty(count, np.int64)
     publish_up = np.empty(count, np.bool_)
     publish_down = np.empty(count, np.bool_)
-    split_chains(points, count, contacts, position, gravity, items, chain_start, need_up,
-                 need_down, publish_up, publish_down)
+    waiting = split_chains(points, count, contacts, position, gravity, items, chain_start,
+                           need_up, need_down, publish_up, publish_down)
+    if waiting * MAX_WAITING_SHARE > count:
+        for sweep in range(sweeps):
+            solve_span(velocity, contacts.rows, contacts.row_mass, contacts.row_inv_mass,
+                       contacts.velocity_a, contacts.velocity_b, contacts.friction_coefficient,
+                       points, 0, count, sweep % 2 == 1, target, normal_impulse, friction,
+                       with_friction)
+        return
     # Which chains are taken, and each chain's progress, each on its own cache line.
     sync = np.zeros(3 * SYNC_STRIDE, np.int64)
     run_workers(min(threads, 2), velocity, contacts.rows, contacts.row_mass, contacts.row_inv_mass,

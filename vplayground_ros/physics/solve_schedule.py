@@ -42,8 +42,9 @@ def split_chains(points, count, contacts, position, gravity, items, chain_start,
     items[chain_start[c]:chain_start[c + 1]], in sweep order. For the item in slot i: need_up[i]
     and need_down[i] (upward and downward sweeps), each relative to the other chain's progress
     at the start of the sweep (sweep x its length); publish_up[i], publish_down[i]: the other
-    chain waits for it in an upward (downward) sweep, or the sweep after. Six passes over the
-    points (this runs before every shared pass, on one thread)."""
+    chain waits for it in an upward (downward) sweep, or the sweep after. Returns how many
+    points may wait (in an upward sweep). Six passes over the points (this runs before every
+    shared pass, on one thread)."""
     rows_a, rows_b, inv_mass, point = contacts.velocity_a, contacts.velocity_b, contacts.row_inv_mass, contacts.point
     # Per body (velocity row): which chains touch it (bits), and per chain the first and last
     # upward position of its points on it and the latest in the current walk. Only this pass's
@@ -124,6 +125,7 @@ def split_chains(points, count, contacts, position, gravity, items, chain_start,
             last_up[own, body] = here
     # Upward sweeps walk the points in sweep order, downward ones backwards (`latest` holds
     # positions in the walk's direction); only bodies both chains touch tie points together.
+    waiting = 0
     for direction in range(2):
         need_of = need_up if direction == 0 else need_down
         for step in range(count):
@@ -159,3 +161,5 @@ def split_chains(points, count, contacts, position, gravity, items, chain_start,
                     publish_up[chain_start[other] + last_up[other, body]] = True
                 latest[direction, own, body] = here
             need_of[slot] = need
+            waiting += direction == 0
+    return waiting
