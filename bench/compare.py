@@ -42,6 +42,9 @@ from vplayground_ros.physics.specs import BODY_DEFAULTS, DEFAULT_GROUND  # noqa:
 RATE = 128
 DT = 1.0 / RATE
 FALLING_SECONDS = 2.0  # the falling phase of a pile (SPEC 8)
+# The peers run on one thread each, so ours does too (World.solver_threads; bench/pile.py
+# --compare-threads measures what the second thread adds).
+SOLVER_THREADS = 1
 PEER_PROGRAMS = Path(__file__).parent / "peers" / "target" / "release"
 
 
@@ -49,7 +52,7 @@ class Ours:
     name = "vplayground"
 
     def __init__(self, boxes, world=None):
-        self.world = world if world is not None else world_of(boxes)
+        self.world = world if world is not None else world_of(boxes, solver_threads=SOLVER_THREADS)
 
     def step(self):
         self.world.step(1)
@@ -304,7 +307,7 @@ def settled_pile(count, seconds):
     which the peers start (settling thousands of boxes from the drop would take PyBullet and
     MuJoCo's default solver hours here)."""
     boxes = scenes.pile(count)
-    world = world_of(boxes)
+    world = world_of(boxes, solver_threads=SOLVER_THREADS)
     world.step(int(seconds * RATE))
     state = world.state()
     return world, [(size, position, quaternion, mass) for (size, _, _, mass), position, quaternion
@@ -387,7 +390,7 @@ def car_scene(seconds, budget_s):
 def stage_breakdown(count, seconds):
     """Where our step's CPU time goes on the falling pile (per-stage timers inside the compiled
     step): {stage: [ms per step, % of the step]}."""
-    world = world_of(scenes.loose_pile(count))
+    world = world_of(scenes.loose_pile(count), solver_threads=SOLVER_THREADS)
     world.profiling = True
     steps = int(seconds * RATE)
     world.step(steps)

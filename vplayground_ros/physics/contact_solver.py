@@ -29,16 +29,43 @@ stick start sliding, and never stop. Pair rule: friction coefficients combine as
 geometric mean (SPEC 4), elasticity as the larger of the two (a bouncy body bounces on anything).
 """
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
+from .atomics import atomic_add, atomic_load, atomic_store, spin_pause, yield_thread
 from .constants import (LINEAR_SLOP, MAX_CORRECTION_SPEED, POSITION_CORRECTION,
                         RESTITUTION_THRESHOLD, SHOCK_SWEEPS, SHOCK_TOLERANCE,
                         STICKING_SPEED)
 from .contact import ARM_A, ARM_B, DIRECTION, TURN_A, TURN_B
 from .math3d import cross
+from .solve_schedule import split_chains
 
 # A row whose target is this low is not solved in that pass.
 INACTIVE = -1.0e30
+
+# Passes with fewer points than this are solved by one thread: sharing a pass costs the split
+# (about 12 ns a point) and a parallel region, whose second thread wakes some tens of us late;
+# on a free core 10 sweeps over 4,000 points took 1.26-1.36 -> 0.85-1.10 ms, while the loose
+# pile's median step (about 400 points) got slower with a threshold of 256.
+PARALLEL_MIN_POINTS = 1000
+
+# A pass in which more than 1/MAX_WAITING_SHARE of the points may wait for the other thread is
+# solved by one thread after all: each wait hands a cache line across and stalls a thread, and
+# the 20-row pyramid (a fifth of its points waiting) stepped 2.04-2.14 -> 2.22-2.40 ms with two
+# threads on a free core. Piles have a few per cent.
+MAX_WAITING_SHARE = 16
+
+# The threads' shared counters stand this many int64 apart, a cache line each, so one thread's
+# writes do not evict the line the other is spinning on.
+SYNC_STRIDE = 8
+
+# A waiting thread spins this many pauses (tens of microseconds) before giving up its core once:
+# by then the thread it waits for has lost its own core to another process.
+SPINS_BEFORE_YIELD = 2000
+
+# A thread blocked on a chain that no thread has taken takes it after this many pauses: Numba's
+# second thread, asleep between regions, usually starts within 5-20 us; one that comes later
+# finds nothing left to take (the results are the same whoever runs what).
+SPINS_BEFORE_TAKING = 1000
 
 
 @njit(cache=True, nogil=True)
@@ -213,19 +240,15 @@ def order_supports(contacts, bodies, gravity):
 
 
 @njit(cache=True, nogil=True)
-def solve_rows(velocity, contacts, sweeps, target, normal_impulse, friction, with_friction):
+def solve_rows(velocity, contacts, sweeps, target, normal_impulse, friction, with_friction, position,
+               gravity, threads):
     """Sequential impulses over every point, `sweeps` times. Points are visited bottom to top
     along gravity, then top to bottom, alternating as the 2008 program alternated its order (no
     contact is always solved last, and so always wins): upward sweeps hand a stack's support up,
     downward ones its weight down, which converges tall stacks and walls in the 2008 iteration
-    counts. Within a manifold that also puts the lowest (most loaded) corner first. Per point: the
-    friction circle (when asked), then the normal row driven to at least its target with a
-    non-negative accumulated impulse. A row's relative velocity is d . (v_B - v_A) + arm_B . w_B
-    - arm_A . w_A; an impulse j along it changes v by -/+ inv_mass j d and w by -/+ j turn.
-    (Per-point work is inlined: Numba would pay reference counting for each array passed to a
-    helper.)"""
-    rows, row_mass, row_inv_mass = contacts.rows, contacts.row_mass, contacts.row_inv_mass
-    rows_a, rows_b, mu = contacts.velocity_a, contacts.velocity_b, contacts.friction_coefficient
+    counts. Within a manifold that also puts the lowest (most loaded) corner first. With
+    `threads` > 1 and enough points, two threads share the sweeps, with the same result
+    (solve_schedule)."""
     # The points this pass solves, once: the collision pass takes only fast closing contacts and
     # the position pass only penetrating ones, and re-skipping the rest in every sweep cost more
     # than solving them.
@@ -235,52 +258,205 @@ def solve_rows(velocity, contacts, sweeps, target, normal_impulse, friction, wit
         if target[order[k]] > INACTIVE:
             points[count] = order[k]
             count += 1
+    if threads > 1 and count >= PARALLEL_MIN_POINTS:
+        solve_rows_shared(velocity, contacts, sweeps, target, normal_impulse, friction,
+                          with_friction, position, gravity, points, count, threads)
+        return
+    rows, row_mass, row_inv_mass = contacts.rows, contacts.row_mass, contacts.row_inv_mass
+    rows_a, rows_b, mu = contacts.velocity_a, contacts.velocity_b, contacts.friction_coefficient
     for sweep in range(sweeps):
-        for k in range(count):
-            c = points[k] if sweep % 2 == 0 else points[count - 1 - k]
-            goal = target[c]
-            a, b = rows_a[c], rows_b[c]
-            m_a, m_b = row_inv_mass[c, 0], row_inv_mass[c, 1]
-            if with_friction:
-                v1 = v2 = 0.0
-                for e in range(3):
-                    dv, wa, wb = velocity[b, e] - velocity[a, e], velocity[a, 3 + e], velocity[b, 3 + e]
-                    v1 += rows[c, 1, DIRECTION + e] * dv - rows[c, 1, ARM_A + e] * wa + rows[c, 1, ARM_B + e] * wb
-                    v2 += rows[c, 2, DIRECTION + e] * dv - rows[c, 2, ARM_A + e] * wa + rows[c, 2, ARM_B + e] * wb
-                old1, old2 = friction[c, 0], friction[c, 1]
-                new1, new2 = old1 - row_mass[c, 1] * v1, old2 - row_mass[c, 2] * v2
-                magnitude = np.sqrt(new1 * new1 + new2 * new2)
-                limit = mu[c] * normal_impulse[c]
-                if magnitude > limit:
-                    new1 *= limit / magnitude
-                    new2 *= limit / magnitude
-                friction[c, 0], friction[c, 1] = new1, new2
-                d1, d2 = new1 - old1, new2 - old2
-                for e in range(3):
-                    linear = rows[c, 1, DIRECTION + e] * d1 + rows[c, 2, DIRECTION + e] * d2
+        solve_span(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, points, 0, count,
+                   sweep % 2 == 1, target, normal_impulse, friction, with_friction)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def solve_span(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, points, start, end,
+               backwards, target, normal_impulse, friction, with_friction):
+    """One sweep of sequential impulses over points[start:end] (backwards: from the end). Per
+    point: the friction circle (when asked), then the normal row driven to at least its target
+    with a non-negative accumulated impulse. A row's relative velocity is d . (v_B - v_A) +
+    arm_B . w_B - arm_A . w_A; an impulse j along it changes v by -/+ inv_mass j d and w by -/+
+    j turn. Static sides (no inverse mass, so no turn either) are not written: their change is
+    zero, and two threads may share one (the ground). (Inlined into its callers, and the
+    per-point work inlined here: Numba would pay reference counting for each array passed to a
+    call, and the two-thread solve calls this for every stretch of points between waits.)"""
+    for k in range(start, end):
+        c = points[end - 1 - (k - start)] if backwards else points[k]
+        goal = target[c]
+        a, b = rows_a[c], rows_b[c]
+        m_a, m_b = row_inv_mass[c, 0], row_inv_mass[c, 1]
+        if with_friction:
+            v1 = v2 = 0.0
+            for e in range(3):
+                dv, wa, wb = velocity[b, e] - velocity[a, e], velocity[a, 3 + e], velocity[b, 3 + e]
+                v1 += rows[c, 1, DIRECTION + e] * dv - rows[c, 1, ARM_A + e] * wa + rows[c, 1, ARM_B + e] * wb
+                v2 += rows[c, 2, DIRECTION + e] * dv - rows[c, 2, ARM_A + e] * wa + rows[c, 2, ARM_B + e] * wb
+            old1, old2 = friction[c, 0], friction[c, 1]
+            new1, new2 = old1 - row_mass[c, 1] * v1, old2 - row_mass[c, 2] * v2
+            magnitude = np.sqrt(new1 * new1 + new2 * new2)
+            limit = mu[c] * normal_impulse[c]
+            if magnitude > limit:
+                new1 *= limit / magnitude
+                new2 *= limit / magnitude
+            friction[c, 0], friction[c, 1] = new1, new2
+            d1, d2 = new1 - old1, new2 - old2
+            for e in range(3):
+                linear = rows[c, 1, DIRECTION + e] * d1 + rows[c, 2, DIRECTION + e] * d2
+                if m_a != 0.0:
                     velocity[a, e] -= m_a * linear
-                    velocity[b, e] += m_b * linear
                     velocity[a, 3 + e] -= rows[c, 1, TURN_A + e] * d1 + rows[c, 2, TURN_A + e] * d2
+                if m_b != 0.0:
+                    velocity[b, e] += m_b * linear
                     velocity[b, 3 + e] += rows[c, 1, TURN_B + e] * d1 + rows[c, 2, TURN_B + e] * d2
-            vn = 0.0
-            for e in range(3):
-                vn += (rows[c, 0, DIRECTION + e] * (velocity[b, e] - velocity[a, e])
-                       - rows[c, 0, ARM_A + e] * velocity[a, 3 + e] + rows[c, 0, ARM_B + e] * velocity[b, 3 + e])
-            old = normal_impulse[c]
-            new = max(old + row_mass[c, 0] * (goal - vn), 0.0)
-            normal_impulse[c] = new
-            d = new - old
-            for e in range(3):
+        vn = 0.0
+        for e in range(3):
+            vn += (rows[c, 0, DIRECTION + e] * (velocity[b, e] - velocity[a, e])
+                   - rows[c, 0, ARM_A + e] * velocity[a, 3 + e] + rows[c, 0, ARM_B + e] * velocity[b, 3 + e])
+        old = normal_impulse[c]
+        new = max(old + row_mass[c, 0] * (goal - vn), 0.0)
+        normal_impulse[c] = new
+        d = new - old
+        for e in range(3):
+            if m_a != 0.0:
                 velocity[a, e] -= m_a * d * rows[c, 0, DIRECTION + e]
-                velocity[b, e] += m_b * d * rows[c, 0, DIRECTION + e]
                 velocity[a, 3 + e] -= d * rows[c, 0, TURN_A + e]
+            if m_b != 0.0:
+                velocity[b, e] += m_b * d * rows[c, 0, DIRECTION + e]
                 velocity[b, 3 + e] += d * rows[c, 0, TURN_B + e]
 
 
 @njit(cache=True, nogil=True)
-def collision_pass(contacts, bodies, iterations):
+def solve_rows_shared(velocity, contacts, sweeps, target, normal_impulse, friction, with_friction,
+                      position, gravity, points, count, threads):
+    """solve_rows' sweeps over points[:count] on up to two threads, bit for bit the serial
+    result: the points go into two chains that wait for each other only where they share a body
+    (solve_schedule), in one parallel region."""
+    items = np.empty(count, np.int64)
+    chain_start = np.empty(3, np.int64)
+    need_up = np.empty(count, np.int64)
+    need_down = np.empty(count, np.int64)
+    publish_up = np.empty(count, np.bool_)
+    publish_down = np.empty(count, np.bool_)
+    waiting = split_chains(points, count, contacts, position, gravity, items, chain_start,
+                           need_up, need_down, publish_up, publish_down)
+    if waiting * MAX_WAITING_SHARE > count:
+        for sweep in range(sweeps):
+            solve_span(velocity, contacts.rows, contacts.row_mass, contacts.row_inv_mass,
+                       contacts.velocity_a, contacts.velocity_b, contacts.friction_coefficient,
+                       points, 0, count, sweep % 2 == 1, target, normal_impulse, friction,
+                       with_friction)
+        return
+    # Which chains are taken, and each chain's progress, each on its own cache line.
+    sync = np.zeros(3 * SYNC_STRIDE, np.int64)
+    run_workers(min(threads, 2), velocity, contacts.rows, contacts.row_mass, contacts.row_inv_mass,
+                contacts.velocity_a, contacts.velocity_b, contacts.friction_coefficient, target,
+                normal_impulse, friction, with_friction, items, chain_start, need_up, need_down,
+                publish_up, publish_down, sweeps, sync)
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def run_workers(workers, velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, target,
+                normal_impulse, friction, with_friction, items, chain_start, need_up, need_down,
+                publish_up, publish_down, sweeps, sync):
+    """One parallel region for a whole pass: Numba starts one in 5-20 us."""
+    for _ in prange(workers):
+        work_chains(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, target,
+                    normal_impulse, friction, with_friction, items, chain_start, need_up,
+                    need_down, publish_up, publish_down, sweeps, sync)
+
+
+@njit(cache=True, nogil=True)
+def work_chains(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, target,
+                normal_impulse, friction, with_friction, items, chain_start, need_up, need_down,
+                publish_up, publish_down, sweeps, sync):
+    """One worker: takes a chain and runs its sweeps, each stretch of points that need not wait
+    in one go, publishing its progress where the other chain may wait for it. A worker that has
+    waited long for a chain nobody took, or has finished its own, takes that one too and runs
+    both, interleaved: so one thread alone (the other late, or never started: Numba with one
+    thread runs the region's iterations one after the other) does everything itself."""
+    taken, progress = 0, SYNC_STRIDE  # sync[taken]: chains taken; sync[progress + c * SYNC_STRIDE]
+    own = np.zeros(2, np.bool_)
+    sweep = np.zeros(2, np.int64)
+    done = np.zeros(2, np.int64)  # points done this sweep, per chain
+    seen = np.zeros(2, np.int64)  # the other chain's progress, as last read
+    length = np.empty(2, np.int64)
+    for c in range(2):
+        length[c] = chain_start[c + 1] - chain_start[c]
+    c = atomic_add(sync, taken, 1)
+    if c >= 2:
+        return
+    own[c] = True
+    spins = 0
+    while True:
+        moved = False
+        busy = False
+        for c in range(2):
+            if not own[c]:
+                continue
+            other = 1 - c
+            while sweep[c] < sweeps:
+                busy = True
+                if done[c] == length[c]:
+                    sweep[c] += 1
+                    done[c] = 0
+                    atomic_store(sync, progress + c * SYNC_STRIDE, sweep[c] * length[c])
+                    continue
+                upward = sweep[c] % 2 == 0
+                base = sweep[c] * length[other]
+                # The stretch of points that may run now, up to one the other chain may wait for.
+                first = done[c]
+                last = first
+                while last < length[c]:
+                    slot = chain_start[c] + (last if upward else length[c] - 1 - last)
+                    need = base + (need_up[slot] if upward else need_down[slot])
+                    if need > seen[other]:
+                        if own[other]:
+                            seen[other] = sweep[other] * length[other] + done[other]
+                        else:
+                            seen[other] = atomic_load(sync, progress + other * SYNC_STRIDE)
+                        if need > seen[other]:
+                            break
+                    last += 1
+                    if publish_up[slot] if upward else publish_down[slot]:
+                        break
+                if last == first:
+                    break  # waits for the other chain
+                if upward:
+                    start, end = chain_start[c] + first, chain_start[c] + last
+                else:
+                    start, end = chain_start[c + 1] - last, chain_start[c + 1] - first
+                solve_span(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, items,
+                           start, end, not upward, target, normal_impulse, friction, with_friction)
+                done[c] = last
+                atomic_store(sync, progress + c * SYNC_STRIDE, sweep[c] * length[c] + last)
+                moved = True
+        if not busy:
+            # Own chains finished: take the other if nobody has (it cannot wait for ours).
+            if own[0] and own[1] or atomic_load(sync, taken) >= 2:
+                return
+            c = atomic_add(sync, taken, 1)
+            if c >= 2:
+                return
+            own[c] = True
+            continue
+        if moved:
+            spins = 0
+            continue
+        spins += 1
+        spin_pause()
+        if spins % SPINS_BEFORE_YIELD == 0:
+            yield_thread()
+        if spins >= SPINS_BEFORE_TAKING and atomic_load(sync, taken) < 2:
+            c = atomic_add(sync, taken, 1)
+            if c < 2:
+                own[c] = True
+
+
+@njit(cache=True, nogil=True)
+def collision_pass(contacts, bodies, iterations, gravity, threads):
     solve_rows(bodies.velocity, contacts, iterations, contacts.collision_target,
-               contacts.collision_impulse, contacts.collision_friction, True)
+               contacts.collision_impulse, contacts.collision_friction, True, bodies.position,
+               gravity, threads)
 
 
 @njit(cache=True, nogil=True)
@@ -399,15 +575,15 @@ def shock_propagation(contacts, bodies):
 
 
 @njit(cache=True, nogil=True)
-def contact_pass(contacts, bodies, iterations):
+def contact_pass(contacts, bodies, iterations, gravity, threads):
     """Velocities (zero elasticity, friction), shock propagation, then the split-impulse
     position pass on the pseudo velocities; keeps the friction as a world vector for the next
     step's warm start."""
     solve_rows(bodies.velocity, contacts, iterations, contacts.contact_target, contacts.impulse,
-               contacts.friction, True)
+               contacts.friction, True, bodies.position, gravity, threads)
     shock_propagation(contacts, bodies)
     solve_rows(bodies.pseudo_velocity, contacts, iterations, contacts.position_target,
-               contacts.position_impulse, contacts.friction, False)
+               contacts.position_impulse, contacts.friction, False, bodies.position, gravity, threads)
     rows = contacts.rows
     for c in range(contacts.count[0]):
         f1, f2 = contacts.friction[c, 0], contacts.friction[c, 1]

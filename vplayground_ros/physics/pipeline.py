@@ -231,7 +231,7 @@ def step_world(steps, ctx):
         # 4. Collision pass with the pre-step velocities and the bodies' elasticity.
         warm_start_from(previous, current)
         prepare_contacts(current, bodies, s.ground_material, s.gravity, s.dt)
-        collision_pass(current, bodies, s.resolve_iterations)
+        collision_pass(current, bodies, s.resolve_iterations, s.gravity, s.solver_threads)
         t = lap(ctx, STAGE_COLLISION, t)
         # 5. Velocity update with external forces: the cars' wheels (springs and dampers see the
         #    velocities before gravity adds its share, or dampers would hold up the cars), then
@@ -241,7 +241,7 @@ def step_world(steps, ctx):
         t = lap(ctx, STAGE_FORCES, t)
         # 6. Contact pass: zero elasticity, twice the iterations, split-impulse penetration fix.
         warm_start(current, bodies)
-        contact_pass(current, bodies, 2 * s.resolve_iterations)
+        contact_pass(current, bodies, 2 * s.resolve_iterations, s.gravity, s.solver_threads)
         t = lap(ctx, STAGE_CONTACT, t)
         # 7. Positions from velocities.
         integrate_positions(bodies, live, s.dt)

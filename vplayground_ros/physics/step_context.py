@@ -16,6 +16,7 @@ Settings = namedtuple("Settings", [
     "freezing_enabled", "freezing_time", "freezing_linear_speed", "freezing_angular_speed",
     "ground_enabled", "ground_height", "ground_material",  # (elasticity, static, dynamic)
     "root_min", "root_size",  # the octree's root cube
+    "solver_threads",  # threads the contact solve may use (World.solver_threads)
 ])
 
 ContactBuffers = namedtuple("ContactBuffers", [
@@ -47,7 +48,7 @@ def swap_contacts(buffers):
     buffers.newest[0] = 1 - buffers.newest[0]
 
 
-def kernel_settings(settings, ground, default_ground, root):
+def kernel_settings(settings, ground, default_ground, root, solver_threads=1):
     """The World's validated settings (SPEC 3) as the kernels take them."""
     s, g = settings, ground
     m = g or default_ground
@@ -69,4 +70,5 @@ def kernel_settings(settings, ground, default_ground, root):
                          float(m["dynamic_friction"])),
         root_min=np.asarray(root_min, dtype=np.float64),
         root_size=float(root_size),
+        solver_threads=int(solver_threads),
     )

@@ -4,9 +4,11 @@ Everything here is Python bookkeeping between steps (adding, editing, removing b
 buffers); the physics runs inside `pipeline.step_world`, many steps per call.
 """
 import heapq
+import os
 import time
 from collections import namedtuple
 
+import numba
 import numpy as np
 
 from . import specs
@@ -50,13 +52,25 @@ def body_bounds(b, slots):
     return shapes.bounds(b.shape[slots], b.dimensions[slots], b.position[slots], b.orientation[slots])
 
 
+def default_solver_threads():
+    """2 where the process may run on two cores and Numba has two threads, else 1."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        cores = os.cpu_count() or 1
+    return 2 if min(cores, numba.config.NUMBA_NUM_THREADS) >= 2 else 1
+
+
 class World(WorldQueries):
     """A world of bodies on an optional ground plane, with an optional playground mesh and
     vehicles: bodies by name, their arrays, step(). See SPEC 4 for the contract; what it can
     be asked is in queries.py."""
 
-    def __init__(self, settings=None, ground=specs.DEFAULT_GROUND, capacity=64):
+    def __init__(self, settings=None, ground=specs.DEFAULT_GROUND, capacity=64, solver_threads=None):
         self.settings = specs.validate_settings(settings)
+        # Threads the contact solve may use (solver_threads below); not a scene setting: how
+        # many cores to give is the host's choice, not the world's.
+        self.solver_threads = default_solver_threads() if solver_threads is None else solver_threads
         self.ground = specs.validate_ground(ground)
         self.time = 0.0
         self.step_count = 0
@@ -97,6 +111,20 @@ class World(WorldQueries):
         # included): what the engine itself costs, against which a host's overhead is measured.
         self.engine_cpu_seconds = 0.0
         self._stage_ns = np.zeros(len(STAGES), np.int64)
+
+    @property
+    def solver_threads(self):
+        """Threads the contact solve may use: 1 solves every pass on the stepping thread; 2 lets
+        a second one share passes with enough points (contact_solver.PARALLEL_MIN_POINTS). For
+        a given value the results are bit-identical from run to run, and 2 gives the same bytes
+        whether or not the second thread gets a core."""
+        return self._solver_threads
+
+    @solver_threads.setter
+    def solver_threads(self, threads):
+        if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or not 1 <= threads <= 2:
+            raise ValueError(f"solver_threads: must be 1 or 2, got {threads!r}")
+        self._solver_threads = int(threads)
 
     # ----------------------------------------------------------------- bodies
     def body_names(self):
@@ -361,7 +389,7 @@ class World(WorldQueries):
         while done < n:
             ctx = StepContext(self._bodies, self._hulls, self._playground, self._vehicles.arrays, self._broad,
                               self._contacts, kernel_settings(self.settings, self.ground, specs.DEFAULT_GROUND,
-                                                              self._root),
+                                                              self._root, self._solver_threads),
                               counters, self._stage_ns, self.profiling)
             started = time.thread_time()
             steps, status = step_world(n - done, ctx)

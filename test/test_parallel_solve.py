@@ -1,0 +1,111 @@
+"""The contact solve on two threads (issue 20): the serial solve's result bit for bit, whatever
+the thread count and however many threads actually run (physics, not timing)."""
+import numba
+import numpy as np
+import pytest
+
+from helpers import pile, pyramid, tower
+from vplayground_ros.physics import World
+from vplayground_ros.physics.contact_solver import MAX_WAITING_SHARE, PARALLEL_MIN_POINTS
+from vplayground_ros.physics.solve_schedule import NO_WAIT, split_chains
+from vplayground_ros.physics.step_context import newest_contacts
+
+NO_FREEZING = {"freezing": {"enabled": False}}
+
+
+def last_split(world):
+    """The two chains of the last step's contact points (the contact pass's velocity sweeps
+    solve them all), split at the bodies' current positions: (points, chain lengths, how many
+    points wait for the other chain in an upward sweep)."""
+    contacts = newest_contacts(world._contacts)
+    count = contacts.count[0]
+    items, need_up, need_down = (np.empty(count, np.int64) for _ in range(3))
+    chain_start = np.empty(3, np.int64)
+    publish_up, publish_down = np.empty(count, np.bool_), np.empty(count, np.bool_)
+    split_chains(contacts.solve_order[:count].copy(), count, contacts, world._bodies.position,
+                 np.asarray(world.settings["gravity"], dtype=float), items, chain_start, need_up,
+                 need_down, publish_up, publish_down)
+    return count, np.diff(chain_start), int(np.sum(need_up != NO_WAIT))
+
+
+def snapshot(world):
+    state = world.state()
+    contacts = world.contacts()
+    return {**state, "impulses": contacts["impulses"], "points": contacts["points"]}
+
+
+def assert_same_bytes(first, second):
+    for key in first:
+        assert np.array_equal(first[key], second[key]), key
+
+
+def stepped(build, threads, steps, numba_threads=None):
+    """A world from `build` with `threads` solver threads, after `steps` steps; with
+    `numba_threads`, Numba runs that many threads meanwhile (set_num_threads)."""
+    world = build()
+    world.solver_threads = threads
+    if numba_threads is None:
+        world.step(steps)
+        return world
+    before = numba.get_num_threads()
+    numba.set_num_threads(numba_threads)
+    try:
+        world.step(steps)
+    finally:
+        numba.set_num_threads(before)
+    return world
+
+
+def test_two_threads_give_the_serial_result_bit_for_bit():
+    """A pile whose contacts cross the cut between the threads' halves, so the chains wait
+    for each other: every state and contact byte as with one thread, and as in a second run."""
+    build = lambda: pile(300, seed=3)  # noqa: E731
+    serial = stepped(build, 1, 130)
+    count, lengths, waiting = last_split(serial)
+    assert count >= PARALLEL_MIN_POINTS and lengths.min() > count // 4
+    assert 0 < waiting * MAX_WAITING_SHARE <= count  # shared, with waits
+    shared = [snapshot(stepped(build, 2, 130)) for _ in range(2)]
+    assert_same_bytes(snapshot(serial), shared[0])
+    assert_same_bytes(shared[0], shared[1])
+
+
+@pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="needs two Numba threads")
+def test_two_threads_on_one_core_do_all_the_work_alone():
+    """Numba with one thread runs the region's two workers one after the other: the first takes
+    the other chain too (no wait for a thread that never comes), and the bytes are the same."""
+    build = lambda: pile(300, seed=3)  # noqa: E731
+    alone = stepped(build, 2, 130, numba_threads=1)
+    assert_same_bytes(snapshot(stepped(build, 1, 130)), snapshot(alone))
+
+
+def test_a_pyramid_on_two_threads_is_the_serial_pyramid():
+    """The cut runs down the middle of the 20-row pyramid (every row crosses it): so many points
+    would wait that one thread solves it after all, and the bytes are the serial ones."""
+    build = lambda: pyramid(20, settings=NO_FREEZING, density=500.0, elasticity=0.0)  # noqa: E731
+    two = stepped(build, 2, 256)
+    count, lengths, waiting = last_split(two)
+    assert count >= PARALLEL_MIN_POINTS and waiting > 0
+    assert_same_bytes(snapshot(stepped(build, 1, 256)), snapshot(two))
+
+
+def test_stacks_the_cut_does_not_cross_never_wait():
+    """Two towers apart: each thread has one, and no point waits for the other thread."""
+    world = World(NO_FREEZING)
+    for x in (-5.0, 5.0):
+        for k in range(10):
+            world.add_body({"size": [1, 1, 1], "position": [x, 0, 0.5 + k]})
+    world.step(2)
+    count, lengths, waiting = last_split(world)
+    assert list(lengths) == [count // 2, count // 2] and waiting == 0
+
+
+def test_solver_threads_is_a_checked_setting():
+    assert World().solver_threads in (1, 2)
+    assert World(solver_threads=1).solver_threads == 1
+    world = tower(2)
+    for bad in (0, 3, 1.5, True, "2"):
+        with pytest.raises(ValueError, match="solver_threads"):
+            world.solver_threads = bad
+    with pytest.raises(ValueError, match="solver_threads"):
+        World(solver_threads=0)
+    assert world.solver_threads in (1, 2)
