@@ -261,3 +261,20 @@ def test_body_markers_draw_each_shape_and_follow_a_capsule(running):
     capsule, ends = last.markers[2].pose.position, [m.pose.position for m in last.markers[5:]]
     # lying along x: its ends 0.3 m either side of its centre
     assert sorted(e.x - capsule.x for e in ends) == pytest.approx([-0.3, 0.3], abs=1e-3)
+
+
+def test_solver_threads_is_a_parameter_that_every_world_of_the_run_keeps(running):
+    """The contact solve's thread count is the host's choice: set as a parameter, it reaches the
+    World stepping and the one a reset brings; a value outside 1..2 is refused unchanged."""
+    runtime, _ = running(SCENE, "--real-time-factor", "0")
+    store, sim = runtime.parameters, runtime.sim
+    assert store["solver_threads"] == sim.world.solver_threads
+    wait_for(lambda: sim.snapshot.step > 0, timeout=600)  # past the first batch (a cold Numba cache compiles)
+    for threads in (1, 2, 1):
+        assert store.set({"solver_threads": threads}) == (True, "")
+        wait_for(lambda: sim.call(lambda world: world.solver_threads) == threads)
+    ok, reason = store.set({"solver_threads": 3})
+    assert not ok and "solver_threads" in reason and store["solver_threads"] == 1
+    before = sim.world
+    assert runtime.requests.reset(255)[0]
+    wait_for(lambda: sim.call(lambda world: world is not before and world.solver_threads == 1))

@@ -41,8 +41,9 @@ def setting(name, default, description, kind):
     return ParameterSpec(name, default, description, kind, low, high)
 
 
-def parameter_table(settings, options, scene_directories, max_bodies):
-    """Every parameter; the physics ones default to the scene's `settings`."""
+def parameter_table(settings, options, scene_directories, max_bodies, solver_threads=1):
+    """Every parameter; the physics ones default to the scene's `settings`, `solver_threads` to
+    the World's (how many cores the host gives, not a scene setting)."""
     s = settings
     f = s["freezing"]
     P = ParameterSpec
@@ -57,6 +58,8 @@ def parameter_table(settings, options, scene_directories, max_bodies):
         setting("steps_per_second", int(s["steps_per_second"]), "physics steps per simulated second", "int"),
         setting("resolve_iterations", int(s["resolve_iterations"]),
                 "collision passes per step (contact passes are twice this)", "int"),
+        P("solver_threads", int(solver_threads),
+          "threads of the contact solve: 2 shares large passes with a second core (same results)", "int", 1, 2),
         setting("octree_depth", int(s["octree_depth"]), "depth of the broad-phase octree", "int"),
         P("freezing.enabled", bool(f["enabled"]), "freeze bodies at rest", "bool"),
         setting("freezing.time", float(f["time"]), "seconds below the thresholds before freezing", "float"),

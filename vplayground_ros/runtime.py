@@ -21,7 +21,8 @@ class Runtime:
         self.resolve_name = resolve_name
         # The parameters own every setting (parameters.py); the requests change them through it.
         directories = default_scene_directories(recorder.path.parent if recorder is not None else None)
-        self.parameters = Parameters(parameter_table(sim.world.settings, options, directories, DEFAULT_MAX_BODIES))
+        self.parameters = Parameters(parameter_table(sim.world.settings, options, directories, DEFAULT_MAX_BODIES,
+                                                     sim.world.solver_threads))
         self.parameters.listen(self._apply)
         self.requests = Requests(sim, str(options.scene), scene_directories=directories,
                                  max_bodies=DEFAULT_MAX_BODIES, settings=self.parameters)
@@ -60,6 +61,8 @@ class Runtime:
             self.sim.call(lambda world: take_settings(world, physics))
         if "real_time_factor" in changed:
             self.sim.real_time_factor = changed["real_time_factor"]
+        if "solver_threads" in changed:
+            self.sim.solver_threads = changed["solver_threads"]
         if "max_bodies" in changed:
             self.requests.max_bodies = changed["max_bodies"]
         if "scene_directories" in changed:

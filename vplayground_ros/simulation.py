@@ -66,6 +66,9 @@ class Simulation:
                  with_contacts=True):
         self.world = world
         self.real_time_factor = real_time_factor
+        # Threads of the contact solve (the `solver_threads` parameter), given to each world this
+        # loop steps: a loaded scene or a reset brings a new World, which keeps the host's choice.
+        self.solver_threads = world.solver_threads
         self.duration = duration
         self.with_contacts = with_contacts
         self.paused = start_paused
@@ -169,6 +172,8 @@ class Simulation:
                 world, first_batch = self.world, True
                 origin_wall, origin_sim = time.perf_counter(), world.time
                 rtf_wall, rtf_sim, rtf_measured = origin_wall, world.time, False
+            if world.solver_threads != self.solver_threads:
+                world.solver_threads = self.solver_threads
             rate = world.settings["steps_per_second"]
             steps = 0
             if not self.paused:
