@@ -258,9 +258,9 @@ def solve_rows(velocity, contacts, sweeps, target, normal_impulse, friction, wit
         if target[order[k]] > INACTIVE:
             points[count] = order[k]
             count += 1
-    if threads > 1 and count >= PARALLEL_MIN_POINTS:
-        solve_rows_shared(velocity, contacts, sweeps, target, normal_impulse, friction,
-                          with_friction, position, gravity, points, count, threads)
+    if threads > 1 and count >= PARALLEL_MIN_POINTS and solve_rows_shared(
+            velocity, contacts, sweeps, target, normal_impulse, friction, with_friction, position,
+            gravity, points, count, threads):
         return
     rows, row_mass, row_inv_mass = contacts.rows, contacts.row_mass, contacts.row_inv_mass
     rows_a, rows_b, mu = contacts.velocity_a, contacts.velocity_b, contacts.friction_coefficient
@@ -330,7 +330,8 @@ def solve_rows_shared(velocity, contacts, sweeps, target, normal_impulse, fricti
                       position, gravity, points, count, threads):
     """solve_rows' sweeps over points[:count] on up to two threads, bit for bit the serial
     result: the points go into two chains that wait for each other only where they share a body
-    (solve_schedule), in one parallel region."""
+    (solve_schedule), in one parallel region. False, having solved nothing, when too many
+    points would wait: solve_rows then solves them on its own thread."""
     items = np.empty(count, np.int64)
     chain_start = np.empty(3, np.int64)
     need_up = np.empty(count, np.int64)
@@ -340,18 +341,14 @@ def solve_rows_shared(velocity, contacts, sweeps, target, normal_impulse, fricti
     waiting = split_chains(points, count, contacts, position, gravity, items, chain_start,
                            need_up, need_down, publish_up, publish_down)
     if waiting * MAX_WAITING_SHARE > count:
-        for sweep in range(sweeps):
-            solve_span(velocity, contacts.rows, contacts.row_mass, contacts.row_inv_mass,
-                       contacts.velocity_a, contacts.velocity_b, contacts.friction_coefficient,
-                       points, 0, count, sweep % 2 == 1, target, normal_impulse, friction,
-                       with_friction)
-        return
+        return False
     # Which chains are taken, and each chain's progress, each on its own cache line.
     sync = np.zeros(3 * SYNC_STRIDE, np.int64)
     run_workers(min(threads, 2), velocity, contacts.rows, contacts.row_mass, contacts.row_inv_mass,
                 contacts.velocity_a, contacts.velocity_b, contacts.friction_coefficient, target,
                 normal_impulse, friction, with_friction, items, chain_start, need_up, need_down,
                 publish_up, publish_down, sweeps, sync)
+    return True
 
 
 @njit(cache=True, nogil=True, parallel=True)

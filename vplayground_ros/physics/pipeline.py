@@ -98,9 +98,16 @@ def static_index_outdated(bodies, broad, live):
     for k in range(len(live)):
         if not bodies.awake[live[k]]:
             pending += 1
-    indexed = broad.indexed[0] - broad.stale[0]
-    limit = max(STATIC_REINDEX_MIN_PENDING, int(STATIC_REINDEX_PENDING_FRACTION * indexed))
+    limit = reindex_limit(broad.indexed[0], broad.stale[0])
     return broad.force_rebuild[0] or pending >= limit or broad.stale[0] >= limit
+
+
+@njit(cache=True, nogil=True)
+def reindex_limit(indexed, stale):
+    """How many waiting or stale entries make the static index outdated: a share of the bodies
+    it holds (`indexed - stale`), at least STATIC_REINDEX_MIN_PENDING. (Scalars: resting_steps
+    calls it from Python, where handing over the broad phase's arrays would cost more.)"""
+    return max(STATIC_REINDEX_MIN_PENDING, int(STATIC_REINDEX_PENDING_FRACTION * (indexed - stale)))
 
 
 @njit(cache=True, nogil=True)
@@ -168,8 +175,7 @@ def resting_steps(bodies, broad, vehicles, contacts, steps):
     (typing and unboxing them), several times the step of a world at rest."""
     if broad.force_rebuild[0] or np.any(vehicles.active) or np.any(bodies.active > bodies.static_indexed):
         return False
-    indexed = broad.indexed[0] - broad.stale[0]
-    if broad.stale[0] >= max(STATIC_REINDEX_MIN_PENDING, int(STATIC_REINDEX_PENDING_FRACTION * indexed)):
+    if broad.stale[0] >= reindex_limit(broad.indexed[0], broad.stale[0]):
         return False  # static_index_outdated: step_world rebuilds the index first
     broad.moving.count[0] = broad.moving.level_mask[0] = 0
     broad.pair_count[0] = broad.playground_count[0] = 0
