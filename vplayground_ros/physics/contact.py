@@ -48,7 +48,8 @@ Contacts = namedtuple("Contacts", [
     "support_order",      # (K,) support points, grouped per upper body
     "support_body",       # (K,) velocity row of each point's upper body (-1: not a support)
     "support_mass",       # (K, 3) effective mass of each row with the upper body alone moving
-    "support_impulse", "support_friction",  # (K,), (K, 2)
+    "support_impulse", "support_friction",  # (K,), (K, 2) (warm-started)
+    "support_friction_world",  # (K, 3) the one-sided friction impulse as a world vector, for next step
     "manifold_count",     # (1,)
     "manifold_start", "manifold_size", "manifold_a", "manifold_b",  # (M,)
     "table_key", "table_manifold",  # open-addressing hash: pair key -> manifold, for warm start
@@ -69,7 +70,7 @@ def allocate_contacts(points, manifolds):
         contact_target=f(), position_target=f(), solve_order=i(points), sweep_points=i(points),
         support_count=i(1),
         support_order=i(points), support_body=i(points), support_mass=f(3), support_impulse=f(),
-        support_friction=f(2), manifold_count=i(1),
+        support_friction=f(2), support_friction_world=f(3), manifold_count=i(1),
         manifold_start=i(manifolds), manifold_size=i(manifolds), manifold_a=i(manifolds),
         manifold_b=i(manifolds), table_key=np.full(table, -1, np.int64), table_manifold=i(table),
         table_slot=i(manifolds), table_count=i(1))
@@ -124,7 +125,7 @@ def find_manifold(keys, manifolds, a, b):
 
 @njit(cache=True, nogil=True)
 def warm_start_from(previous, current):
-    """Copies last step's contact-pass impulses onto this step's points that are the same contact
+    """Copies last step's contact-pass and shock-propagation impulses onto this step's points that are the same contact
     (same pair, within WARM_START_MATCH_DISTANCE in A's frame). Stacks then start each solve
     from nearly the answer, which the fixed iteration count alone could not reach."""
     limit_sq = WARM_START_MATCH_DISTANCE * WARM_START_MATCH_DISTANCE
@@ -132,9 +133,9 @@ def warm_start_from(previous, current):
     for m in range(current.manifold_count[0]):
         start, size = current.manifold_start[m], current.manifold_size[m]
         for c in range(start, start + size):
-            current.impulse[c] = 0.0
+            current.impulse[c] = current.support_impulse[c] = 0.0
             for e in range(3):
-                current.friction_world[c, e] = 0.0
+                current.friction_world[c, e] = current.support_friction_world[c, e] = 0.0
         old = find_manifold(keys, manifolds, current.manifold_a[m], current.manifold_b[m])
         if old < 0:
             continue
@@ -150,5 +151,7 @@ def warm_start_from(previous, current):
                     best, best_sq = o, d_sq
             if best >= 0:
                 current.impulse[c] = previous.impulse[best]
+                current.support_impulse[c] = previous.support_impulse[best]
                 for e in range(3):
                     current.friction_world[c, e] = previous.friction_world[best, e]
+                    current.support_friction_world[c, e] = previous.support_friction_world[best, e]
