@@ -70,6 +70,9 @@ QUEUE_MESSAGES = 4096
 # wake-up per message (128 Hz of /clock alone) cost more CPU than the writing, and made the
 # simulation thread and the writer take the GIL from each other. The queue holds 4096.
 WAKE_PERIOD = 0.05
+# ... and this often when it found nothing (a paused simulation sends ~1 message a second): the
+# queue has no wake-up of its own, and close() is answered within it.
+IDLE_WAKE_PERIOD = 0.25
 
 
 class WholeChunkZstd:
@@ -342,7 +345,7 @@ class Recorder:
                 except Exception as error:  # OSError mostly (ENOSPC, EIO); anything else must not kill the thread
                     self.error = f"{self._file.name}: {getattr(error, 'strerror', None) or error}"
             if not closing:
-                time.sleep(WAKE_PERIOD)
+                time.sleep(WAKE_PERIOD if batch else IDLE_WAKE_PERIOD)
         try:
             self._finish()
         except Exception as error:
