@@ -227,6 +227,49 @@ def test_the_recorder_writes_every_message_intact_and_checksums_every_chunk(tmp_
     assert read == written
 
 
+def test_the_bag_writer_writes_what_mcaps_writer_writes_byte_for_byte():
+    # recorder.BagWriter frames messages itself (mcap's Writer spent most of the recorder's
+    # Python on them): for the same calls, the file must be mcap's own, chunks, message indexes,
+    # statistics, summary and footer alike: schemas and channels registered between messages,
+    # log times out of order, empty messages and messages larger than a chunk included.
+    import io
+    import random
+
+    from mcap.writer import CompressionType, Writer
+
+    def write(make):
+        rng, out = random.Random(3), io.BytesIO()
+        register_schema, register_channel, add, finish = make(out)
+        channels = {}
+        for k in range(2500):
+            topic = "/a" if k < 5 else rng.choice(["/a", "/b", "/c", "/d"])
+            if topic not in channels:
+                channels[topic] = register_channel(topic, "cdr", register_schema(f"pkg/msg/{topic[1:]}", "ros2msg", b"int32 x"))
+            size = 300_000 if k % 997 == 5 else rng.randint(0, 3000)
+            add(channels[topic], max(0, 1000 * k + rng.randint(-5000, 5000)), rng.randbytes(size))
+        finish()
+        return out.getvalue()
+
+    def mcap_writer(out):
+        writer = Writer(out, chunk_size=200_000, compression=CompressionType.ZSTD)
+        writer.start(profile=recorder_module.PROFILE, library="vplayground_ros")
+        return (lambda name, encoding, data: writer.register_schema(name=name, encoding=encoding, data=data),
+                lambda topic, encoding, schema: writer.register_channel(topic=topic, message_encoding=encoding,
+                                                                        schema_id=schema),
+                lambda channel, stamp, data: writer.add_message(channel_id=channel, log_time=stamp,
+                                                                publish_time=stamp, data=data), writer.finish)
+
+    def bag_writer(out):
+        writer = recorder_module.BagWriter(out, 200_000, recorder_module.PROFILE, "vplayground_ros")
+        return writer.register_schema, writer.register_channel, writer.add_message, writer.finish
+
+    ours = write(bag_writer)
+    assert ours == write(mcap_writer)
+    with io.BytesIO(ours) as stream:
+        summary = make_reader(stream, validate_crcs=True).get_summary()
+    assert summary.statistics.message_count == 2500 and len(summary.chunk_indexes) > 10
+
+
 def test_a_killed_run_recovers(tmp_path):
     path = tmp_path / "killed.mcap"
     process = run("--real-time-factor", "4", "--record", str(path), wait=False)

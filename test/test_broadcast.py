@@ -224,6 +224,23 @@ class ThreadRecordingWorld:
         setattr(self._world, name, value)
 
 
+def test_real_time_sends_a_clock_for_every_step_in_order(running):
+    # In real time a batch runs two steps (Simulation.BATCH_PERIOD): each has its /clock, sent
+    # in order when the batch ends, before the messages of its last step.
+    runtime, sink = running(SCENE, "--duration", "1.0")
+    runtime.sim.wait(30)
+    runtime.stop()
+    rate = runtime.sim.world.settings["steps_per_second"]
+    steps = [round(t * rate) for t, _ in sink.of("clock")]
+    assert steps == list(range(steps[0], steps[0] + len(steps))) and len(steps) >= rate - 2
+    clocks_sent = set()
+    for key, t, _ in list(sink.messages):
+        if key == "clock":
+            clocks_sent.add(round(t * rate))
+        elif key == "poses" and t > 0.0:  # the loaded world's own round comes before any step
+            assert round(t * rate) in clocks_sent
+
+
 def test_the_publisher_never_reads_the_world_it_only_reads_snapshots():
     # simulation.py's rule: nothing outside the simulation thread touches the World while it
     # steps. Scenery (scene markers) and wheels (car markers) come with the snapshots.

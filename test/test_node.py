@@ -391,3 +391,24 @@ def test_marker_and_contact_topics_carry_the_bodies(ros):
     assert [f.name for f in cloud.fields] == ["x", "y", "z", "nx", "ny", "nz", "depth", "impulse", "body_a", "body_b"]
     joints = ros.latest["/joint_states"]
     assert len(joints.name) == 12 and "front_left_suspension" in joints.name
+
+
+def test_the_node_loads_its_fast_dds_profile_unless_the_user_chose_one(tmp_path, monkeypatch):
+    from vplayground_ros.cli import use_middleware_profile
+    monkeypatch.chdir(tmp_path)
+    environ = {}
+    profile = use_middleware_profile(environ)
+    assert profile is not None and environ == {"FASTRTPS_DEFAULT_PROFILES_FILE": str(profile)}
+    for chosen in ({"FASTRTPS_DEFAULT_PROFILES_FILE": "/mine.xml"}, {"FASTDDS_DEFAULT_PROFILES_FILE": "/mine.xml"},
+                   {"RMW_IMPLEMENTATION": "rmw_cyclonedds_cpp"}):
+        environ = dict(chosen)
+        assert use_middleware_profile(environ) is None and environ == chosen
+    (tmp_path / "DEFAULT_FASTRTPS_PROFILES.xml").write_text("<profiles/>")
+    environ = {}
+    assert use_middleware_profile(environ) is None and environ == {}
+    # Fast DDS takes the file as it is: a participant made with it reports no XML error.
+    script = ("import rclpy; rclpy.init(); node = rclpy.create_node('profile_check'); "
+              "node.destroy_node(); rclpy.shutdown()")
+    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60,
+                            env={**os.environ, "FASTRTPS_DEFAULT_PROFILES_FILE": str(profile)}, cwd=tmp_path / "..")
+    assert result.returncode == 0 and "XMLPARSER" not in result.stderr + result.stdout, result.stderr

@@ -47,6 +47,8 @@ TIME_TOLERANCE = 1e-9      # s: a snapshot this close before a due time is at it
 # waits (as fast as possible, at most HAND_OVER_TIMEOUT s) or the oldest is skipped (real time).
 PENDING_LIMIT = 8
 HAND_OVER_TIMEOUT = 1.0
+# A batch of more steps than this (a late one catching up) sends only its last step's /clock.
+MAX_CLOCK_FILL = 16
 PAUSED_JOBS = ("state", "markers", "diagnostics")  # what goes out while paused, by the wall clock
 PAUSED_ON_CHANGE = ("state", "markers")            # ... and only when the snapshot changed
 SENSOR_QOS = "reliable_10"  # a reliable publisher serves best-effort (sensor data) subscribers too
@@ -138,6 +140,7 @@ class Broadcaster:
         self._pose_block = None  # (positions, quaternions, their (N, 7) rows) last made
         self._tf_frames = None   # (names, car frames, parents, children) last made
         self._last_clock = -math.inf
+        self._last_clock_step = None  # (world, step) of the last batch's /clock
         self._last_state = None
         self._latched = {}  # key -> (data, seconds) last sent
         self._removed_reported = 0
@@ -239,10 +242,7 @@ class Broadcaster:
             self._removed_reported += 1
             self.log.warning(f"removed {name}: its state went non-finite or it left the world")
         seconds = snapshot.time
-        rate = self.parameters["clock_rate"]
-        if seconds != self._last_clock and (rate <= 0.0 or seconds - self._last_clock >= 1.0 / rate - 1e-9):
-            self._last_clock = seconds
-            self.send("clock", messages.clock(seconds), seconds)
+        self._send_clock(snapshot)
         if seconds < self._schedule_time or self.sim.world is not self._scheduled_world:
             # A new scene or a reset of the time: every job at once, the schedule from here.
             for job in (*self._jobs.values(), self._scenery):
@@ -260,6 +260,26 @@ class Broadcaster:
         self.sim.next_publish_time = min(job.due for job in (*self._jobs.values(), self._scenery))
         if due or cells is not None or snapshot.readings:
             self._hand_over((snapshot, due, cells))
+
+    def _send_clock(self, snapshot):
+        """/clock at every step (capped by clock_rate): a batch of several steps in real time
+        (Simulation.BATCH_PERIOD) sends one for each, in order, when it ends. As fast as
+        possible, or when time jumped (a reset, another scene), one a batch."""
+        seconds, step = snapshot.time, snapshot.step
+        if seconds == self._last_clock:
+            return
+        world, last = self.sim.world, self._last_clock_step
+        steps = step - last[1] if last is not None and last[0] is world else 0
+        times = (seconds,)
+        if 1 < steps <= MAX_CLOCK_FILL and seconds > self._last_clock and self.sim.real_time_factor > 0.0:
+            dt = 1.0 / world.settings["steps_per_second"]
+            times = tuple(seconds - k * dt for k in range(steps - 1, 0, -1)) + times
+        rate = self.parameters["clock_rate"]
+        for time_ in times:
+            if rate <= 0.0 or time_ - self._last_clock >= 1.0 / rate - 1e-9:
+                self._last_clock = time_
+                self.send("clock", messages.clock(time_), time_)
+        self._last_clock_step = (world, step)
 
     def _static_frames_changed(self, snapshot):
         """The sensors' static frames made again when the world, its sensors or the car

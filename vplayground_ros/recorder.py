@@ -1,4 +1,5 @@
-"""MCAP bags (SPEC 7), written with the `mcap` library.
+"""MCAP bags (SPEC 7), written with the `mcap` library's records (BagWriter frames the messages
+itself, into the file mcap's Writer would write).
 
 Why `mcap` and not foxglove-sdk's writer: the bytes we record are the CDR the publishers already
 send, so the writer only frames and compresses them, and the pure-Python `mcap` writer keeps
@@ -21,21 +22,25 @@ the package free of a native extension wherever it is built (colcon, pip); zstd 
   summarised file (as `mcap recover` does).
 """
 import argparse
-import queue
+import struct
 import sys
 import threading
 import time
 import types
 import zlib
+from collections import deque
 from pathlib import Path
 
 import mcap.writer
 import zstandard
+from mcap.data_stream import RecordBuilder
 from mcap.exceptions import McapError
+from mcap.opcode import Opcode
 from mcap.reader import make_reader
+from mcap.records import (Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Message, Schema, Statistics,
+                          SummaryOffset)
 from mcap.stream_reader import StreamReader
-from mcap.records import Channel, Message, Schema
-from mcap.writer import CompressionType, Writer
+from mcap.writer import MCAP0_MAGIC, CompressionType, Writer
 
 from .interfaces import schema
 
@@ -65,6 +70,9 @@ QUEUE_MESSAGES = 4096
 # wake-up per message (128 Hz of /clock alone) cost more CPU than the writing, and made the
 # simulation thread and the writer take the GIL from each other. The queue holds 4096.
 WAKE_PERIOD = 0.05
+# ... and this often when it found nothing (a paused simulation sends ~1 message a second): the
+# queue has no wake-up of its own, and close() is answered within it.
+IDLE_WAKE_PERIOD = 0.25
 
 
 class WholeChunkZstd:
@@ -96,6 +104,145 @@ except ImportError:  # zlib's own, slower
     mcap.writer.zlib = zlib
 
 
+# A Message record's opening: opcode, record length, channel id, sequence, log time, publish time.
+MESSAGE_HEAD = struct.Struct("<BQHIQQ")
+
+
+def record_bytes(record):
+    """One MCAP record (mcap.records) as bytes."""
+    builder = RecordBuilder()
+    record.write(builder)
+    return builder.end()
+
+
+class BagWriter:
+    """The MCAP file as mcap's Writer(chunk_size, CompressionType.ZSTD) writes it, byte for byte
+    (test_bag compares the two), for what the recorder does: schemas, channels, messages whose
+    publish time is their log time. mcap's writer makes a Message object for each message and
+    writes it field by field into a BytesIO (~30 us a message, most of the recorder's CPU at
+    1,000 bodies beside zstd); here a message's head is packed in place in one buffer kept for
+    the whole file, which zstd and the CRC then read. The other records are mcap's own."""
+
+    def __init__(self, stream, chunk_size, profile, library):
+        self._stream = stream
+        self._chunk_size = chunk_size
+        self._buffer = bytearray(chunk_size + 1024 * 1024)  # grows to the largest chunk yet
+        self._schemas, self._channels, self._chunk_indexes = [], [], []
+        self._counts = {}  # channel id -> messages, in the order of their first ones (mcap's)
+        self._message_count = self._start_time = self._end_time = 0
+        self._new_chunk()
+        stream.write(MCAP0_MAGIC)
+        stream.write(record_bytes(Header(profile, library)))
+
+    def _new_chunk(self):
+        self._size = 0      # bytes of the chunk's records in _buffer
+        self._indexes = {}  # channel id -> [log time, offset in the chunk, ...]
+        self._chunk_messages = self._chunk_start = self._chunk_end = 0
+
+    def register_schema(self, name, encoding, data):
+        schema = Schema(id=len(self._schemas) + 1, data=data, encoding=encoding, name=name)
+        self._schemas.append(schema)
+        self._add_record(record_bytes(schema))
+        return schema.id
+
+    def register_channel(self, topic, message_encoding, schema_id):
+        channel = Channel(id=len(self._channels) + 1, topic=topic, message_encoding=message_encoding,
+                          metadata={}, schema_id=schema_id)
+        self._channels.append(channel)
+        self._add_record(record_bytes(channel))
+        return channel.id
+
+    def _room(self, count):
+        """The buffer's offset for `count` more bytes of the chunk."""
+        start = self._size
+        if start + count > len(self._buffer):
+            self._buffer += bytes(start + count - len(self._buffer))
+        self._size = start + count
+        return start
+
+    def _add_record(self, data):
+        start = self._room(len(data))
+        self._buffer[start:self._size] = data
+        if self._size > self._chunk_size and self._chunk_messages:
+            self._finish_chunk()
+
+    def add_message(self, channel_id, log_time, data):
+        if self._message_count == 0 or log_time < self._start_time:
+            self._start_time = log_time
+        if log_time > self._end_time:
+            self._end_time = log_time
+        self._message_count += 1
+        self._counts[channel_id] = self._counts.get(channel_id, 0) + 1
+        if self._chunk_messages == 0 or log_time < self._chunk_start:
+            self._chunk_start = log_time
+        if log_time > self._chunk_end:
+            self._chunk_end = log_time
+        self._chunk_messages += 1
+        start = self._room(MESSAGE_HEAD.size + len(data))
+        index = self._indexes.get(channel_id)
+        if index is None:
+            index = self._indexes[channel_id] = []
+        index += (log_time, start)
+        MESSAGE_HEAD.pack_into(self._buffer, start, Opcode.MESSAGE, 22 + len(data), channel_id, 0, log_time, log_time)
+        self._buffer[start + MESSAGE_HEAD.size:self._size] = data
+        if self._size > self._chunk_size:
+            self._finish_chunk()
+
+    def _finish_chunk(self):
+        if not self._chunk_messages:
+            return
+        with memoryview(self._buffer) as buffer, buffer[:self._size] as data:
+            compressed = mcap.writer.zstandard.compress(data)
+            crc = mcap.writer.zlib.crc32(data)
+        chunk = record_bytes(Chunk(compression="zstd", data=compressed, message_start_time=self._chunk_start,
+                                   message_end_time=self._chunk_end, uncompressed_crc=crc,
+                                   uncompressed_size=self._size))
+        chunk_start = self._stream.tell()
+        self._stream.write(chunk)
+        index_start, offsets, indexes = chunk_start + len(chunk), {}, []
+        for channel_id, entries in self._indexes.items():
+            offsets[channel_id] = index_start + sum(len(i) for i in indexes)
+            indexes.append(struct.pack(f"<BQHI{len(entries)}Q", Opcode.MESSAGE_INDEX, 6 + 8 * len(entries),
+                                       channel_id, 8 * len(entries), *entries))
+        indexes = b"".join(indexes)
+        self._stream.write(indexes)
+        self._chunk_indexes.append(ChunkIndex(
+            message_start_time=self._chunk_start, message_end_time=self._chunk_end, chunk_start_offset=chunk_start,
+            chunk_length=len(chunk), message_index_offsets=offsets, message_index_length=len(indexes),
+            compression="zstd", compressed_size=len(compressed), uncompressed_size=self._size))
+        self._new_chunk()
+
+    def finish(self):
+        """The last chunk, the summary (schemas, channels, statistics, chunk indexes, the empty
+        attachment and metadata indexes, their offsets) and the footer; the stream stays open."""
+        self._finish_chunk()
+        self._stream.write(record_bytes(DataEnd(0)))
+        summary_start = self._stream.tell()
+        summary, offsets = RecordBuilder(), []
+        statistics = Statistics(attachment_count=0, channel_count=len(self._channels),
+                                channel_message_counts=self._counts, chunk_count=len(self._chunk_indexes),
+                                message_count=self._message_count, metadata_count=0,
+                                message_start_time=self._start_time, message_end_time=self._end_time,
+                                schema_count=len(self._schemas))
+        for opcode, records in ((Opcode.SCHEMA, self._schemas), (Opcode.CHANNEL, self._channels),
+                                (Opcode.STATISTICS, [statistics]), (Opcode.CHUNK_INDEX, self._chunk_indexes),
+                                (Opcode.ATTACHMENT_INDEX, []), (Opcode.METADATA_INDEX, [])):
+            group_start = summary.count
+            for record in records:
+                record.write(summary)
+            offsets.append(SummaryOffset(group_opcode=opcode, group_start=summary_start + group_start,
+                                         group_length=summary.count - group_start))
+        offset_start = summary_start + summary.count
+        for offset in offsets:
+            offset.write(summary)
+        summary = summary.end()
+        crc = zlib.crc32(struct.pack("<BQQQ", Opcode.FOOTER, 20, summary_start, offset_start), zlib.crc32(summary))
+        self._stream.write(summary)
+        self._stream.write(record_bytes(Footer(summary_start=summary_start, summary_offset_start=offset_start,
+                                               summary_crc=crc)))
+        self._stream.write(MCAP0_MAGIC)
+
+
 class Recorder:
     def __init__(self, path, split_size=0):
         self.path = Path(path)
@@ -108,7 +255,9 @@ class Recorder:
         self.error = None        # the first failure (disk full, unwritable path); then nothing is written
         self.files = []
         self._latched = {}       # topic -> (type, data, time_ns): re-written into every split
-        self._queue = queue.Queue(maxsize=QUEUE_MESSAGES)
+        # Appended by any thread, taken by the writer (deque operations are atomic): a
+        # queue.Queue's lock and condition per message cost more than the rest of write().
+        self._queue = deque()
         self._thread = threading.Thread(target=self._run, name="vplayground-recorder", daemon=True)
         self._file = self._writer = None
         self._channels = {}
@@ -127,22 +276,21 @@ class Recorder:
         stamp = int(round(seconds * 1e9))
         if latched:
             self._latched[topic] = (type_name, data, stamp)
-        try:
-            self._queue.put_nowait((topic, type_name, data, stamp))
-        except queue.Full:
+        if len(self._queue) >= QUEUE_MESSAGES:
             self.dropped += 1
+            return
+        self._queue.append((topic, type_name, data, stamp))
 
     def close(self, timeout=30.0):
         """Writes what is queued and finishes the file (summary, footer)."""
-        self._queue.put(None)
+        self._queue.append(None)
         self._thread.join(timeout)
 
     # ----------------------------------------------------------- writer thread
     def _open(self, path):
         path.parent.mkdir(parents=True, exist_ok=True)
         self._file = open(path, "wb")
-        self._writer = Writer(self._file, chunk_size=self.chunk_size, compression=CompressionType.ZSTD)
-        self._writer.start(profile=PROFILE, library="vplayground_ros")
+        self._writer = BagWriter(self._file, self.chunk_size, PROFILE, "vplayground_ros")
         self._channels = {}
         self.files.append(path)
 
@@ -165,7 +313,7 @@ class Recorder:
 
     def _add(self, topic, type_name, data, stamp):
         channel = self._channel(topic, type_name)
-        self._writer.add_message(channel_id=channel, log_time=stamp, publish_time=stamp, data=data)
+        self._writer.add_message(channel, stamp, data)
         # A chunk reaches the disk as soon as it is complete (crash safety); with nothing
         # buffered this is no system call at all.
         self._file.flush()
@@ -181,12 +329,9 @@ class Recorder:
     def _run(self):
         closing = False
         while not closing:
-            batch = [self._queue.get()]
-            while True:  # everything queued meanwhile, taken at once
-                try:
-                    batch.append(self._queue.get_nowait())
-                except queue.Empty:
-                    break
+            batch = []
+            while self._queue:  # everything queued meanwhile, taken at once
+                batch.append(self._queue.popleft())
             for item in batch:
                 if item is None:
                     closing = True
@@ -200,7 +345,7 @@ class Recorder:
                 except Exception as error:  # OSError mostly (ENOSPC, EIO); anything else must not kill the thread
                     self.error = f"{self._file.name}: {getattr(error, 'strerror', None) or error}"
             if not closing:
-                time.sleep(WAKE_PERIOD)
+                time.sleep(WAKE_PERIOD if batch else IDLE_WAKE_PERIOD)
         try:
             self._finish()
         except Exception as error:

@@ -18,8 +18,11 @@ import numpy as np
 
 from .sensors import Sensors
 
-# A batch runs this long at most in wall time, so commands and snapshots stay fresh.
-BATCH_PERIOD = 0.01
+# In real time the loop wakes this often (wall s) and runs the steps due: two at 128 steps/s.
+# A wake-up costs ~50-100 us of CPU on a VM whatever the work after it (an empty 128 Hz loop
+# took ~1 % of a core), so each one runs two steps rather than one; the broadcaster still
+# sends a /clock for every step, and commands wake the loop at once whenever they come.
+BATCH_PERIOD = 1.0 / 64
 # Steps per batch when running as fast as possible.
 FAST_BATCH_STEPS = 16
 # Falling further behind than this many batches is not caught up on: the loop drops the debt
@@ -77,7 +80,8 @@ class Simulation:
         # (Numba's cache load or compile, up to minutes, is no step time): mean_step_ms.
         self.step_seconds = 0.0
         self.timed_steps = 0
-        self.thread_cpu_seconds = 0.0  # CPU time of the simulation thread (physics, snapshots)
+        self._thread_cpu_seconds = 0.0  # the simulation thread's CPU time when it ended
+        self._cpu_clock = None          # its CPU clock while it runs (thread_cpu_seconds)
         self.engine_cpu_seconds = 0.0  # the part of it inside the compiled step, over all worlds
         self.achieved_rtf = 0.0
         # The next simulated time a listener publishes at: a batch ends at the first step at or
@@ -103,6 +107,18 @@ class Simulation:
     def mean_step_ms(self):
         """Wall milliseconds per step, over the steps after each world's first batch."""
         return 1e3 * self.step_seconds / max(self.timed_steps, 1)
+
+    @property
+    def thread_cpu_seconds(self):
+        """CPU time of the simulation thread (physics, snapshots, listeners), read from its
+        clock when asked (/diagnostics, once a second) rather than stored after every batch."""
+        clock = self._cpu_clock
+        if clock is not None:
+            try:
+                return time.clock_gettime(clock)
+            except OSError:  # the thread ended meanwhile
+                pass
+        return self._thread_cpu_seconds
 
     @property
     def state(self):
@@ -158,9 +174,12 @@ class Simulation:
 
     # ---------------------------------------------------------------------- the loop
     def _run(self):
+        self._cpu_clock = time.pthread_getcpuclockid(threading.get_ident())
         try:
             self._loop()
         finally:
+            self._thread_cpu_seconds = time.thread_time()
+            self._cpu_clock = None
             self._finished.set()
 
     def _loop(self):
@@ -232,19 +251,27 @@ class Simulation:
                 self.achieved_rtf = (world.time - rtf_sim) / (now - rtf_wall)
                 if now - rtf_wall >= RTF_WINDOW:
                     rtf_wall, rtf_sim, rtf_measured = now, world.time, True
-            self.thread_cpu_seconds = time.thread_time()
-            if steps == 0:
-                self._wait_for_work()
+            if self.paused:
+                if steps == 0:
+                    self._wait_for_work(BATCH_PERIOD)
+            elif self.real_time_factor > 0.0:
+                # Unless a step is due already (a batch cut short at a publish time), until a
+                # batch's worth is: in this pass, not in one more that finds nothing due.
+                speed = self.real_time_factor * rate
+                done = (world.time - origin_sim) * rate
+                per_batch = max(1, int(round(BATCH_PERIOD * speed)))
+                if (time.perf_counter() - origin_wall) * speed - done < 1.0 - 1e-9:
+                    wait = origin_wall + (done + per_batch) / speed - time.perf_counter()
+                    if wait > 0.0:
+                        self._wait_for_work(min(wait, BATCH_PERIOD))
 
-    def _wait_for_work(self):
-        """Sleeps until the next step is due or a command arrives."""
-        if self.paused or self.real_time_factor > 0.0:
-            period = 1.0 / (self.world.settings["steps_per_second"] * max(self.real_time_factor, 1e-3))
-            try:
-                item = self._commands.get(timeout=min(period, BATCH_PERIOD) if not self.paused else BATCH_PERIOD)
-            except queue.Empty:
-                return
-            self._commands.put(item)  # keep order: applied at the top of the loop
+    def _wait_for_work(self, timeout):
+        """Sleeps `timeout` s or until a command arrives."""
+        try:
+            item = self._commands.get(timeout=timeout)
+        except queue.Empty:
+            return
+        self._commands.put(item)  # keep order: applied at the top of the loop
 
     def _apply_commands(self):
         applied = False
