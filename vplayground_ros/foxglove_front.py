@@ -32,6 +32,14 @@ GATHER = 0.01
 # Viewers served at once (each holds two threads; one in the handshake holds its slot up to
 # HANDSHAKE_TIMEOUT): anyone who can reach the port could otherwise open connections without end.
 MAX_VIEWERS = 16
+# A viewer refused for want of a slot gets its 503 after its request is read (up to this long,
+# s): a socket closed with an unread request is reset, and the reset can reach the viewer before
+# the answer does. At most MAX_VIEWERS refusals wait at once; past that they answer at once.
+REFUSE_READ_TIMEOUT = 2.0
+
+
+BUSY = b"503 Service Unavailable"
+BUSY_TEXT = f"too many viewers: at most {MAX_VIEWERS} at once"
 
 
 class HandshakeError(Exception):
@@ -168,6 +176,7 @@ class ProtocolFront:
         self.connections = set()
         self.serving = 0       # viewers with a thread of their own, at most MAX_VIEWERS
         self._full_logged = False  # the warning about refused viewers, once until a slot frees
+        self._refusing = 0         # refusals reading their viewer's request (REFUSE_READ_TIMEOUT)
         self._lock = threading.Lock()
         self._thread = threading.Thread(target=self._accept, name="foxglove-front", daemon=True)
         self._thread.start()
@@ -195,15 +204,35 @@ class ProtocolFront:
                     self.serving += 1
                 warn = full and not self._full_logged
                 self._full_logged |= full
+                read_first = full and self._refusing < MAX_VIEWERS
+                self._refusing += read_first
             if full:
                 if warn:
                     self.log.warning(f"foxglove: {MAX_VIEWERS} viewers connected, refusing more "
                                      f"(first refused: {address[0]}:{address[1]})")
-                viewer.settimeout(HANDSHAKE_TIMEOUT)
-                refuse(viewer, b"503 Service Unavailable", f"too many viewers: at most {MAX_VIEWERS} at once")
-                viewer.close()
+                if read_first:
+                    threading.Thread(target=self._refuse_busy, args=(viewer,), daemon=True).start()
+                else:
+                    viewer.settimeout(HANDSHAKE_TIMEOUT)
+                    refuse(viewer, BUSY, BUSY_TEXT)
+                    viewer.close()
                 continue
             threading.Thread(target=self._serve, args=(viewer, address), daemon=True).start()
+
+    def _refuse_busy(self, viewer):
+        """The 503 of a viewer past MAX_VIEWERS, once its request is read (or a silent peer's
+        REFUSE_READ_TIMEOUT is up)."""
+        try:
+            viewer.settimeout(REFUSE_READ_TIMEOUT)
+            try:
+                read_head(viewer)
+            except (OSError, HandshakeError):
+                pass  # silent, gone or not HTTP: the answer goes out all the same
+            refuse(viewer, BUSY, BUSY_TEXT)
+        finally:
+            viewer.close()
+            with self._lock:
+                self._refusing -= 1
 
     def _serve(self, viewer, address):
         peer = f"{address[0]}:{address[1]}"
