@@ -515,7 +515,7 @@ def shock_propagation(contacts, bodies):
         u0, u1, u2, u3, u4, u5 = (velocity[upper, 0], velocity[upper, 1], velocity[upper, 2],
                                   velocity[upper, 3], velocity[upper, 4], velocity[upper, 5])
         # Warm start: last step's one-sided impulses again, so a resting stack's sweeps start
-        # at their answer and stop after one or two.
+        # near their answer.
         for k in range(size):
             c = order[group_start + k]
             if upper == velocity_a[c]:
