@@ -154,9 +154,13 @@ def prepare_contacts(contacts, bodies, ground_material, gravity, dt):
         contacts.collision_impulse[c] = 0.0
         contacts.collision_friction[c, 0] = contacts.collision_friction[c, 1] = 0.0
         contacts.position_impulse[c] = 0.0
-        fw = contacts.friction_world[c]
+        # Last step's friction impulses (warm_start_from) on this step's tangents: the contact
+        # pass's, and shock propagation's (order_supports keeps those only on support points).
+        fw, sw = contacts.friction_world[c], contacts.support_friction_world[c]
         contacts.friction[c, 0] = fw[0] * t1[0] + fw[1] * t1[1] + fw[2] * t1[2]
         contacts.friction[c, 1] = fw[0] * t2[0] + fw[1] * t2[1] + fw[2] * t2[2]
+        contacts.support_friction[c, 0] = sw[0] * t1[0] + sw[1] * t1[1] + sw[2] * t1[2]
+        contacts.support_friction[c, 1] = sw[0] * t2[0] + sw[1] * t2[1] + sw[2] * t2[2]
     # Sweep order of the points: bottom to top along gravity, ties in detection order.
     count = contacts.count[0]
     heights = np.empty(count)
@@ -189,13 +193,8 @@ def order_supports(contacts, bodies, gravity):
     supports = 0
     for c in range(count):
         contacts.support_body[c] = -1
-        # Last step's one-sided impulses (warm_start_from) on a point that is a support again,
-        # its friction on this step's tangents; none on any other.
-        fw = contacts.support_friction_world[c]
-        contacts.support_friction[c, 0] = (fw[0] * contacts.rows[c, 1, DIRECTION] + fw[1] * contacts.rows[c, 1, DIRECTION + 1]
-                                           + fw[2] * contacts.rows[c, 1, DIRECTION + 2])
-        contacts.support_friction[c, 1] = (fw[0] * contacts.rows[c, 2, DIRECTION] + fw[1] * contacts.rows[c, 2, DIRECTION + 1]
-                                           + fw[2] * contacts.rows[c, 2, DIRECTION + 2])
+        # Last step's one-sided impulses (warm_start_from, prepare_contacts) stay on a point
+        # that is a support again; any other has none.
         if g == 0.0:
             contacts.support_impulse[c] = contacts.support_friction[c, 0] = contacts.support_friction[c, 1] = 0.0
             continue
