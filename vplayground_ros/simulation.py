@@ -36,6 +36,11 @@ STOPPED, PLAYING, PAUSED = 0, 1, 2  # simulation_interfaces SimulationState
 log = logging.getLogger(__name__)
 
 
+def steps_per_batch(speed):
+    """Steps a real-time batch runs at `speed` steps per wall second (at least one)."""
+    return max(1, int(round(BATCH_PERIOD * speed)))
+
+
 @dataclass
 class Snapshot:
     """What the world looked like after a batch (copies, safe to read from any thread). The
@@ -206,7 +211,7 @@ class Simulation:
             else:
                 due = (time.perf_counter() - origin_wall) * self.real_time_factor * rate
                 steps = int(due - (world.time - origin_sim) * rate + 1e-9)
-                per_batch = max(1, int(round(BATCH_PERIOD * self.real_time_factor * rate)))
+                per_batch = steps_per_batch(self.real_time_factor * rate)
                 if steps > MAX_DEBT_BATCHES * per_batch:
                     self.late_ticks += steps - per_batch
                     steps = per_batch
@@ -259,9 +264,8 @@ class Simulation:
                 # batch's worth is: in this pass, not in one more that finds nothing due.
                 speed = self.real_time_factor * rate
                 done = (world.time - origin_sim) * rate
-                per_batch = max(1, int(round(BATCH_PERIOD * speed)))
                 if (time.perf_counter() - origin_wall) * speed - done < 1.0 - 1e-9:
-                    wait = origin_wall + (done + per_batch) / speed - time.perf_counter()
+                    wait = origin_wall + (done + steps_per_batch(speed)) / speed - time.perf_counter()
                     if wait > 0.0:
                         self._wait_for_work(min(wait, BATCH_PERIOD))
 
