@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from vplayground_ros.physics import World
+from vplayground_ros.physics import World, pipeline
 from vplayground_ros.scene import SceneError, load_world, save_world
 
 
@@ -279,6 +279,23 @@ def every_array(world):
             for name, array in (value._asdict().items() if hasattr(value, "_asdict") else [("", value)]):
                 out[f"{group}.{field}.{name}"] = np.array(array)
     return out
+
+
+def test_bodies_that_freeze_last_join_the_static_index_once_the_world_is_at_rest():
+    """A frozen body waits outside the static index until enough others do (it is re-indexed
+    each step meanwhile); when it is the last to freeze nothing else will come, so the world at
+    rest indexes it at once and every later step is the resting one, without a compiled call."""
+    world = World()
+    for k in range(40):
+        world.add_body({"size": [0.5] * 3, "position": [(k % 8) * 0.75, (k // 8) * 0.75, 0.25]})
+    world.step(3 * 128)
+    assert world.state()["frozen"].all() and world._bodies.static_indexed[world._bodies.active].all()
+    world.add_body({"name": "late", "size": [0.5] * 3, "position": [-3.0, 0.0, 0.25]})
+    world.step(3 * 128)
+    assert world.state()["frozen"].all()
+    b = world._bodies
+    assert b.static_indexed[b.active].all()
+    assert pipeline.resting_steps(b, world._broad, world._vehicles.arrays, world._contacts, 1)
 
 
 def test_a_world_at_rest_steps_alike_with_and_without_the_resting_shortcut():

@@ -210,7 +210,14 @@ def step_world(steps, ctx):
                 return done, GROW_INDEX
             live = list_live_bodies(bodies, broad, False)
         if at_rest(bodies, live, ctx.vehicles):
-            # Every body asleep or immovable: the step is its empty result (no counters).
+            # Every body asleep or immovable: the step is its empty result (no counters). Sleepers
+            # still waiting for the static index join it now, once: nothing else will freeze
+            # while the world rests, and with none live the World's next calls step in Python
+            # (resting_steps) instead of re-indexing them here every step.
+            if len(live) > 0:
+                if not rebuild_static_index(bodies, broad, s):
+                    return done, GROW_INDEX
+                live = list_live_bodies(bodies, broad, False)
             if not rest_step(bodies, broad, current, s, live):
                 return done, GROW_INDEX
             lap(ctx, STAGE_DERIVED, t)
