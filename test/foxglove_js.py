@@ -8,7 +8,9 @@ from pathlib import Path
 
 import pytest
 
-PACKAGES = ["@mcap/core@2", "@foxglove/rosmsg@5", "@foxglove/rosmsg2-serialization@2", "zstd-codec@0.1"]
+# @mcap/support: the decompressors Foxglove's own MCAP reading loads (its wasm zstd grows its
+# memory; zstd-codec, used before, stops at a 16 MB heap, below one 8 MiB chunk and its input).
+PACKAGES = ["@mcap/core@2", "@mcap/support@1", "@foxglove/rosmsg@5", "@foxglove/rosmsg2-serialization@2"]
 
 needs_node = pytest.mark.skipif(shutil.which("node") is None or shutil.which("npm") is None,
                                 reason="Foxglove's JavaScript stack needs node and npm")
@@ -17,7 +19,7 @@ needs_node = pytest.mark.skipif(shutil.which("node") is None or shutil.which("np
 def run_script(name, source, *args, timeout=120):
     """Writes the script next to the installed packages, runs it with node; returns stdout."""
     cache = Path(os.environ.get("VPLAYGROUND_NPM_CACHE", Path.home() / ".cache" / "vplayground_ros" / "npm"))
-    if not (cache / "node_modules" / "@foxglove" / "rosmsg2-serialization").exists():
+    if not all((cache / "node_modules" / package.rpartition("@")[0]).exists() for package in PACKAGES):
         cache.mkdir(parents=True, exist_ok=True)
         subprocess.run(["npm", "install", "--prefix", str(cache), "--no-audit", "--no-fund", "--silent", *PACKAGES],
                        check=True, timeout=300)

@@ -288,15 +288,13 @@ const fs = require("fs");
 const { McapIndexedReader } = require("@mcap/core");
 const { parse } = require("@foxglove/rosmsg");
 const { MessageReader } = require("@foxglove/rosmsg2-serialization");
-const { ZstdCodec } = require("zstd-codec");
+const { loadDecompressHandlers } = require("@mcap/support");
 
-ZstdCodec.run(async (zstd) => {
-  const simple = new zstd.Simple();
+(async () => {
   const data = fs.readFileSync(process.argv[2]);
   const readable = { size: async () => BigInt(data.length),
                      read: async (offset, length) => data.subarray(Number(offset), Number(offset + length)) };
-  const reader = await McapIndexedReader.Initialize({ readable,
-      decompressHandlers: { zstd: (buffer, size) => simple.decompress(buffer) } });
+  const reader = await McapIndexedReader.Initialize({ readable, decompressHandlers: await loadDecompressHandlers() });
   const readers = new Map();
   for (const [id, channel] of reader.channelsById) {
     const schema = reader.schemasById.get(channel.schemaId);
@@ -310,7 +308,7 @@ ZstdCodec.run(async (zstd) => {
     counts[topic] = (counts[topic] || 0) + 1;
   }
   console.log(JSON.stringify(counts));
-});
+})();
 """
 
 

@@ -56,13 +56,16 @@ PROFILE = "ros2"
 # 16 MiB was smaller still on the settled pile but cost the moving one 30-50 % more CPU. A
 # kill -9 loses the chunk being filled (~6 s of the default scene).
 CHUNK_SIZE = 8 * 1024 * 1024
-# zstd level 2 with a hash table of 2^18 entries (level 2's own is 2^17, level 3's too): replayed
-# bags, against level 3, a settled 10,000-body pile took 15 % less of the writer's CPU for a
-# 7 % smaller bag, a 1,000-body pile that never rests 21 % less CPU for a 10 % larger bag.
-# Level 1 as it comes (a 2^13 table) misses the previous round: 4 times the bag at 10,000
-# settled bodies, no faster there.
-ZSTD_LEVEL = 2
-ZSTD_HASH_LOG = 18
+# zstd's fast level -2 with a hash table of 2^17 entries. Replaying recorded bags' chunks (best
+# of 3 runs), against the level 2 with 2^18 entries used before, a settled 10,000-body pile took
+# 0.43 instead of 0.61 ms of CPU per MB for a 9 % larger bag, a 1,000-body pile that never rests
+# 0.97 instead of 2.0 ms per MB for a 9 % larger bag. Counting what the larger file costs to
+# write (~2 ms per MB into this VM's page cache), that is ~20 % (settled) to ~30 % (moving) less
+# of the writer's CPU; levels -3 and -5 save little more and make the bags 18-30 % larger. The
+# fast levels find the previous round only with a table this size (level 1 as it comes, 2^13,
+# made 4 times the bag at 10,000 settled bodies).
+ZSTD_LEVEL = -2
+ZSTD_HASH_LOG = 17
 # zstd windows decoders take by default (libzstd, the mcap readers): 2^27 bytes.
 MAX_WINDOW_LOG = 27
 QUEUE_MESSAGES = 4096
