@@ -10,6 +10,7 @@ import zlib
 import numpy as np
 import pytest
 import zstandard
+from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.records import Chunk
 from mcap.stream_reader import StreamReader
@@ -225,6 +226,30 @@ def test_the_recorder_writes_every_message_intact_and_checksums_every_chunk(tmp_
     with open(path, "rb") as stream:
         read = [message.data for _, _, message in make_reader(stream, validate_crcs=True).iter_messages()]
     assert read == written
+
+
+def test_a_chunk_reaches_the_file_once_it_is_old_though_not_full(tmp_path, monkeypatch):
+    # A crash loses the chunk being filled: a slow trickle of messages (a small or paused world)
+    # must still reach the file within CHUNK_MAX_AGE, not only when 16 MiB have gathered.
+    monkeypatch.setattr(recorder_module, "CHUNK_MAX_AGE", 0.3)
+    path = tmp_path / "trickle.mcap"
+    recorder = Recorder(path)
+    try:
+        recorder.write("/clock", "rosgraph_msgs/msg/Clock", cdr.clock(1.0), 1.0)
+        deadline, chunks = time.monotonic() + 20, []
+        while not chunks and time.monotonic() < deadline:
+            time.sleep(0.1)
+            with open(path, "rb") as stream:  # the file as a crash would leave it: no end
+                try:
+                    for record in StreamReader(stream, skip_magic=False, emit_chunks=True).records:
+                        if isinstance(record, Chunk):
+                            chunks.append(record)
+                except (McapError, EOFError):
+                    pass
+        assert len(chunks) == 1 and chunks[0].message_start_time == 10**9
+    finally:
+        recorder.close()
+    assert recover(path, tmp_path / "fixed.mcap") == 1
 
 
 def test_the_bag_writer_writes_what_mcaps_writer_writes_byte_for_byte():

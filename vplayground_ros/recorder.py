@@ -17,8 +17,8 @@ the package free of a native extension wherever it is built (colcon, pip); zstd 
 - A disk that fills or a path that cannot be written stops the recording, never the simulation:
   the first failure is kept in `error` (the node puts it on /diagnostics) and later messages are
   dropped.
-- Chunks are written to the file as they fill, so after a crash (kill -9) every complete chunk
-  is still there: `vplayground-recover crashed.mcap fixed.mcap` rewrites them into a proper,
+- Chunks are written to the file as they fill or after CHUNK_MAX_AGE, so after a crash
+  (kill -9) every complete chunk is still there: `vplayground-recover crashed.mcap fixed.mcap` rewrites them into a proper,
   summarised file (as `mcap recover` does).
 """
 import argparse
@@ -45,17 +45,20 @@ from mcap.writer import MCAP0_MAGIC, CompressionType, Writer
 from .interfaces import schema
 
 PROFILE = "ros2"
-# Smaller chunks lose less on a crash; larger ones compress better, and keep the writer's
-# memory flat: it holds a ~1.6 kB index entry per chunk until the file is finished, which at
-# 256 KiB was ~27 MB an hour for the default scene (~1.3 MB/s of messages). Most of a bag is
-# the 30 Hz snapshots of every body, each much like the one before it when the bodies rest:
-# zstd finds that only when one round of them (3.8 MB at 10,000 bodies) fits in a chunk and in
-# its window. Replaying recorded bags, 8 MiB chunks compressed with a window as long as the
-# chunk took a settled 10,000-body pile 2.1:1 smaller and ~30 % less CPU than 4 MiB and zstd's
-# default window (2 MiB), and a 1,000-body pile that never rests 7 % smaller at the same CPU;
-# 16 MiB was smaller still on the settled pile but cost the moving one 30-50 % more CPU. A
-# kill -9 loses the chunk being filled (~6 s of the default scene).
-CHUNK_SIZE = 8 * 1024 * 1024
+# Larger chunks compress better, and keep the writer's memory flat: it holds a ~1.6 kB index
+# entry per chunk until the file is finished, which at 256 KiB was ~27 MB an hour for the
+# default scene (~1.3 MB/s of messages). Most of a bag is the 30 Hz snapshots of every body,
+# each much like the one before it when the bodies rest: zstd finds that only when the round
+# before (3.8 MB at 10,000 bodies) is in the same chunk and in its window, so a chunk's first
+# round costs what a new scene does. Replaying a settled 10,000-body pile's chunks (zstd as
+# below), 16 MiB chunks made the bag 2.4 times smaller than 8 MiB and took 25 % less CPU; a
+# 1,000-body pile that never rests, the same size and 10 % less CPU. Foxglove's decoder
+# (@mcap/support's wasm zstd) reads them; zstd-codec, a 16 MB heap, cannot.
+CHUNK_SIZE = 16 * 1024 * 1024
+# What a crash (kill -9) loses is the chunk being filled: it is written once its first message
+# is this old (wall-clock s), full or not: ~5 MB of the default scene, ~1/3 MB at 1,000
+# resting bodies.
+CHUNK_MAX_AGE = 4.0
 # zstd's fast level -2 with a hash table of 2^17 entries. Replaying recorded bags' chunks (best
 # of 3 runs), against the level 2 with 2^18 entries used before, a settled 10,000-body pile took
 # 0.43 instead of 0.61 ms of CPU per MB for a 9 % larger bag, a 1,000-body pile that never rests
@@ -138,6 +141,7 @@ class BagWriter:
         stream.write(record_bytes(Header(profile, library)))
 
     def _new_chunk(self):
+        self.chunk_opened = None  # time.monotonic() at the chunk's first message
         self._size = 0      # bytes of the chunk's records in _buffer
         self._indexes = {}  # channel id -> [log time, offset in the chunk, ...]
         self._chunk_messages = self._chunk_start = self._chunk_end = 0
@@ -167,7 +171,7 @@ class BagWriter:
         start = self._room(len(data))
         self._buffer[start:self._size] = data
         if self._size > self._chunk_size and self._chunk_messages:
-            self._finish_chunk()
+            self.finish_chunk()
 
     def add_message(self, channel_id, log_time, data):
         if self._message_count == 0 or log_time < self._start_time:
@@ -176,7 +180,9 @@ class BagWriter:
             self._end_time = log_time
         self._message_count += 1
         self._counts[channel_id] = self._counts.get(channel_id, 0) + 1
-        if self._chunk_messages == 0 or log_time < self._chunk_start:
+        if self._chunk_messages == 0:
+            self._chunk_start, self.chunk_opened = log_time, time.monotonic()
+        elif log_time < self._chunk_start:
             self._chunk_start = log_time
         if log_time > self._chunk_end:
             self._chunk_end = log_time
@@ -189,9 +195,11 @@ class BagWriter:
         MESSAGE_HEAD.pack_into(self._buffer, start, Opcode.MESSAGE, 22 + len(data), channel_id, 0, log_time, log_time)
         self._buffer[start + MESSAGE_HEAD.size:self._size] = data
         if self._size > self._chunk_size:
-            self._finish_chunk()
+            self.finish_chunk()
 
-    def _finish_chunk(self):
+    def finish_chunk(self):
+        """Writes the chunk being filled (mcap's Writer does at chunk_size; the Recorder also
+        when it grew old)."""
         if not self._chunk_messages:
             return
         with memoryview(self._buffer) as buffer, buffer[:self._size] as data:
@@ -218,7 +226,7 @@ class BagWriter:
     def finish(self):
         """The last chunk, the summary (schemas, channels, statistics, chunk indexes, the empty
         attachment and metadata indexes, their offsets) and the footer; the stream stays open."""
-        self._finish_chunk()
+        self.finish_chunk()
         self._stream.write(record_bytes(DataEnd(0)))
         summary_start = self._stream.tell()
         summary, offsets = RecordBuilder(), []
@@ -345,14 +353,25 @@ class Recorder:
                     if self.split_size and self._file.tell() > self.split_size:
                         self._split()
                     self._add(*item)
-                except Exception as error:  # OSError mostly (ENOSPC, EIO); anything else must not kill the thread
-                    self.error = f"{self._file.name}: {getattr(error, 'strerror', None) or error}"
+                except Exception as error:  # anything must not kill the thread
+                    self._failed(error)
+            opened = self._writer.chunk_opened if self.error is None else None
+            if opened is not None and time.monotonic() - opened >= CHUNK_MAX_AGE:
+                try:
+                    self._writer.finish_chunk()
+                    self._file.flush()
+                except Exception as error:
+                    self._failed(error)
             if not closing:
                 time.sleep(WAKE_PERIOD if batch else IDLE_WAKE_PERIOD)
         try:
             self._finish()
         except Exception as error:
-            self.error = self.error or f"{self._file.name}: {getattr(error, 'strerror', None) or error}"
+            self._failed(error)
+
+    def _failed(self, error):
+        """Keeps the first failure (OSError mostly: ENOSPC, EIO); nothing is recorded after it."""
+        self.error = self.error or f"{self._file.name}: {getattr(error, 'strerror', None) or error}"
 
 
 def recover(source, target):
