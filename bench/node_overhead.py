@@ -7,8 +7,8 @@ simulation thread spent inside the compiled step over the same interval (/diagno
 gives the Python threads' names to the OS), the time from starting the process to the first
 ~/bodies/poses message (warm Numba cache), and the bag's bytes per simulated second. With
 --foxglove the built-in Foxglove server runs too, with a WebSocket client subscribed to every
-channel. With --awake the pile never freezes (freezing off, 2 s after the drop): the boxes
-jostle in contact all along, so every pose, marker, transform and contact changes each round.
+channel (foxglove_viewer.py, in a process of its own as a viewer is). With --awake the pile
+never freezes (freezing off, 2 s after the drop): the boxes jostle in contact all along, so every pose, marker, transform and contact changes each round.
 
     python bench/node_overhead.py [--boxes 1000] [--seconds 20] [--foxglove] [--awake] [--scene PATH]
 """
@@ -30,7 +30,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 sys.path.insert(0, str(Path(__file__).parent))
 sys.path.insert(0, str(Path(__file__).parent.parent / "test"))
-from foxglove_client import URL_IN_LOG, watching_everything  # noqa: E402
+from foxglove_client import URL_IN_LOG  # noqa: E402
 from pile import build_pile  # noqa: E402
 
 from vplayground_ros.broadcast import TOPICS  # noqa: E402
@@ -151,7 +151,11 @@ def measure(args, workspace):
             client.create_subscription(message, name, lambda m: None, qos)
     foxglove = None
     if args.foxglove:
-        foxglove = watching_everything(urls[0], len(TOPICS))
+        foxglove = subprocess.Popen([sys.executable, str(Path(__file__).with_name("foxglove_viewer.py")), urls[0],
+                                     str(len(TOPICS))], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+        atexit.register(lambda: foxglove.poll() is None and foxglove.kill())
+        if foxglove.stdout.readline().strip() != "subscribed":
+            raise RuntimeError("the Foxglove viewer did not subscribe")
     end = time.perf_counter() + 3.0
     while time.perf_counter() < end:  # let discovery settle
         rclpy.spin_once(client, timeout_sec=0.05)
@@ -173,9 +177,10 @@ def measure(args, workspace):
     while time.perf_counter() < end:
         rclpy.spin_once(client, timeout_sec=0.05)
     wall1, cpu1, threads1, node1, rtf, values = sample()
-    foxglove_frames = foxglove.received if foxglove else None
+    foxglove_frames = None
     if foxglove:
-        foxglove.close()
+        foxglove.stdin.close()
+        foxglove_frames = int(foxglove.stdout.readline())
     node.terminate()
     node.wait(30)
     wall = wall1 - wall0
