@@ -9,7 +9,8 @@ from pathlib import Path
 import pytest
 
 # @mcap/support: the decompressors Foxglove's own MCAP reading loads (its wasm zstd grows its
-# memory; zstd-codec, used before, stops at a 16 MB heap, below one 8 MiB chunk and its input).
+# memory; zstd-codec, used before, has a fixed 16 MB heap, which one 8 MiB chunk and its
+# compressed bytes can already overflow).
 PACKAGES = ["@mcap/core@2", "@mcap/support@1", "@foxglove/rosmsg@5", "@foxglove/rosmsg2-serialization@2"]
 
 needs_node = pytest.mark.skipif(shutil.which("node") is None or shutil.which("npm") is None,
