@@ -125,9 +125,10 @@ def find_manifold(keys, manifolds, a, b):
 
 @njit(cache=True, nogil=True)
 def warm_start_from(previous, current):
-    """Copies last step's contact-pass and shock-propagation impulses onto this step's points that are the same contact
-    (same pair, within WARM_START_MATCH_DISTANCE in A's frame). Stacks then start each solve
-    from nearly the answer, which the fixed iteration count alone could not reach."""
+    """Copies last step's contact-pass and shock-propagation impulses onto this step's points
+    that are the same contact (same pair, within WARM_START_MATCH_DISTANCE in A's frame). Stacks
+    then start each solve from nearly the answer, which the fixed iteration count alone could
+    not reach."""
     limit_sq = WARM_START_MATCH_DISTANCE * WARM_START_MATCH_DISTANCE
     keys, manifolds = previous.table_key, previous.table_manifold
     for m in range(current.manifold_count[0]):

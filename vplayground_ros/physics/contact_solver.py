@@ -193,17 +193,16 @@ def order_supports(contacts, bodies, gravity):
     supports = 0
     for c in range(count):
         contacts.support_body[c] = -1
-        # Last step's one-sided impulses (warm_start_from, prepare_contacts) stay on a point
-        # that is a support again; any other has none.
-        if g == 0.0:
-            contacts.support_impulse[c] = contacts.support_friction[c, 0] = contacts.support_friction[c, 1] = 0.0
-            continue
-        n = contacts.normal[c]
-        # n points from A to B: pointing down, B holds A up.
-        up = -(n[0] * gravity[0] + n[1] * gravity[1] + n[2] * gravity[2]) / g
         a, b = contacts.body_a[c], contacts.body_b[c]
-        upper = a if up < -0.5 else (b if up > 0.5 else -1)
+        upper = -1  # no gravity: nothing holds anything up
+        if g != 0.0:
+            n = contacts.normal[c]
+            # n points from A to B: pointing down, B holds A up.
+            up = -(n[0] * gravity[0] + n[1] * gravity[1] + n[2] * gravity[2]) / g
+            upper = a if up < -0.5 else (b if up > 0.5 else -1)
         if upper < 0 or not bodies.awake[upper]:
+            # Last step's one-sided impulses (warm_start_from, prepare_contacts) stay on a point
+            # that is a support again; any other has none.
             contacts.support_impulse[c] = contacts.support_friction[c, 0] = contacts.support_friction[c, 1] = 0.0
             continue
         contacts.support_body[c] = upper
