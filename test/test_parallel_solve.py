@@ -6,8 +6,8 @@ import pytest
 
 from helpers import pile, pyramid, tower
 from vplayground_ros.physics import World
-from vplayground_ros.physics.contact_solver import MAX_WAITING_SHARE, PARALLEL_MIN_POINTS
-from vplayground_ros.physics.solve_schedule import NO_WAIT, split_chains
+from vplayground_ros.physics.contact_solver import MAX_WAITING_SHARE, MIN_GROUPS_PER_LEVEL, PARALLEL_MIN_POINTS
+from vplayground_ros.physics.solve_schedule import NO_WAIT, shock_levels, split_chains
 from vplayground_ros.physics.step_context import newest_contacts
 
 NO_FREEZING = {"freezing": {"enabled": False}}
@@ -26,6 +26,30 @@ def last_split(world):
                  np.asarray(world.settings["gravity"], dtype=float), items, chain_start, need_up,
                  need_down, publish_up, publish_down)
     return count, np.diff(chain_start), int(np.sum(need_up != NO_WAIT))
+
+
+def last_levels(world):
+    """Shock propagation's levels for the last step's support points: (support points, groups,
+    groups per level)."""
+    contacts = newest_contacts(world._contacts)
+    supports = contacts.support_count[0]
+    group_start, by_level, level_start = (np.empty(supports + 1, np.int64) for _ in range(3))
+    groups, levels = shock_levels(contacts.support_order, supports, contacts.support_body,
+                                  contacts.velocity_a, contacts.velocity_b,
+                                  len(world._bodies.active) + 1, group_start, by_level, level_start)
+    assert sorted(by_level[:groups]) == list(range(groups))
+    return supports, groups, np.diff(level_start[:levels + 1]).tolist()
+
+
+def two_layers(side=16):
+    """side x side cubes on the ground, as many on top of them: every box held up by one
+    support, the upper layer's by a lower box."""
+    world = World(NO_FREEZING)
+    for layer in range(2):
+        for i in range(side):
+            for j in range(side):
+                world.add_body({"size": [1, 1, 1], "position": [1.5 * i, 1.5 * j, 0.5 + layer]})
+    return world
 
 
 def snapshot(world):
@@ -109,3 +133,34 @@ def test_solver_threads_is_a_checked_setting():
     with pytest.raises(ValueError, match="solver_threads"):
         World(solver_threads=0)
     assert world.solver_threads in (1, 2)
+
+
+def test_shock_propagation_runs_a_level_at_a_time():
+    """Each upper body's group goes one level above the groups whose bodies it reads or that
+    read it: the two layers are two levels of one group per box; a tower a level per box, too
+    thin to share."""
+    world = two_layers()
+    world.step(3)
+    supports, groups, per_level = last_levels(world)
+    assert groups == 512 and per_level == [256, 256]
+    assert supports >= PARALLEL_MIN_POINTS and groups >= MIN_GROUPS_PER_LEVEL * len(per_level)  # shared
+    world = tower(10, settings=NO_FREEZING)
+    world.step(3)
+    assert last_levels(world)[2] == [1] * 10
+
+
+def test_shared_shock_propagation_gives_the_serial_result_bit_for_bit():
+    """The two layers, shaken so the upper boxes lean on their supports: two solver threads,
+    and two threads run by one (Numba with one thread), give the serial bytes."""
+    def build():
+        world = two_layers()
+        for name in world.body_names()[256::3]:
+            world.apply_impulse(name, [300.0, -200.0, 0.0])
+        return world
+    serial = snapshot(stepped(build, 1, 96))
+    shared = stepped(build, 2, 96)
+    supports, groups, per_level = last_levels(shared)
+    assert supports >= PARALLEL_MIN_POINTS and groups >= MIN_GROUPS_PER_LEVEL * len(per_level)
+    assert_same_bytes(serial, snapshot(shared))
+    if numba.config.NUMBA_NUM_THREADS >= 2:
+        assert_same_bytes(serial, snapshot(stepped(build, 2, 96, numba_threads=1)))

@@ -37,7 +37,7 @@ from .constants import (LINEAR_SLOP, MAX_CORRECTION_SPEED, POSITION_CORRECTION,
                         STICKING_SPEED)
 from .contact import ARM_A, ARM_B, DIRECTION, TURN_A, TURN_B
 from .math3d import cross
-from .solve_schedule import split_chains
+from .solve_schedule import shock_levels, split_chains
 
 # A row whose target is this low is not solved in that pass.
 INACTIVE = -1.0e30
@@ -66,6 +66,13 @@ SPINS_BEFORE_YIELD = 2000
 # second thread, asleep between regions, usually starts within 5-20 us; one that comes later
 # finds nothing left to take (the results are the same whoever runs what).
 SPINS_BEFORE_TAKING = 1000
+
+# Shared shock propagation: groups a thread claims at once (a landing box's group, 4 points and
+# 10 sweeps, takes about a microsecond; a claim is an atomic add on a line both threads write),
+# and the groups a level must have on average (a tower has one a level: the threads would wait
+# for each other at every box).
+SHOCK_CLAIM = 4
+MIN_GROUPS_PER_LEVEL = 16
 
 
 @njit(cache=True, nogil=True)
@@ -477,7 +484,7 @@ def warm_start(contacts, bodies):
 
 
 @njit(cache=True, nogil=True)
-def shock_propagation(contacts, bodies):
+def shock_propagation(contacts, bodies, threads):
     """Guendelman, Bridson & Fedkiw (2003) section 7: one last pass of the contact pass, from the
     bottom up, in which each body meets its supports as if they had infinite mass. Body by body,
     sweeps over its support points (up to SHOCK_SWEEPS, fewer once converged) drive the normal
@@ -491,13 +498,17 @@ def shock_propagation(contacts, bodies):
     with much the same residue, so the sweeps start near their answer (with up to 16 sweeps,
     resting stacks and a jostling pile took 8-10 a body instead of 12-15), and 10 warm sweeps
     hold stacks better than 16 cold ones did (SHOCK_SWEEPS: over 20 s the 55-brick wall drifted
-    0.36 mm instead of 1.3, the 20-row pyramid 1.6 instead of 5.8)."""
+    0.36 mm instead of 1.3, the 20-row pyramid 1.6 instead of 5.8).
+    With `threads` > 1 and enough support points, two threads share the groups level by level
+    (solve_schedule.shock_levels), with the same result."""
+    order, supports = contacts.support_order, contacts.support_count[0]
+    if threads > 1 and supports >= PARALLEL_MIN_POINTS and shock_propagation_shared(contacts, bodies, threads):
+        return
     velocity, rows, row_inv_mass = bodies.velocity, contacts.rows, contacts.row_inv_mass
     target, mu = contacts.contact_target, contacts.friction_coefficient
     impulse, friction = contacts.impulse, contacts.friction
     shock, shock_friction = contacts.support_impulse, contacts.support_friction
     support_mass = contacts.support_mass
-    order, supports = contacts.support_order, contacts.support_count[0]
     velocity_a, velocity_b, support_body = contacts.velocity_a, contacts.velocity_b, contacts.support_body
     group_start = 0
     while group_start < supports:
@@ -505,95 +516,171 @@ def shock_propagation(contacts, bodies):
         group_end = group_start + 1
         while group_end < supports and support_body[order[group_end]] == upper:
             group_end += 1
-        size = group_end - group_start
-        # The upper body's velocity lives in locals for the group's sweeps: what its supports do
-        # is final, so only these six change, and a sweep's chain of dependent arithmetic no
-        # longer waits on stores to and loads from the velocity array (a quarter of the pass).
-        # Every sum is the one the array version took: the results are bitwise the same.
-        u0, u1, u2, u3, u4, u5 = (velocity[upper, 0], velocity[upper, 1], velocity[upper, 2],
-                                  velocity[upper, 3], velocity[upper, 4], velocity[upper, 5])
-        # Warm start: last step's one-sided impulses again, so a resting stack's sweeps start
-        # near their answer.
+        shock_group(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
+                    shock_friction, support_mass, order, velocity_a, velocity_b, group_start,
+                    group_end, upper)
+        group_start = group_end
+
+
+@njit(cache=True, nogil=True, inline="always")
+def shock_group(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock, shock_friction,
+                support_mass, order, velocity_a, velocity_b, group_start, group_end, upper):
+    """Shock propagation's sweeps over one upper body's support points, order[group_start:
+    group_end]: they change its velocity (and their one-sided impulses) only."""
+    size = group_end - group_start
+    # The upper body's velocity lives in locals for the group's sweeps: what its supports do
+    # is final, so only these six change, and a sweep's chain of dependent arithmetic no
+    # longer waits on stores to and loads from the velocity array (a quarter of the pass).
+    # Every sum is the one the array version took: the results are bitwise the same.
+    u0, u1, u2, u3, u4, u5 = (velocity[upper, 0], velocity[upper, 1], velocity[upper, 2],
+                              velocity[upper, 3], velocity[upper, 4], velocity[upper, 5])
+    # Warm start: last step's one-sided impulses again, so a resting stack's sweeps start
+    # near their answer.
+    for k in range(size):
+        c = order[group_start + k]
+        if upper == velocity_a[c]:
+            sign, m, turn = -1.0, row_inv_mass[c, 0], TURN_A
+        else:
+            sign, m, turn = 1.0, row_inv_mass[c, 1], TURN_B
+        pn, f1, f2 = shock[c], shock_friction[c, 0], shock_friction[c, 1]
+        sm = sign * m
+        u0 += sm * (rows[c, 0, DIRECTION + 0] * pn + rows[c, 1, DIRECTION + 0] * f1 + rows[c, 2, DIRECTION + 0] * f2)
+        u1 += sm * (rows[c, 0, DIRECTION + 1] * pn + rows[c, 1, DIRECTION + 1] * f1 + rows[c, 2, DIRECTION + 1] * f2)
+        u2 += sm * (rows[c, 0, DIRECTION + 2] * pn + rows[c, 1, DIRECTION + 2] * f1 + rows[c, 2, DIRECTION + 2] * f2)
+        u3 += sign * (rows[c, 0, turn + 0] * pn + rows[c, 1, turn + 0] * f1 + rows[c, 2, turn + 0] * f2)
+        u4 += sign * (rows[c, 0, turn + 1] * pn + rows[c, 1, turn + 1] * f1 + rows[c, 2, turn + 1] * f2)
+        u5 += sign * (rows[c, 0, turn + 2] * pn + rows[c, 1, turn + 2] * f1 + rows[c, 2, turn + 2] * f2)
+    for sweep in range(SHOCK_SWEEPS):
+        largest = 0.0  # the largest velocity change of this sweep
         for k in range(size):
-            c = order[group_start + k]
-            if upper == velocity_a[c]:
+            c = order[group_start + (k if sweep % 2 == 0 else size - 1 - k)]
+            a, b = velocity_a[c], velocity_b[c]
+            # Only the upper body moves: A takes -j, B takes +j.
+            if upper == a:
                 sign, m, turn = -1.0, row_inv_mass[c, 0], TURN_A
+                va = (u0, u1, u2, u3, u4, u5)
+                vb = (velocity[b, 0], velocity[b, 1], velocity[b, 2],
+                      velocity[b, 3], velocity[b, 4], velocity[b, 5])
             else:
                 sign, m, turn = 1.0, row_inv_mass[c, 1], TURN_B
-            pn, f1, f2 = shock[c], shock_friction[c, 0], shock_friction[c, 1]
+                va = (velocity[a, 0], velocity[a, 1], velocity[a, 2],
+                      velocity[a, 3], velocity[a, 4], velocity[a, 5])
+                vb = (u0, u1, u2, u3, u4, u5)
+            # Friction circle on the total friction, then the normal row on the total.
+            v1 = v2 = 0.0
+            for e in range(3):
+                dv, wa, wb = vb[e] - va[e], va[3 + e], vb[3 + e]
+                v1 += rows[c, 1, DIRECTION + e] * dv - rows[c, 1, ARM_A + e] * wa + rows[c, 1, ARM_B + e] * wb
+                v2 += rows[c, 2, DIRECTION + e] * dv - rows[c, 2, ARM_A + e] * wa + rows[c, 2, ARM_B + e] * wb
+            old1 = friction[c, 0] + shock_friction[c, 0]
+            old2 = friction[c, 1] + shock_friction[c, 1]
+            new1 = old1 - support_mass[c, 1] * v1
+            new2 = old2 - support_mass[c, 2] * v2
+            magnitude = np.sqrt(new1 * new1 + new2 * new2)
+            limit = mu[c] * (impulse[c] + shock[c])
+            if magnitude > limit:
+                new1 *= limit / magnitude
+                new2 *= limit / magnitude
+            d1, d2 = new1 - old1, new2 - old2
+            largest = max(largest, abs(d1) / support_mass[c, 1], abs(d2) / support_mass[c, 2])
+            shock_friction[c, 0] += d1
+            shock_friction[c, 1] += d2
             sm = sign * m
-            u0 += sm * (rows[c, 0, DIRECTION + 0] * pn + rows[c, 1, DIRECTION + 0] * f1 + rows[c, 2, DIRECTION + 0] * f2)
-            u1 += sm * (rows[c, 0, DIRECTION + 1] * pn + rows[c, 1, DIRECTION + 1] * f1 + rows[c, 2, DIRECTION + 1] * f2)
-            u2 += sm * (rows[c, 0, DIRECTION + 2] * pn + rows[c, 1, DIRECTION + 2] * f1 + rows[c, 2, DIRECTION + 2] * f2)
-            u3 += sign * (rows[c, 0, turn + 0] * pn + rows[c, 1, turn + 0] * f1 + rows[c, 2, turn + 0] * f2)
-            u4 += sign * (rows[c, 0, turn + 1] * pn + rows[c, 1, turn + 1] * f1 + rows[c, 2, turn + 1] * f2)
-            u5 += sign * (rows[c, 0, turn + 2] * pn + rows[c, 1, turn + 2] * f1 + rows[c, 2, turn + 2] * f2)
-        for sweep in range(SHOCK_SWEEPS):
-            largest = 0.0  # the largest velocity change of this sweep
-            for k in range(size):
-                c = order[group_start + (k if sweep % 2 == 0 else size - 1 - k)]
-                a, b = velocity_a[c], velocity_b[c]
-                # Only the upper body moves: A takes -j, B takes +j.
-                if upper == a:
-                    sign, m, turn = -1.0, row_inv_mass[c, 0], TURN_A
-                    va = (u0, u1, u2, u3, u4, u5)
-                    vb = (velocity[b, 0], velocity[b, 1], velocity[b, 2],
-                          velocity[b, 3], velocity[b, 4], velocity[b, 5])
-                else:
-                    sign, m, turn = 1.0, row_inv_mass[c, 1], TURN_B
-                    va = (velocity[a, 0], velocity[a, 1], velocity[a, 2],
-                          velocity[a, 3], velocity[a, 4], velocity[a, 5])
-                    vb = (u0, u1, u2, u3, u4, u5)
-                # Friction circle on the total friction, then the normal row on the total.
-                v1 = v2 = 0.0
-                for e in range(3):
-                    dv, wa, wb = vb[e] - va[e], va[3 + e], vb[3 + e]
-                    v1 += rows[c, 1, DIRECTION + e] * dv - rows[c, 1, ARM_A + e] * wa + rows[c, 1, ARM_B + e] * wb
-                    v2 += rows[c, 2, DIRECTION + e] * dv - rows[c, 2, ARM_A + e] * wa + rows[c, 2, ARM_B + e] * wb
-                old1 = friction[c, 0] + shock_friction[c, 0]
-                old2 = friction[c, 1] + shock_friction[c, 1]
-                new1 = old1 - support_mass[c, 1] * v1
-                new2 = old2 - support_mass[c, 2] * v2
-                magnitude = np.sqrt(new1 * new1 + new2 * new2)
-                limit = mu[c] * (impulse[c] + shock[c])
-                if magnitude > limit:
-                    new1 *= limit / magnitude
-                    new2 *= limit / magnitude
-                d1, d2 = new1 - old1, new2 - old2
-                largest = max(largest, abs(d1) / support_mass[c, 1], abs(d2) / support_mass[c, 2])
-                shock_friction[c, 0] += d1
-                shock_friction[c, 1] += d2
-                sm = sign * m
-                u0 += sm * (rows[c, 1, DIRECTION + 0] * d1 + rows[c, 2, DIRECTION + 0] * d2)
-                u1 += sm * (rows[c, 1, DIRECTION + 1] * d1 + rows[c, 2, DIRECTION + 1] * d2)
-                u2 += sm * (rows[c, 1, DIRECTION + 2] * d1 + rows[c, 2, DIRECTION + 2] * d2)
-                u3 += sign * (rows[c, 1, turn + 0] * d1 + rows[c, 2, turn + 0] * d2)
-                u4 += sign * (rows[c, 1, turn + 1] * d1 + rows[c, 2, turn + 1] * d2)
-                u5 += sign * (rows[c, 1, turn + 2] * d1 + rows[c, 2, turn + 2] * d2)
-                if upper == a:
-                    va = (u0, u1, u2, u3, u4, u5)
-                else:
-                    vb = (u0, u1, u2, u3, u4, u5)
-                vn = 0.0
-                for e in range(3):
-                    vn += (rows[c, 0, DIRECTION + e] * (vb[e] - va[e])
-                           - rows[c, 0, ARM_A + e] * va[3 + e] + rows[c, 0, ARM_B + e] * vb[3 + e])
-                total = impulse[c] + shock[c]
-                d = max(total + support_mass[c, 0] * (target[c] - vn), 0.0) - total
-                largest = max(largest, abs(d) / support_mass[c, 0])
-                shock[c] += d
-                smd = sm * d
-                u0 += smd * rows[c, 0, DIRECTION + 0]
-                u1 += smd * rows[c, 0, DIRECTION + 1]
-                u2 += smd * rows[c, 0, DIRECTION + 2]
-                u3 += sign * d * rows[c, 0, turn + 0]
-                u4 += sign * d * rows[c, 0, turn + 1]
-                u5 += sign * d * rows[c, 0, turn + 2]
-            if largest < SHOCK_TOLERANCE:
-                break
-        velocity[upper, 0], velocity[upper, 1], velocity[upper, 2] = u0, u1, u2
-        velocity[upper, 3], velocity[upper, 4], velocity[upper, 5] = u3, u4, u5
-        group_start = group_end
+            u0 += sm * (rows[c, 1, DIRECTION + 0] * d1 + rows[c, 2, DIRECTION + 0] * d2)
+            u1 += sm * (rows[c, 1, DIRECTION + 1] * d1 + rows[c, 2, DIRECTION + 1] * d2)
+            u2 += sm * (rows[c, 1, DIRECTION + 2] * d1 + rows[c, 2, DIRECTION + 2] * d2)
+            u3 += sign * (rows[c, 1, turn + 0] * d1 + rows[c, 2, turn + 0] * d2)
+            u4 += sign * (rows[c, 1, turn + 1] * d1 + rows[c, 2, turn + 1] * d2)
+            u5 += sign * (rows[c, 1, turn + 2] * d1 + rows[c, 2, turn + 2] * d2)
+            if upper == a:
+                va = (u0, u1, u2, u3, u4, u5)
+            else:
+                vb = (u0, u1, u2, u3, u4, u5)
+            vn = 0.0
+            for e in range(3):
+                vn += (rows[c, 0, DIRECTION + e] * (vb[e] - va[e])
+                       - rows[c, 0, ARM_A + e] * va[3 + e] + rows[c, 0, ARM_B + e] * vb[3 + e])
+            total = impulse[c] + shock[c]
+            d = max(total + support_mass[c, 0] * (target[c] - vn), 0.0) - total
+            largest = max(largest, abs(d) / support_mass[c, 0])
+            shock[c] += d
+            smd = sm * d
+            u0 += smd * rows[c, 0, DIRECTION + 0]
+            u1 += smd * rows[c, 0, DIRECTION + 1]
+            u2 += smd * rows[c, 0, DIRECTION + 2]
+            u3 += sign * d * rows[c, 0, turn + 0]
+            u4 += sign * d * rows[c, 0, turn + 1]
+            u5 += sign * d * rows[c, 0, turn + 2]
+        if largest < SHOCK_TOLERANCE:
+            break
+    velocity[upper, 0], velocity[upper, 1], velocity[upper, 2] = u0, u1, u2
+    velocity[upper, 3], velocity[upper, 4], velocity[upper, 5] = u3, u4, u5
+
+
+@njit(cache=True, nogil=True)
+def shock_propagation_shared(contacts, bodies, threads):
+    """shock_propagation on up to two threads, bit for bit the serial result: the groups level
+    by level (solve_schedule.shock_levels), claimed a few at a time by whichever thread is free,
+    each run once every group of the levels below it is done. False, having solved nothing,
+    when the levels are too thin to share."""
+    order, supports = contacts.support_order, contacts.support_count[0]
+    group_start = np.empty(supports + 1, np.int64)
+    by_level = np.empty(supports, np.int64)
+    level_start = np.empty(supports + 1, np.int64)
+    groups, levels = shock_levels(order, supports, contacts.support_body, contacts.velocity_a,
+                                  contacts.velocity_b, len(bodies.active) + 1, group_start,
+                                  by_level, level_start)
+    if groups < MIN_GROUPS_PER_LEVEL * levels:
+        return False
+    # How many groups must be done before the one in each place may run: its level's start.
+    need = np.empty(groups, np.int64)
+    for level in range(levels):
+        need[level_start[level]:level_start[level + 1]] = level_start[level]
+    sync = np.zeros(2 * SYNC_STRIDE, np.int64)  # groups claimed; groups done (a line each)
+    run_shock_workers(min(threads, 2), bodies.velocity, contacts.rows, contacts.row_inv_mass,
+                      contacts.contact_target, contacts.friction_coefficient, contacts.impulse,
+                      contacts.friction, contacts.support_impulse, contacts.support_friction,
+                      contacts.support_mass, order, contacts.velocity_a, contacts.velocity_b,
+                      contacts.support_body, group_start, by_level, need, groups, sync)
+    return True
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def run_shock_workers(workers, velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
+                      shock_friction, support_mass, order, velocity_a, velocity_b, support_body,
+                      group_start, by_level, need, groups, sync):
+    for _ in prange(workers):
+        shock_worker(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
+                     shock_friction, support_mass, order, velocity_a, velocity_b, support_body,
+                     group_start, by_level, need, groups, sync)
+
+
+@njit(cache=True, nogil=True)
+def shock_worker(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
+                 shock_friction, support_mass, order, velocity_a, velocity_b, support_body,
+                 group_start, by_level, need, groups, sync):
+    """One thread of the shared shock propagation: claims SHOCK_CLAIM groups at a time, in
+    level order, until none are left. A thread alone (the other late, or Numba running the
+    region's iterations one after the other) claims and runs them all: every group it waits
+    for was claimed before its own, by itself (done) or by a thread that is running."""
+    claimed, done = 0, SYNC_STRIDE
+    while True:
+        first = atomic_add(sync, claimed, SHOCK_CLAIM)
+        if first >= groups:
+            return
+        for place in range(first, min(first + SHOCK_CLAIM, groups)):
+            spins = 0
+            while atomic_load(sync, done) < need[place]:
+                spins += 1
+                spin_pause()
+                if spins % SPINS_BEFORE_YIELD == 0:
+                    yield_thread()
+            g = by_level[place]
+            start, end = group_start[g], group_start[g + 1]
+            shock_group(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
+                        shock_friction, support_mass, order, velocity_a, velocity_b, start, end,
+                        support_body[order[start]])
+            atomic_add(sync, done, 1)
 
 
 @njit(cache=True, nogil=True)
@@ -603,7 +690,7 @@ def contact_pass(contacts, bodies, iterations, gravity, threads):
     step's warm start."""
     solve_rows(bodies.velocity, contacts, iterations, contacts.contact_target, contacts.impulse,
                contacts.friction, True, bodies.position, gravity, threads)
-    shock_propagation(contacts, bodies)
+    shock_propagation(contacts, bodies, threads)
     solve_rows(bodies.pseudo_velocity, contacts, iterations, contacts.position_target,
                contacts.position_impulse, contacts.friction, False, bodies.position, gravity, threads)
     rows = contacts.rows

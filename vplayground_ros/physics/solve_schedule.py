@@ -23,6 +23,9 @@ Why not Box2D v3's graph colouring: it changes the order in which the points are
 stacks and walls depend on the height order) and needs a wait per colour per sweep; a level
 schedule keeps the order but needs a wait per level (tens to hundreds a sweep on a pile). Two
 chains wait only at the bodies the cut crosses.
+
+Shock propagation is one pass, not sweeps, and each of its groups writes one body: there a
+level schedule (shock_levels) pays, a wait per level of the pile, a storey each.
 """
 import numpy as np
 from numba import njit
@@ -163,3 +166,68 @@ def split_chains(points, count, contacts, position, gravity, items, chain_start,
             need_of[slot] = need
             waiting += direction == 0
     return waiting
+
+
+@njit(cache=True, nogil=True)
+def shock_levels(order, supports, support_body, velocity_a, velocity_b, rows, group_start,
+                 by_level, level_start):
+    """Shock propagation's schedule on two threads (its own, not the chains above): the groups
+    of support points, one per upper body (order[:supports], grouped by contact_solver's
+    order_supports), in levels such that the groups of one level share no body that one of them
+    writes. A group writes only its upper body's velocity and reads its supports' (bodies below,
+    or static ones, which nothing writes), so it goes one level above every earlier group (in
+    the serial order) that wrote a body it reads or read the body it writes: each group then
+    reads what it read in the serial pass, in whatever order a level's groups run, and the
+    result is the serial one bit for bit. A pile's landing has a few levels of hundreds of
+    groups (each stack a level per storey), a tower one level per box.
+
+    Fills group_start[:groups + 1] (each group's first place in order, then `supports`),
+    by_level[:groups] (the groups level by level, each level in serial order) and
+    level_start[:levels + 1]; returns (groups, levels). `rows`: velocity rows (bodies + 1)."""
+    groups = 0
+    k = 0
+    while k < supports:
+        group_start[groups] = k
+        groups += 1
+        upper = support_body[order[k]]
+        k += 1
+        while k < supports and support_body[order[k]] == upper:
+            k += 1
+    group_start[groups] = supports
+    # The level of the last group (1-based; 0: none) that wrote each body, and the highest
+    # level that read it. Only the bodies of these points are set.
+    written = np.empty(rows, np.int64)
+    read = np.empty(rows, np.int64)
+    for k in range(supports):
+        c = order[k]
+        written[velocity_a[c]] = written[velocity_b[c]] = 0
+        read[velocity_a[c]] = read[velocity_b[c]] = 0
+    level = np.empty(groups, np.int64)
+    levels = 0
+    for g in range(groups):
+        upper = support_body[order[group_start[g]]]
+        lv = read[upper]
+        for k in range(group_start[g], group_start[g + 1]):
+            c = order[k]
+            other = velocity_b[c] if velocity_a[c] == upper else velocity_a[c]
+            lv = max(lv, written[other])
+        lv += 1
+        level[g] = lv
+        written[upper] = lv
+        for k in range(group_start[g], group_start[g + 1]):
+            c = order[k]
+            other = velocity_b[c] if velocity_a[c] == upper else velocity_a[c]
+            read[other] = max(read[other], lv)
+        levels = max(levels, lv)
+    # The groups by level (a counting sort: each level keeps the serial order).
+    level_start[:levels + 1] = 0
+    for g in range(groups):
+        level_start[level[g]] += 1
+    for lv in range(levels):
+        level_start[lv + 1] += level_start[lv]
+    cursor = level_start[:levels].copy()
+    for g in range(groups):
+        lv = level[g] - 1
+        by_level[cursor[lv]] = g
+        cursor[lv] += 1
+    return groups, levels
