@@ -5,7 +5,8 @@ Scenes: `loose` (issue 20's: 0.5 m boxes, 500 kg/m^3, friction 0.6/0.4, elastici
 from a spread 10-layer grid with random yaw and small tilts) and `dense` (a jittered 0.8 m grid).
 Prints the falling phase (first 2 s) median / p95 / max, the last second, the whole run, where a
 falling step's time goes (the stage timers, from a second identical run), and the step of
-`--asleep` boxes standing in columns of two, every one of them frozen.
+`--asleep` boxes standing in columns of two, every one of them frozen. With `--runs N` the falling
+phase runs N times: each run's longest step, and each step's fastest over the runs.
 
 `--compare-threads` instead runs the falling phase with the contact solve on one thread and on
 two (World.solver_threads), interleaved `--rounds` times, and prints per step the wall time, the
@@ -13,7 +14,7 @@ stepping thread's CPU and the CPU of the whole process (both solver threads), wi
 and the load average; the two settings' final states are compared too.
 
     python bench/pile.py [--scene loose|dense] [--boxes 1000] [--seconds 10] [--asleep 5000]
-                         [--solver-threads 1|2]
+                         [--solver-threads 1|2] [--runs 1]
     python bench/pile.py --compare-threads [--scene loose|dense] [--boxes 1000] [--rounds 3]
 """
 import argparse
@@ -155,6 +156,22 @@ def asleep_step(count, steps=2000, solver_threads=1):
     return np.median(cpu), cpu.max(), batched, int(world.state()["frozen"].sum())
 
 
+def fastest_steps(scene, count, solver_threads, first_run, runs_in_all):
+    """The falling phase `runs_in_all` times (the same steps: the engine is deterministic):
+    each run's longest step, and each step's fastest time over the runs, whose median / p95 /
+    max say what the steps cost the engine when nothing else on the machine took its share (on
+    a shared VM one step's time varies by tens of per cent from run to run)."""
+    runs = [first_run]
+    for _ in range(runs_in_all - 1):
+        world = build_pile(count, scene=scene, solver_threads=solver_threads)
+        runs.append(timed_steps(world, len(first_run))[0])
+    fastest = np.min(runs, axis=0)
+    print(f"falling phase, {runs_in_all} runs: longest step of each run "
+          + ", ".join(f"{run.max():.2f}" for run in runs) + f" ms (step {', '.join(str(int(run.argmax())) for run in runs)}); "
+          f"each step's fastest: median {np.median(fastest):.2f}, p95 {np.percentile(fastest, 95):.2f}, "
+          f"max {fastest.max():.2f} ms (step {int(fastest.argmax())})")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scene", choices=sorted(SCENES), default="loose")
@@ -166,6 +183,8 @@ def main():
     parser.add_argument("--compare-threads", action="store_true",
                         help="falling phase with 1 and 2 solver threads, and the speed-up")
     parser.add_argument("--rounds", type=int, default=3, help="rounds of --compare-threads")
+    parser.add_argument("--runs", type=int, default=1,
+                        help="falling phases timed in all: with more than 1, also each step's fastest")
     args = parser.parse_args()
     if args.compare_threads:
         warm_up()
@@ -194,6 +213,8 @@ def main():
     print(f"{frozen}/{args.boxes} frozen at the end, "
           f"{world.stats['points'] / steps:.0f} contact points and {world.stats['pairs'] / steps:.0f} "
           "pairs per step on average")
+    if args.runs > 1:
+        fastest_steps(args.scene, args.boxes, args.solver_threads, clocks["cpu"][: FALLING_SECONDS * rate], args.runs)
     split = stage_split(args.scene, args.boxes, rate, args.solver_threads)
     print(f"falling-phase stages, ms/step (total {sum(split.values()):.3f}): "
           + ", ".join(f"{stage} {ms:.3f}" for stage, ms in split.items()))
