@@ -7,7 +7,7 @@ import pytest
 from helpers import pile, pyramid, tower
 from vplayground_ros.physics import World
 from vplayground_ros.physics.contact_solver import MAX_WAITING_SHARE, MIN_GROUPS_PER_LEVEL, PARALLEL_MIN_POINTS
-from vplayground_ros.physics.solve_schedule import NO_WAIT, shock_levels, split_chains
+from vplayground_ros.physics.solve_schedule import NO_WAIT, shock_levels, split_chains, support_groups
 from vplayground_ros.physics.step_context import newest_contacts
 
 NO_FREEZING = {"freezing": {"enabled": False}}
@@ -34,9 +34,10 @@ def last_levels(world):
     contacts = newest_contacts(world._contacts)
     supports = contacts.support_count[0]
     group_start, by_level, level_start = (np.empty(supports + 1, np.int64) for _ in range(3))
-    groups, levels = shock_levels(contacts.support_order, supports, contacts.support_body,
-                                  contacts.velocity_a, contacts.velocity_b,
-                                  len(world._bodies.active) + 1, group_start, by_level, level_start)
+    groups = support_groups(contacts.support_order, supports, contacts.support_body, group_start)
+    levels = shock_levels(contacts.support_order, contacts.support_body, contacts.velocity_a,
+                          contacts.velocity_b, len(world._bodies.active) + 1, group_start, groups,
+                          by_level, level_start)
     assert sorted(by_level[:groups]) == list(range(groups))
     return supports, groups, np.diff(level_start[:levels + 1]).tolist()
 

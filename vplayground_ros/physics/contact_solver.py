@@ -37,7 +37,7 @@ from .constants import (LINEAR_SLOP, MAX_CORRECTION_SPEED, POSITION_CORRECTION,
                         STICKING_SPEED)
 from .contact import ARM_A, ARM_B, DIRECTION, TURN_A, TURN_B
 from .math3d import cross
-from .solve_schedule import shock_levels, split_chains
+from .solve_schedule import shock_levels, split_chains, support_groups
 
 # A row whose target is this low is not solved in that pass.
 INACTIVE = -1.0e30
@@ -501,25 +501,23 @@ def shock_propagation(contacts, bodies, threads):
     0.36 mm instead of 1.3, the 20-row pyramid 1.6 instead of 5.8).
     With `threads` > 1 and enough support points, two threads share the groups level by level
     (solve_schedule.shock_levels), with the same result."""
-    order, supports = contacts.support_order, contacts.support_count[0]
-    if threads > 1 and supports >= PARALLEL_MIN_POINTS and shock_propagation_shared(contacts, bodies, threads):
+    order, supports, support_body = contacts.support_order, contacts.support_count[0], contacts.support_body
+    group_start = np.empty(supports + 1, np.int64)
+    groups = support_groups(order, supports, support_body, group_start)
+    if threads > 1 and supports >= PARALLEL_MIN_POINTS and shock_propagation_shared(
+            contacts, bodies, threads, group_start, groups):
         return
     velocity, rows, row_inv_mass = bodies.velocity, contacts.rows, contacts.row_inv_mass
     target, mu = contacts.contact_target, contacts.friction_coefficient
     impulse, friction = contacts.impulse, contacts.friction
     shock, shock_friction = contacts.support_impulse, contacts.support_friction
     support_mass = contacts.support_mass
-    velocity_a, velocity_b, support_body = contacts.velocity_a, contacts.velocity_b, contacts.support_body
-    group_start = 0
-    while group_start < supports:
-        upper = support_body[order[group_start]]
-        group_end = group_start + 1
-        while group_end < supports and support_body[order[group_end]] == upper:
-            group_end += 1
+    velocity_a, velocity_b = contacts.velocity_a, contacts.velocity_b
+    for g in range(groups):
+        start, end = group_start[g], group_start[g + 1]
         shock_group(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
-                    shock_friction, support_mass, order, velocity_a, velocity_b, group_start,
-                    group_end, upper)
-        group_start = group_end
+                    shock_friction, support_mass, order, velocity_a, velocity_b, start, end,
+                    support_body[order[start]])
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -618,18 +616,16 @@ def shock_group(velocity, rows, row_inv_mass, target, mu, impulse, friction, sho
 
 
 @njit(cache=True, nogil=True)
-def shock_propagation_shared(contacts, bodies, threads):
-    """shock_propagation on up to two threads, bit for bit the serial result: the groups level
-    by level (solve_schedule.shock_levels), claimed a few at a time by whichever thread is free,
-    each run once every group of the levels below it is done. False, having solved nothing,
-    when the levels are too thin to share."""
-    order, supports = contacts.support_order, contacts.support_count[0]
-    group_start = np.empty(supports + 1, np.int64)
-    by_level = np.empty(supports, np.int64)
-    level_start = np.empty(supports + 1, np.int64)
-    groups, levels = shock_levels(order, supports, contacts.support_body, contacts.velocity_a,
-                                  contacts.velocity_b, len(bodies.active) + 1, group_start,
-                                  by_level, level_start)
+def shock_propagation_shared(contacts, bodies, threads, group_start, groups):
+    """shock_propagation on up to two threads, bit for bit the serial result: the groups
+    (support_groups) level by level (solve_schedule.shock_levels), claimed a few at a time by
+    whichever thread is free, each run once every group of the levels below it is done. False,
+    having solved nothing, when the levels are too thin to share."""
+    order = contacts.support_order
+    by_level = np.empty(groups, np.int64)
+    level_start = np.empty(groups + 1, np.int64)
+    levels = shock_levels(order, contacts.support_body, contacts.velocity_a, contacts.velocity_b,
+                          len(bodies.active) + 1, group_start, groups, by_level, level_start)
     if groups < MIN_GROUPS_PER_LEVEL * levels:
         return False
     # How many groups must be done before the one in each place may run: its level's start.

@@ -169,21 +169,10 @@ def split_chains(points, count, contacts, position, gravity, items, chain_start,
 
 
 @njit(cache=True, nogil=True)
-def shock_levels(order, supports, support_body, velocity_a, velocity_b, rows, group_start,
-                 by_level, level_start):
-    """Shock propagation's schedule on two threads (its own, not the chains above): the groups
-    of support points, one per upper body (order[:supports], grouped by contact_solver's
-    order_supports), in levels such that the groups of one level share no body that one of them
-    writes. A group writes only its upper body's velocity and reads its supports' (bodies below,
-    or static ones, which nothing writes), so it goes one level above every earlier group (in
-    the serial order) that wrote a body it reads or read the body it writes: each group then
-    reads what it read in the serial pass, in whatever order a level's groups run, and the
-    result is the serial one bit for bit. A pile's landing has a few levels of hundreds of
-    groups (each stack a level per storey), a tower one level per box.
-
-    Fills group_start[:groups + 1] (each group's first place in order, then `supports`),
-    by_level[:groups] (the groups level by level, each level in serial order) and
-    level_start[:levels + 1]; returns (groups, levels). `rows`: velocity rows (bodies + 1)."""
+def support_groups(order, supports, support_body, group_start):
+    """Shock propagation's groups: order[:supports] holds each upper body's support points
+    together (contact_solver.order_supports). Fills group_start[:groups + 1] (each group's
+    first place in order, then `supports`) and returns how many groups there are."""
     groups = 0
     k = 0
     while k < supports:
@@ -194,11 +183,28 @@ def shock_levels(order, supports, support_body, velocity_a, velocity_b, rows, gr
         while k < supports and support_body[order[k]] == upper:
             k += 1
     group_start[groups] = supports
+    return groups
+
+
+@njit(cache=True, nogil=True)
+def shock_levels(order, support_body, velocity_a, velocity_b, rows, group_start, groups, by_level,
+                 level_start):
+    """Shock propagation's schedule on two threads (its own, not the chains above): the groups
+    (support_groups, one per upper body) in levels such that the groups of one level share no
+    body that one of them writes. A group writes only its upper body's velocity and reads its
+    supports' (bodies below, or static ones, which nothing writes), so it goes one level above
+    every earlier group (in the serial order) that wrote a body it reads or read the body it
+    writes: each group then reads what it read in the serial pass, in whatever order a level's
+    groups run, and the result is the serial one bit for bit. A pile's landing has a few levels
+    of hundreds of groups (each stack a level per storey), a tower one level per box.
+
+    Fills by_level[:groups] (the groups level by level, each level in serial order) and
+    level_start[:levels + 1]; returns levels. `rows`: velocity rows (bodies + 1)."""
     # The level of the last group (1-based; 0: none) that wrote each body, and the highest
     # level that read it. Only the bodies of these points are set.
     written = np.empty(rows, np.int64)
     read = np.empty(rows, np.int64)
-    for k in range(supports):
+    for k in range(group_start[groups]):
         c = order[k]
         written[velocity_a[c]] = written[velocity_b[c]] = 0
         read[velocity_a[c]] = read[velocity_b[c]] = 0
@@ -230,4 +236,4 @@ def shock_levels(order, supports, support_body, velocity_a, velocity_b, rows, gr
         lv = level[g] - 1
         by_level[cursor[lv]] = g
         cursor[lv] += 1
-    return groups, levels
+    return levels
