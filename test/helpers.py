@@ -10,11 +10,13 @@ from vplayground_ros.physics import World
 WAIT_TIMEOUT = 30.0
 
 
-def wait_for(condition, timeout=WAIT_TIMEOUT):
-    """Polls `condition` until it holds (returns True) or `timeout` s pass (the test fails)."""
+def wait_for(condition, timeout=WAIT_TIMEOUT, explain=None):
+    """Polls `condition` until it holds (returns True) or `timeout` s pass: the test fails then,
+    with what `explain()` says (the state a timeout should show, read when it happens)."""
     deadline = time.monotonic() + timeout
     while not condition():
-        assert time.monotonic() < deadline, f"timed out after {timeout} s"
+        if time.monotonic() >= deadline:
+            raise AssertionError(f"timed out after {timeout} s" + (f": {explain()}" if explain else ""))
         time.sleep(0.005)
     return True
 

@@ -64,8 +64,8 @@ def ros():
     harness.client.create_subscription(
         TransformStamped, f"{NS}/transforms",
         lambda m: harness.frames.__setitem__((m.header.frame_id, m.child_frame_id), m), 100)
-    assert wait_for(lambda: all(topic in harness.latest for topic in TOPICS), timeout=60), \
-        sorted(set(TOPICS) - set(harness.latest))
+    assert wait_for(lambda: all(topic in harness.latest for topic in TOPICS), timeout=60,
+                    explain=lambda: sorted(set(TOPICS) - set(harness.latest)))
     yield harness
     harness.close()
 
