@@ -6,7 +6,8 @@ import pytest
 
 from helpers import pile, pyramid, tower
 from vplayground_ros.physics import World
-from vplayground_ros.physics.contact_solver import MAX_WAITING_SHARE, MIN_GROUPS_PER_LEVEL, PARALLEL_MIN_POINTS
+from vplayground_ros.physics.contact_solver import (MAX_WAITING_SHARE, MIN_GROUPS_PER_LEVEL, PARALLEL_MIN_POINTS,
+                                                   SHOCK_ROW_SIZE, reads_body, shock_group, shock_propagation)
 from vplayground_ros.physics.solve_schedule import NO_WAIT, shock_levels, split_chains, support_groups
 from vplayground_ros.physics.step_context import newest_contacts
 
@@ -165,3 +166,48 @@ def test_shared_shock_propagation_gives_the_serial_result_bit_for_bit():
     assert_same_bytes(serial, snapshot(shared))
     if numba.config.NUMBA_NUM_THREADS >= 2:
         assert_same_bytes(serial, snapshot(stepped(build, 2, 96, numba_threads=1)))
+
+
+def shock_in_pairs_and_one_at_a_time(world):
+    """The last step's shock propagation run again from its contacts as the pass runs it (in
+    pairs where it can) and one group after the other: (whether each group could pair with the
+    next, whether the two gave the same bytes)."""
+    contacts, bodies = newest_contacts(world._contacts), world._bodies
+    order, supports = contacts.support_order, contacts.support_count[0]
+    group_start = np.empty(supports + 1, np.int64)
+    groups = support_groups(order, supports, contacts.support_body, group_start)
+    upper = [contacts.support_body[order[group_start[g]]] for g in range(groups)]
+    pairable = [not reads_body(order, contacts.velocity_a, contacts.velocity_b, group_start[g + 1],
+                               group_start[g + 2], upper[g]) for g in range(groups - 1)]
+
+    def copy(parts):
+        return type(parts)(*(part.copy() for part in parts))
+    paired_contacts, paired_bodies = copy(contacts), copy(bodies)
+    shock_propagation(paired_contacts, paired_bodies, 1)
+    c, b = copy(contacts), copy(bodies)
+    view = np.empty((supports, 3, SHOCK_ROW_SIZE))
+    for g in range(groups):
+        shock_group(b.velocity, c.rows, c.row_inv_mass, c.contact_target, c.friction_coefficient,
+                    c.impulse, c.friction, c.support_impulse, c.support_friction, c.support_mass,
+                    order, c.velocity_a, c.velocity_b, group_start[g], group_start[g + 1], upper[g],
+                    view)
+    assert not np.array_equal(b.velocity, bodies.velocity)  # the pass did something
+    same = (np.array_equal(paired_bodies.velocity, b.velocity)
+            and np.array_equal(paired_contacts.support_impulse, c.support_impulse)
+            and np.array_equal(paired_contacts.support_friction, c.support_friction))
+    return pairable, same
+
+
+def test_shock_propagation_in_pairs_gives_the_one_at_a_time_result():
+    """Shock propagation runs two groups at once (shock_pair) where the second does not stand on
+    the first: a falling pile's groups, all in pairs, and a tower's, none (each box stands on the
+    one before), leave every velocity and one-sided impulse as one group after the other does."""
+    world = pile(300, seed=3, settings=NO_FREEZING)
+    world.solver_threads = 1
+    world.step(120)
+    pairable, same = shock_in_pairs_and_one_at_a_time(world)
+    assert len(pairable) >= 100 and all(pairable) and same
+    world = tower(6, settings=NO_FREEZING)
+    world.step(10)
+    pairable, same = shock_in_pairs_and_one_at_a_time(world)
+    assert len(pairable) == 5 and not any(pairable) and same

@@ -499,13 +499,17 @@ def shock_propagation(contacts, bodies, threads):
     resting stacks and a jostling pile took 8-10 a body instead of 12-15), and 10 warm sweeps
     hold stacks better than 16 cold ones did (SHOCK_SWEEPS: over 20 s the 55-brick wall drifted
     0.36 mm instead of 1.3, the 20-row pyramid 1.6 instead of 5.8).
-    With `threads` > 1 and enough support points, two threads share the groups level by level
-    (solve_schedule.shock_levels), with the same result."""
+    A body's sweeps are one chain of dependent arithmetic, so two groups that do not read each
+    other's upper body run interleaved (shock_pair), which at the loose pile's landing takes
+    about a fifth off the pass. With `threads` > 1 and enough support points, two threads share
+    the groups level by level (solve_schedule.shock_levels). Either way the result is that of
+    one group after the other."""
     order, supports, support_body = contacts.support_order, contacts.support_count[0], contacts.support_body
     group_start = np.empty(supports + 1, np.int64)
     groups = support_groups(order, supports, support_body, group_start)
+    view = np.empty((supports, 3, SHOCK_ROW_SIZE))
     if threads > 1 and supports >= PARALLEL_MIN_POINTS and shock_propagation_shared(
-            contacts, bodies, threads, group_start, groups):
+            contacts, bodies, threads, group_start, groups, view):
         return
     velocity, rows, row_inv_mass = bodies.velocity, contacts.rows, contacts.row_inv_mass
     target, mu = contacts.contact_target, contacts.friction_coefficient
@@ -513,110 +517,187 @@ def shock_propagation(contacts, bodies, threads):
     shock, shock_friction = contacts.support_impulse, contacts.support_friction
     support_mass = contacts.support_mass
     velocity_a, velocity_b = contacts.velocity_a, contacts.velocity_b
-    for g in range(groups):
+    # Groups in order, two at a time where the second does not read the first's upper body
+    # (the first may read the second's: its velocity stays put until both are done).
+    g = 0
+    while g < groups:
         start, end = group_start[g], group_start[g + 1]
-        shock_group(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
-                    shock_friction, support_mass, order, velocity_a, velocity_b, start, end,
-                    support_body[order[start]])
+        upper = support_body[order[start]]
+        if g + 1 < groups and not reads_body(order, velocity_a, velocity_b, end, group_start[g + 2], upper):
+            shock_pair(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
+                       shock_friction, support_mass, order, velocity_a, velocity_b, start, end,
+                       upper, end, group_start[g + 2], support_body[order[end]], view)
+            g += 2
+        else:
+            shock_group(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
+                        shock_friction, support_mass, order, velocity_a, velocity_b, start, end,
+                        upper, view)
+            g += 1
+
+
+# Shock propagation's per-row view of a support point (the last axis of its scratch array):
+# with the upper body's velocity u = (linear, angular), the row's relative velocity is
+# BIAS + LINEAR . u_linear + ANGULAR . u_angular, and an impulse j along it adds
+# j * PUSH_LINEAR and j * PUSH_ANGULAR to u.
+BIAS, LINEAR, ANGULAR, PUSH_LINEAR, PUSH_ANGULAR, MASS, INV_MASS = 0, 1, 4, 7, 10, 13, 14
+SHOCK_ROW_SIZE = 15
+
+
+@njit(cache=True, nogil=True, inline="always")
+def shock_start(velocity, rows, row_inv_mass, shock, shock_friction, support_mass, order,
+                velocity_a, velocity_b, group_start, group_end, upper, view):
+    """Fills one group's view (what the supports below do is final, so their part of each
+    row's relative velocity is taken once, BIAS) and returns its upper body's velocity with
+    last step's one-sided impulses applied again (a resting stack's sweeps start near their
+    answer)."""
+    for k in range(group_start, group_end):
+        c = order[k]
+        if upper == velocity_a[c]:
+            sign, m, arm, turn, below, below_arm = -1.0, row_inv_mass[c, 0], ARM_A, TURN_A, velocity_b[c], ARM_B
+        else:
+            sign, m, arm, turn, below, below_arm = 1.0, row_inv_mass[c, 1], ARM_B, TURN_B, velocity_a[c], ARM_A
+        for r in range(3):
+            bias = 0.0
+            for e in range(3):
+                bias -= sign * (rows[c, r, DIRECTION + e] * velocity[below, e]
+                                + rows[c, r, below_arm + e] * velocity[below, 3 + e])
+                view[k, r, LINEAR + e] = sign * rows[c, r, DIRECTION + e]
+                view[k, r, ANGULAR + e] = sign * rows[c, r, arm + e]
+                view[k, r, PUSH_LINEAR + e] = sign * m * rows[c, r, DIRECTION + e]
+                view[k, r, PUSH_ANGULAR + e] = sign * rows[c, r, turn + e]
+            view[k, r, BIAS] = bias
+            mass = support_mass[c, r]
+            view[k, r, MASS] = mass
+            view[k, r, INV_MASS] = 1.0 / mass if mass > 0.0 else 0.0
+    u0, u1, u2, u3, u4, u5 = (velocity[upper, 0], velocity[upper, 1], velocity[upper, 2],
+                              velocity[upper, 3], velocity[upper, 4], velocity[upper, 5])
+    for k in range(group_start, group_end):
+        c = order[k]
+        j0, j1, j2 = shock[c], shock_friction[c, 0], shock_friction[c, 1]
+        u0 += view[k, 0, PUSH_LINEAR + 0] * j0 + view[k, 1, PUSH_LINEAR + 0] * j1 + view[k, 2, PUSH_LINEAR + 0] * j2
+        u1 += view[k, 0, PUSH_LINEAR + 1] * j0 + view[k, 1, PUSH_LINEAR + 1] * j1 + view[k, 2, PUSH_LINEAR + 1] * j2
+        u2 += view[k, 0, PUSH_LINEAR + 2] * j0 + view[k, 1, PUSH_LINEAR + 2] * j1 + view[k, 2, PUSH_LINEAR + 2] * j2
+        u3 += view[k, 0, PUSH_ANGULAR + 0] * j0 + view[k, 1, PUSH_ANGULAR + 0] * j1 + view[k, 2, PUSH_ANGULAR + 0] * j2
+        u4 += view[k, 0, PUSH_ANGULAR + 1] * j0 + view[k, 1, PUSH_ANGULAR + 1] * j1 + view[k, 2, PUSH_ANGULAR + 1] * j2
+        u5 += view[k, 0, PUSH_ANGULAR + 2] * j0 + view[k, 1, PUSH_ANGULAR + 2] * j1 + view[k, 2, PUSH_ANGULAR + 2] * j2
+    return u0, u1, u2, u3, u4, u5
+
+
+@njit(cache=True, nogil=True, inline="always")
+def shock_point(u, k, c, view, target, mu, impulse, friction, shock, shock_friction):
+    """One support point of a sweep: the friction circle on the total friction, then the
+    normal row on the total. Returns the upper body's new velocity and the largest velocity
+    change a row made."""
+    u0, u1, u2, u3, u4, u5 = u
+    v1 = (view[k, 1, BIAS] + view[k, 1, LINEAR] * u0 + view[k, 1, LINEAR + 1] * u1 + view[k, 1, LINEAR + 2] * u2
+          + view[k, 1, ANGULAR] * u3 + view[k, 1, ANGULAR + 1] * u4 + view[k, 1, ANGULAR + 2] * u5)
+    v2 = (view[k, 2, BIAS] + view[k, 2, LINEAR] * u0 + view[k, 2, LINEAR + 1] * u1 + view[k, 2, LINEAR + 2] * u2
+          + view[k, 2, ANGULAR] * u3 + view[k, 2, ANGULAR + 1] * u4 + view[k, 2, ANGULAR + 2] * u5)
+    old1 = friction[c, 0] + shock_friction[c, 0]
+    old2 = friction[c, 1] + shock_friction[c, 1]
+    new1 = old1 - view[k, 1, MASS] * v1
+    new2 = old2 - view[k, 2, MASS] * v2
+    magnitude = np.sqrt(new1 * new1 + new2 * new2)
+    limit = mu[c] * (impulse[c] + shock[c])
+    if magnitude > limit:
+        new1 *= limit / magnitude
+        new2 *= limit / magnitude
+    d1, d2 = new1 - old1, new2 - old2
+    largest = max(abs(d1) * view[k, 1, INV_MASS], abs(d2) * view[k, 2, INV_MASS])
+    shock_friction[c, 0] += d1
+    shock_friction[c, 1] += d2
+    u0 += view[k, 1, PUSH_LINEAR + 0] * d1 + view[k, 2, PUSH_LINEAR + 0] * d2
+    u1 += view[k, 1, PUSH_LINEAR + 1] * d1 + view[k, 2, PUSH_LINEAR + 1] * d2
+    u2 += view[k, 1, PUSH_LINEAR + 2] * d1 + view[k, 2, PUSH_LINEAR + 2] * d2
+    u3 += view[k, 1, PUSH_ANGULAR + 0] * d1 + view[k, 2, PUSH_ANGULAR + 0] * d2
+    u4 += view[k, 1, PUSH_ANGULAR + 1] * d1 + view[k, 2, PUSH_ANGULAR + 1] * d2
+    u5 += view[k, 1, PUSH_ANGULAR + 2] * d1 + view[k, 2, PUSH_ANGULAR + 2] * d2
+    vn = (view[k, 0, BIAS] + view[k, 0, LINEAR] * u0 + view[k, 0, LINEAR + 1] * u1 + view[k, 0, LINEAR + 2] * u2
+          + view[k, 0, ANGULAR] * u3 + view[k, 0, ANGULAR + 1] * u4 + view[k, 0, ANGULAR + 2] * u5)
+    total = impulse[c] + shock[c]
+    d = max(total + view[k, 0, MASS] * (target[c] - vn), 0.0) - total
+    largest = max(largest, abs(d) * view[k, 0, INV_MASS])
+    shock[c] += d
+    return ((u0 + view[k, 0, PUSH_LINEAR + 0] * d, u1 + view[k, 0, PUSH_LINEAR + 1] * d,
+             u2 + view[k, 0, PUSH_LINEAR + 2] * d, u3 + view[k, 0, PUSH_ANGULAR + 0] * d,
+             u4 + view[k, 0, PUSH_ANGULAR + 1] * d, u5 + view[k, 0, PUSH_ANGULAR + 2] * d), largest)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def store_velocity(velocity, body, u):
+    velocity[body, 0], velocity[body, 1], velocity[body, 2] = u[0], u[1], u[2]
+    velocity[body, 3], velocity[body, 4], velocity[body, 5] = u[3], u[4], u[5]
 
 
 @njit(cache=True, nogil=True, inline="always")
 def shock_group(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock, shock_friction,
-                support_mass, order, velocity_a, velocity_b, group_start, group_end, upper):
+                support_mass, order, velocity_a, velocity_b, group_start, group_end, upper, view):
     """Shock propagation's sweeps over one upper body's support points, order[group_start:
-    group_end]: they change its velocity (and their one-sided impulses) only."""
+    group_end]: they change its velocity (and their one-sided impulses) only. `view` is scratch
+    (support points, 3, SHOCK_ROW_SIZE), indexed by place in `order`."""
+    u = shock_start(velocity, rows, row_inv_mass, shock, shock_friction, support_mass, order,
+                    velocity_a, velocity_b, group_start, group_end, upper, view)
     size = group_end - group_start
-    # The upper body's velocity lives in locals for the group's sweeps: what its supports do
-    # is final, so only these six change, and a sweep's chain of dependent arithmetic no
-    # longer waits on stores to and loads from the velocity array (a quarter of the pass).
-    # Every sum is the one the array version took: the results are bitwise the same.
-    u0, u1, u2, u3, u4, u5 = (velocity[upper, 0], velocity[upper, 1], velocity[upper, 2],
-                              velocity[upper, 3], velocity[upper, 4], velocity[upper, 5])
-    # Warm start: last step's one-sided impulses again, so a resting stack's sweeps start
-    # near their answer.
-    for k in range(size):
-        c = order[group_start + k]
-        if upper == velocity_a[c]:
-            sign, m, turn = -1.0, row_inv_mass[c, 0], TURN_A
-        else:
-            sign, m, turn = 1.0, row_inv_mass[c, 1], TURN_B
-        pn, f1, f2 = shock[c], shock_friction[c, 0], shock_friction[c, 1]
-        sm = sign * m
-        u0 += sm * (rows[c, 0, DIRECTION + 0] * pn + rows[c, 1, DIRECTION + 0] * f1 + rows[c, 2, DIRECTION + 0] * f2)
-        u1 += sm * (rows[c, 0, DIRECTION + 1] * pn + rows[c, 1, DIRECTION + 1] * f1 + rows[c, 2, DIRECTION + 1] * f2)
-        u2 += sm * (rows[c, 0, DIRECTION + 2] * pn + rows[c, 1, DIRECTION + 2] * f1 + rows[c, 2, DIRECTION + 2] * f2)
-        u3 += sign * (rows[c, 0, turn + 0] * pn + rows[c, 1, turn + 0] * f1 + rows[c, 2, turn + 0] * f2)
-        u4 += sign * (rows[c, 0, turn + 1] * pn + rows[c, 1, turn + 1] * f1 + rows[c, 2, turn + 1] * f2)
-        u5 += sign * (rows[c, 0, turn + 2] * pn + rows[c, 1, turn + 2] * f1 + rows[c, 2, turn + 2] * f2)
     for sweep in range(SHOCK_SWEEPS):
         largest = 0.0  # the largest velocity change of this sweep
-        for k in range(size):
-            c = order[group_start + (k if sweep % 2 == 0 else size - 1 - k)]
-            a, b = velocity_a[c], velocity_b[c]
-            # Only the upper body moves: A takes -j, B takes +j.
-            if upper == a:
-                sign, m, turn = -1.0, row_inv_mass[c, 0], TURN_A
-                va = (u0, u1, u2, u3, u4, u5)
-                vb = (velocity[b, 0], velocity[b, 1], velocity[b, 2],
-                      velocity[b, 3], velocity[b, 4], velocity[b, 5])
-            else:
-                sign, m, turn = 1.0, row_inv_mass[c, 1], TURN_B
-                va = (velocity[a, 0], velocity[a, 1], velocity[a, 2],
-                      velocity[a, 3], velocity[a, 4], velocity[a, 5])
-                vb = (u0, u1, u2, u3, u4, u5)
-            # Friction circle on the total friction, then the normal row on the total.
-            v1 = v2 = 0.0
-            for e in range(3):
-                dv, wa, wb = vb[e] - va[e], va[3 + e], vb[3 + e]
-                v1 += rows[c, 1, DIRECTION + e] * dv - rows[c, 1, ARM_A + e] * wa + rows[c, 1, ARM_B + e] * wb
-                v2 += rows[c, 2, DIRECTION + e] * dv - rows[c, 2, ARM_A + e] * wa + rows[c, 2, ARM_B + e] * wb
-            old1 = friction[c, 0] + shock_friction[c, 0]
-            old2 = friction[c, 1] + shock_friction[c, 1]
-            new1 = old1 - support_mass[c, 1] * v1
-            new2 = old2 - support_mass[c, 2] * v2
-            magnitude = np.sqrt(new1 * new1 + new2 * new2)
-            limit = mu[c] * (impulse[c] + shock[c])
-            if magnitude > limit:
-                new1 *= limit / magnitude
-                new2 *= limit / magnitude
-            d1, d2 = new1 - old1, new2 - old2
-            largest = max(largest, abs(d1) / support_mass[c, 1], abs(d2) / support_mass[c, 2])
-            shock_friction[c, 0] += d1
-            shock_friction[c, 1] += d2
-            sm = sign * m
-            u0 += sm * (rows[c, 1, DIRECTION + 0] * d1 + rows[c, 2, DIRECTION + 0] * d2)
-            u1 += sm * (rows[c, 1, DIRECTION + 1] * d1 + rows[c, 2, DIRECTION + 1] * d2)
-            u2 += sm * (rows[c, 1, DIRECTION + 2] * d1 + rows[c, 2, DIRECTION + 2] * d2)
-            u3 += sign * (rows[c, 1, turn + 0] * d1 + rows[c, 2, turn + 0] * d2)
-            u4 += sign * (rows[c, 1, turn + 1] * d1 + rows[c, 2, turn + 1] * d2)
-            u5 += sign * (rows[c, 1, turn + 2] * d1 + rows[c, 2, turn + 2] * d2)
-            if upper == a:
-                va = (u0, u1, u2, u3, u4, u5)
-            else:
-                vb = (u0, u1, u2, u3, u4, u5)
-            vn = 0.0
-            for e in range(3):
-                vn += (rows[c, 0, DIRECTION + e] * (vb[e] - va[e])
-                       - rows[c, 0, ARM_A + e] * va[3 + e] + rows[c, 0, ARM_B + e] * vb[3 + e])
-            total = impulse[c] + shock[c]
-            d = max(total + support_mass[c, 0] * (target[c] - vn), 0.0) - total
-            largest = max(largest, abs(d) / support_mass[c, 0])
-            shock[c] += d
-            smd = sm * d
-            u0 += smd * rows[c, 0, DIRECTION + 0]
-            u1 += smd * rows[c, 0, DIRECTION + 1]
-            u2 += smd * rows[c, 0, DIRECTION + 2]
-            u3 += sign * d * rows[c, 0, turn + 0]
-            u4 += sign * d * rows[c, 0, turn + 1]
-            u5 += sign * d * rows[c, 0, turn + 2]
+        for i in range(size):
+            k = group_start + (i if sweep % 2 == 0 else size - 1 - i)
+            u, change = shock_point(u, k, order[k], view, target, mu, impulse, friction, shock,
+                                    shock_friction)
+            largest = max(largest, change)
         if largest < SHOCK_TOLERANCE:
             break
-    velocity[upper, 0], velocity[upper, 1], velocity[upper, 2] = u0, u1, u2
-    velocity[upper, 3], velocity[upper, 4], velocity[upper, 5] = u3, u4, u5
+    store_velocity(velocity, upper, u)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def shock_pair(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock, shock_friction,
+               support_mass, order, velocity_a, velocity_b, start_a, end_a, upper_a, start_b,
+               end_b, upper_b, view):
+    """shock_group of two groups at once, neither of which reads the body the other writes:
+    each group's sweeps are one chain of dependent arithmetic (every point waits for the
+    velocity the one before it left), so interleaving two chains lets the core work on one
+    while the other waits. Each group's arithmetic and sweep count are its own: the same result
+    as one group after the other."""
+    u_a = shock_start(velocity, rows, row_inv_mass, shock, shock_friction, support_mass, order,
+                      velocity_a, velocity_b, start_a, end_a, upper_a, view)
+    u_b = shock_start(velocity, rows, row_inv_mass, shock, shock_friction, support_mass, order,
+                      velocity_a, velocity_b, start_b, end_b, upper_b, view)
+    size_a, size_b = end_a - start_a, end_b - start_b
+    running_a = running_b = True
+    for sweep in range(SHOCK_SWEEPS):
+        largest_a = largest_b = 0.0
+        for i in range(max(size_a if running_a else 0, size_b if running_b else 0)):
+            if running_a and i < size_a:
+                k = start_a + (i if sweep % 2 == 0 else size_a - 1 - i)
+                u_a, change = shock_point(u_a, k, order[k], view, target, mu, impulse, friction,
+                                          shock, shock_friction)
+                largest_a = max(largest_a, change)
+            if running_b and i < size_b:
+                k = start_b + (i if sweep % 2 == 0 else size_b - 1 - i)
+                u_b, change = shock_point(u_b, k, order[k], view, target, mu, impulse, friction,
+                                          shock, shock_friction)
+                largest_b = max(largest_b, change)
+        running_a = running_a and not largest_a < SHOCK_TOLERANCE
+        running_b = running_b and not largest_b < SHOCK_TOLERANCE
+        if not (running_a or running_b):
+            break
+    store_velocity(velocity, upper_a, u_a)
+    store_velocity(velocity, upper_b, u_b)
 
 
 @njit(cache=True, nogil=True)
-def shock_propagation_shared(contacts, bodies, threads, group_start, groups):
+def reads_body(order, velocity_a, velocity_b, start, end, body):
+    """Whether any point of order[start:end] has `body` on one of its sides."""
+    for k in range(start, end):
+        c = order[k]
+        if velocity_a[c] == body or velocity_b[c] == body:
+            return True
+    return False
+
+
+@njit(cache=True, nogil=True)
+def shock_propagation_shared(contacts, bodies, threads, group_start, groups, view):
     """shock_propagation on up to two threads, bit for bit the serial result: the groups
     (support_groups) level by level (solve_schedule.shock_levels), claimed a few at a time by
     whichever thread is free, each run once every group of the levels below it is done. False,
@@ -637,24 +718,24 @@ def shock_propagation_shared(contacts, bodies, threads, group_start, groups):
                       contacts.contact_target, contacts.friction_coefficient, contacts.impulse,
                       contacts.friction, contacts.support_impulse, contacts.support_friction,
                       contacts.support_mass, order, contacts.velocity_a, contacts.velocity_b,
-                      contacts.support_body, group_start, by_level, need, groups, sync)
+                      contacts.support_body, group_start, by_level, need, groups, sync, view)
     return True
 
 
 @njit(cache=True, nogil=True, parallel=True)
 def run_shock_workers(workers, velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
                       shock_friction, support_mass, order, velocity_a, velocity_b, support_body,
-                      group_start, by_level, need, groups, sync):
+                      group_start, by_level, need, groups, sync, view):
     for _ in prange(workers):
         shock_worker(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
                      shock_friction, support_mass, order, velocity_a, velocity_b, support_body,
-                     group_start, by_level, need, groups, sync)
+                     group_start, by_level, need, groups, sync, view)
 
 
 @njit(cache=True, nogil=True)
 def shock_worker(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
                  shock_friction, support_mass, order, velocity_a, velocity_b, support_body,
-                 group_start, by_level, need, groups, sync):
+                 group_start, by_level, need, groups, sync, view):
     """One thread of the shared shock propagation: claims SHOCK_CLAIM groups at a time, in
     level order, until none are left. A thread alone (the other late, or Numba running the
     region's iterations one after the other) claims and runs them all: every group it waits
@@ -664,7 +745,9 @@ def shock_worker(velocity, rows, row_inv_mass, target, mu, impulse, friction, sh
         first = atomic_add(sync, claimed, SHOCK_CLAIM)
         if first >= groups:
             return
-        for place in range(first, min(first + SHOCK_CLAIM, groups)):
+        last = min(first + SHOCK_CLAIM, groups)
+        place = first
+        while place < last:
             spins = 0
             while atomic_load(sync, done) < need[place]:
                 spins += 1
@@ -673,10 +756,20 @@ def shock_worker(velocity, rows, row_inv_mass, target, mu, impulse, friction, sh
                     yield_thread()
             g = by_level[place]
             start, end = group_start[g], group_start[g + 1]
-            shock_group(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
-                        shock_friction, support_mass, order, velocity_a, velocity_b, start, end,
-                        support_body[order[start]])
-            atomic_add(sync, done, 1)
+            if place + 1 < last and need[place + 1] == need[place]:  # one level: independent
+                h = by_level[place + 1]
+                shock_pair(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
+                           shock_friction, support_mass, order, velocity_a, velocity_b, start, end,
+                           support_body[order[start]], group_start[h], group_start[h + 1],
+                           support_body[order[group_start[h]]], view)
+                atomic_add(sync, done, 2)
+                place += 2
+            else:
+                shock_group(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
+                            shock_friction, support_mass, order, velocity_a, velocity_b, start,
+                            end, support_body[order[start]], view)
+                atomic_add(sync, done, 1)
+                place += 1
 
 
 @njit(cache=True, nogil=True)
