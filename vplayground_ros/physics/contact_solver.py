@@ -74,6 +74,13 @@ SPINS_BEFORE_TAKING = 1000
 SHOCK_CLAIM = 4
 MIN_GROUPS_PER_LEVEL = 16
 
+# Shock propagation's per-row view of a support point (the last axis of its scratch array):
+# with the upper body's velocity u = (linear, angular), the row's relative velocity is
+# BIAS + LINEAR . u_linear + ANGULAR . u_angular, and an impulse j along it adds
+# j * PUSH_LINEAR and j * PUSH_ANGULAR to u.
+BIAS, LINEAR, ANGULAR, PUSH_LINEAR, PUSH_ANGULAR, MASS, INV_MASS = 0, 1, 4, 7, 10, 13, 14
+SHOCK_ROW_SIZE = 15
+
 
 @njit(cache=True, nogil=True)
 def tangent_basis(n):
@@ -533,14 +540,6 @@ def shock_propagation(contacts, bodies, threads):
                         shock_friction, support_mass, order, velocity_a, velocity_b, start, end,
                         upper, view)
             g += 1
-
-
-# Shock propagation's per-row view of a support point (the last axis of its scratch array):
-# with the upper body's velocity u = (linear, angular), the row's relative velocity is
-# BIAS + LINEAR . u_linear + ANGULAR . u_angular, and an impulse j along it adds
-# j * PUSH_LINEAR and j * PUSH_ANGULAR to u.
-BIAS, LINEAR, ANGULAR, PUSH_LINEAR, PUSH_ANGULAR, MASS, INV_MASS = 0, 1, 4, 7, 10, 13, 14
-SHOCK_ROW_SIZE = 15
 
 
 @njit(cache=True, nogil=True, inline="always")
