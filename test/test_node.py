@@ -328,8 +328,9 @@ def test_the_turning_cars_imu_yaw_rate_agrees_with_odometry(ros):
     driving = drive_in_circles(ros)
     turning = lambda: [t for t in set(imu) & set(odom) if odom[t].twist.twist.angular.z > 0.1]  # noqa: E731
     try:
-        # It timed out once in a clean clone's CI-like run, and in about one full-suite run in
-        # five since: the message says which side was missing.
+        # It timed out in about one full-suite run in five while the car started wherever the
+        # twist test had left it (drive_in_circles places it now); if it times out again, the
+        # message says which side was missing.
         assert wait_for(lambda: len(turning()) >= 10, timeout=60, explain=lambda: (
             f"imu {len(imu)} odom {len(odom)} on shared stamps {len(set(imu) & set(odom))}, odom yaw "
             f"rates {sorted(m.twist.twist.angular.z for m in list(odom.values()))[-3:]}, state {ros.sim.state}, "
