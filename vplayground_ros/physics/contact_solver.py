@@ -653,10 +653,11 @@ def shock_group(velocity, rows, row_inv_mass, target, mu, impulse, friction, sho
 def shock_pair(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock, shock_friction,
                support_mass, order, velocity_a, velocity_b, start_a, end_a, upper_a, start_b,
                end_b, upper_b, view):
-    """shock_group of two groups at once, neither of which reads the body the other writes:
-    each group's sweeps are one chain of dependent arithmetic (every point waits for the
-    velocity the one before it left), so interleaving two chains lets the core work on one
-    while the other waits. Each group's arithmetic and sweep count are its own: the same result
+    """shock_group of group A then group B, at once: each group's sweeps are one chain of
+    dependent arithmetic (every point waits for the velocity the one before it left), so
+    interleaving two chains lets the core work on one while the other waits. B must not read
+    A's upper body; A may read B's, since a group reads the bodies below it only in shock_start,
+    before either stores. Each group's arithmetic and sweep count are its own: the same result
     as one group after the other."""
     u_a = shock_start(velocity, rows, row_inv_mass, shock, shock_friction, support_mass, order,
                       velocity_a, velocity_b, start_a, end_a, upper_a, view)
