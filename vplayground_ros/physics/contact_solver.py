@@ -632,7 +632,8 @@ def shock_point(u, k, c, view, target, mu, impulse, friction, shock, shock_frict
 @njit(cache=True, nogil=True, inline="always")
 def finish_group(velocity, body, u, order, group_start, group_end, view, shock, shock_friction):
     """Stores the upper body's new velocity u, unless the group's one-sided impulses gave it
-    kinetic energy: then they are taken back (velocity and impulses as before the group). They
+    kinetic energy: then they are taken back (the body keeps its velocity from before the
+    group, and the impulses are zeroed: none applied, none carried to the next step). They
     hand a support's motion up without pushing back on it, so a support's spurious motion (what
     the sweeps left unconverged) made the whole stack above it move, from nothing. A column of
     six boxes balanced on an edge between two neighbours was pumped so for ever in a settled
