@@ -587,15 +587,20 @@ def shock_start(velocity, rows, row_inv_mass, shock, shock_friction, support_mas
 
 
 @njit(cache=True, nogil=True, inline="always")
+def view_speed(view, k, r, start, u):
+    """start + row r of support point k's view (LINEAR, ANGULAR) . u, u = (linear, angular):
+    with start = the row's BIAS, the row's relative velocity."""
+    return (start + view[k, r, LINEAR] * u[0] + view[k, r, LINEAR + 1] * u[1] + view[k, r, LINEAR + 2] * u[2]
+            + view[k, r, ANGULAR] * u[3] + view[k, r, ANGULAR + 1] * u[4] + view[k, r, ANGULAR + 2] * u[5])
+
+
+@njit(cache=True, nogil=True, inline="always")
 def shock_point(u, k, c, view, target, mu, impulse, friction, shock, shock_friction):
     """One support point of a sweep: the friction circle on the total friction, then the
     normal row on the total. Returns the upper body's new velocity and the largest velocity
     change a row made."""
-    u0, u1, u2, u3, u4, u5 = u
-    v1 = (view[k, 1, BIAS] + view[k, 1, LINEAR] * u0 + view[k, 1, LINEAR + 1] * u1 + view[k, 1, LINEAR + 2] * u2
-          + view[k, 1, ANGULAR] * u3 + view[k, 1, ANGULAR + 1] * u4 + view[k, 1, ANGULAR + 2] * u5)
-    v2 = (view[k, 2, BIAS] + view[k, 2, LINEAR] * u0 + view[k, 2, LINEAR + 1] * u1 + view[k, 2, LINEAR + 2] * u2
-          + view[k, 2, ANGULAR] * u3 + view[k, 2, ANGULAR + 1] * u4 + view[k, 2, ANGULAR + 2] * u5)
+    v1 = view_speed(view, k, 1, view[k, 1, BIAS], u)
+    v2 = view_speed(view, k, 2, view[k, 2, BIAS], u)
     old1 = friction[c, 0] + shock_friction[c, 0]
     old2 = friction[c, 1] + shock_friction[c, 1]
     new1 = old1 - view[k, 1, MASS] * v1
@@ -612,14 +617,14 @@ def shock_point(u, k, c, view, target, mu, impulse, friction, shock, shock_frict
     largest = max(abs(d1) * view[k, 1, INV_MASS], abs(d2) * view[k, 2, INV_MASS])
     shock_friction[c, 0] += d1
     shock_friction[c, 1] += d2
+    u0, u1, u2, u3, u4, u5 = u
     u0 += view[k, 1, PUSH_LINEAR + 0] * d1 + view[k, 2, PUSH_LINEAR + 0] * d2
     u1 += view[k, 1, PUSH_LINEAR + 1] * d1 + view[k, 2, PUSH_LINEAR + 1] * d2
     u2 += view[k, 1, PUSH_LINEAR + 2] * d1 + view[k, 2, PUSH_LINEAR + 2] * d2
     u3 += view[k, 1, PUSH_ANGULAR + 0] * d1 + view[k, 2, PUSH_ANGULAR + 0] * d2
     u4 += view[k, 1, PUSH_ANGULAR + 1] * d1 + view[k, 2, PUSH_ANGULAR + 1] * d2
     u5 += view[k, 1, PUSH_ANGULAR + 2] * d1 + view[k, 2, PUSH_ANGULAR + 2] * d2
-    vn = (view[k, 0, BIAS] + view[k, 0, LINEAR] * u0 + view[k, 0, LINEAR + 1] * u1 + view[k, 0, LINEAR + 2] * u2
-          + view[k, 0, ANGULAR] * u3 + view[k, 0, ANGULAR + 1] * u4 + view[k, 0, ANGULAR + 2] * u5)
+    vn = view_speed(view, k, 0, view[k, 0, BIAS], (u0, u1, u2, u3, u4, u5))
     total = impulse[c] + shock[c]
     d = max(total + view[k, 0, MASS] * (target[c] - vn), 0.0) - total
     largest = max(largest, abs(d) * view[k, 0, INV_MASS])
@@ -640,19 +645,14 @@ def finish_group(velocity, body, u, order, group_start, group_end, view, shock, 
     10,000-box pile (~35 J in 5 s), never froze, and kept its neighbours awake. Energy gained:
     1/2 J . (u_before + u_after), J the group's impulses (its rows' LINEAR, ANGULAR times each
     row's total): exact, since u_after - u_before is the inverse mass times J."""
-    s0 = velocity[body, 0] + u[0]
-    s1 = velocity[body, 1] + u[1]
-    s2 = velocity[body, 2] + u[2]
-    s3 = velocity[body, 3] + u[3]
-    s4 = velocity[body, 4] + u[4]
-    s5 = velocity[body, 5] + u[5]
+    both = (velocity[body, 0] + u[0], velocity[body, 1] + u[1], velocity[body, 2] + u[2],
+            velocity[body, 3] + u[3], velocity[body, 4] + u[4], velocity[body, 5] + u[5])
     work = 0.0
     for k in range(group_start, group_end):
         c = order[k]
         for r in range(3):
             j = shock[c] if r == 0 else shock_friction[c, r - 1]
-            work += j * (view[k, r, LINEAR] * s0 + view[k, r, LINEAR + 1] * s1 + view[k, r, LINEAR + 2] * s2
-                         + view[k, r, ANGULAR] * s3 + view[k, r, ANGULAR + 1] * s4 + view[k, r, ANGULAR + 2] * s5)
+            work += j * view_speed(view, k, r, 0.0, both)
     if work > 0.0:
         for k in range(group_start, group_end):
             c = order[k]
