@@ -1,6 +1,7 @@
 """The SPEC 6.3 request handlers, ROS-free (the node and the Foxglove server share them)."""
 import json
 import re
+import threading
 import time
 from pathlib import Path
 
@@ -224,6 +225,38 @@ def test_a_slow_first_batch_is_start_up_not_late_ticks():
     # Only the third stall (0.6 s = 77 steps at 128/s, less the batch that runs) is late; the
     # first one too would make it ~150. The margin is for a loaded machine's own hiccups.
     assert 50 <= sim.late_ticks <= 120, sim.late_ticks
+
+
+def test_a_command_waits_out_the_first_batch_but_not_a_later_stall():
+    # On a first run the node's first batch compiles the engine for minutes, and a
+    # ~/load_scene made meanwhile answered 255: the command's 10 s ran out while it waited.
+    world = load_world(SCENE)
+    step, stalls = world.step, [1.5]
+    stalling = threading.Event()
+
+    def stalling_step(count):
+        if stalls:
+            stalling.set()
+            time.sleep(stalls.pop())
+        step(count)
+    world.step = stalling_step
+    sim = Simulation(world, real_time_factor=1.0)
+    sim.start()
+    try:
+        assert stalling.wait(10)
+        assert sim.call(lambda w: w.step_count, timeout=0.2) > 0  # taken after the first batch
+        # A later batch that stalls (not a kernel load) still times the command out, and the
+        # command is withdrawn: nothing it would do happens.
+        stalls.append(1.5)
+        stalling.clear()
+        assert stalling.wait(10)
+        ran = []
+        with pytest.raises(TimeoutError, match="did not take the command within 0.2 s"):
+            sim.call(lambda w: ran.append(w.step_count), timeout=0.2)
+        time.sleep(1.5)
+        assert ran == []
+    finally:
+        sim.stop()
 
 
 def test_the_first_batch_is_not_step_time():
