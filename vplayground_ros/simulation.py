@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .physics.jit_cache import compiling
 from .sensors import Sensors
 
 # In real time the loop wakes this often (wall s) and runs the steps due: two at 128 steps/s.
@@ -89,7 +90,6 @@ class Simulation:
         self._cpu_clock = None          # its CPU clock while it runs (thread_cpu_seconds)
         self.engine_cpu_seconds = 0.0  # the part of it inside the compiled step, over all worlds
         self.achieved_rtf = 0.0
-        self.loading_engine = False  # in a world's first batch, which loads the kernels (call)
         # The next simulated time a listener publishes at: a batch ends at the first step at or
         # after it, so what is published carries the same times at any real-time factor.
         self.next_publish_time = math.inf
@@ -142,16 +142,16 @@ class Simulation:
 
     def call(self, fn, timeout=10.0):
         """submit(fn) and wait for its result. On timeout the command is withdrawn if it has
-        not started, so a caller told "timed out" can rely on nothing having changed. A
-        world's first batch does not run the clock out: it loads the engine from Numba's
-        cache or compiles it (minutes on a first run), and a request made meanwhile (a
+        not started, so a caller told "timed out" can rely on nothing having changed. Numba
+        loading or compiling kernels does not run the clock out: a kernel compiles at its first
+        call (minutes on a first run, or after an engine edit), and a request made meanwhile (a
         ~/load_scene just after start) waits for it instead of failing."""
         future = self.submit(fn)
         while True:
             try:
                 return future.result(timeout)
             except TimeoutError:
-                if self.loading_engine and not self._finished.is_set():
+                if compiling() and not self._finished.is_set():
                     continue
                 if future.cancel():
                     raise TimeoutError(f"the simulation thread did not take the command within {timeout:g} s") from None
@@ -233,7 +233,6 @@ class Simulation:
             if steps > 0:
                 resting, second = self._resting(world), world.step_count // rate
                 started, engine_before = time.perf_counter(), world.engine_cpu_seconds
-                self.loading_engine = first_batch
                 try:
                     world.step(steps)
                 except Exception as error:  # an engine bug: keep the loop (and the node) alive
@@ -254,8 +253,7 @@ class Simulation:
                     # At rest nothing moved, nothing can have escaped; the World's check of
                     # every body once a simulated second still runs.
                     self.removed += world.remove_escaped()
-                self._publish(self._read_sensors(world))  # the sensors' kernels load at their first read
-                self.loading_engine = False
+                self._publish(self._read_sensors(world))
             if self.duration is not None and world.time >= self.duration - 0.5 / rate:
                 break
             now = time.perf_counter()
