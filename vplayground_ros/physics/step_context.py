@@ -3,6 +3,8 @@ stages take the context (or the parts of it they need) instead of long argument 
 
 The contact buffers are a pair: each step fills one from the other (the warm start reads the
 older), then `newest` names the one it filled. The World reads contacts through newest_contacts.
+Only what the warm start reads needs two copies; the solver's per-step fields (STEP_SCRATCH) are
+one set of arrays that both buffers share.
 """
 from collections import namedtuple
 
@@ -33,9 +35,23 @@ StepContext = namedtuple("StepContext", [
 ])
 
 
+# Contacts fields a step rebuilds from its own points before reading them (rows, masses,
+# targets, the sweep and support orders, the passes' own accumulators); the step before is read
+# only for its impulses, friction vectors, manifolds and points (warm_start_from). Shared, the
+# arrays a step writes are those the step before wrote, still in cache: at the loose pile's
+# landing (4,000 points, ~2 MB of them) the step took 4.9 -> 4.1 ms (each step's fastest of 4
+# runs), the same results bit for bit. Read between steps, they are the newest step's.
+STEP_SCRATCH = (
+    "velocity_a", "velocity_b", "rows", "row_inv_mass", "row_mass", "restitution",
+    "friction_coefficient", "approach_speed", "collision_impulse", "collision_friction", "friction",
+    "position_impulse", "collision_target", "contact_target", "position_target", "solve_order",
+    "sweep_points", "support_order", "support_body", "support_mass", "support_friction")
+
+
 def allocate_contact_buffers(points, manifolds):
-    return ContactBuffers((allocate_contacts(points, manifolds), allocate_contacts(points, manifolds)),
-                          np.zeros(1, np.int64))
+    first = allocate_contacts(points, manifolds)
+    second = allocate_contacts(points, manifolds)._replace(**{f: getattr(first, f) for f in STEP_SCRATCH})
+    return ContactBuffers((first, second), np.zeros(1, np.int64))
 
 
 def newest_contacts(buffers):
