@@ -41,10 +41,10 @@ from .math3d import cross
 from .solve_schedule import shock_levels, split_chains, support_groups
 
 # Products may fuse with the sum they feed into one multiply-add (one rounding instead of two):
-# the sweeps' dot products and impulse updates are mostly that, and fused they took 15 % less
-# time (hot, 3,400-4,000 points). Nothing is reordered ("contract" only, not "fast"): every
-# caller of the inlined point solve compiles the same fused arithmetic, so one and two threads
-# stay bit-identical (test_parallel_solve).
+# the sweeps' dot products and impulse updates are mostly that, and fused the velocity sweeps
+# took 10-18 % less time (the loose pile's landing, 3,400-4,000 points, hot). Nothing is
+# reordered ("contract" only, not "fast"): every caller of the inlined point solve compiles the
+# same fused arithmetic, so one and two threads stay bit-identical (test_parallel_solve).
 SOLVER_MATH = {"contract"}
 
 # A row whose target is this low is not solved in that pass.
