@@ -252,8 +252,8 @@ def test_a_command_waits_out_a_compile_but_not_another_stall():
         assert sim.call(lambda w: w.step_count, timeout=0.2) > 0  # taken after the compile
         # A batch that stalls otherwise still times the command out, and the command is
         # withdrawn: nothing it would do happens.
-        stalls.append((1.5, False))
         stalling.clear()
+        stalls.append((1.5, False))
         assert stalling.wait(600)
         ran = []
         with pytest.raises(TimeoutError, match="did not take the command within 0.2 s"):

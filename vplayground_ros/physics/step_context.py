@@ -38,7 +38,7 @@ StepContext = namedtuple("StepContext", [
 # Contacts fields a step rebuilds from its own points before reading them (rows, masses,
 # targets, the sweep and support orders, the passes' own accumulators); the step before is read
 # only for its impulses, friction vectors, manifolds and points (warm_start_from). One set serves
-# both buffers: 584 bytes a point of capacity (16 points a body: 93 MB at 10,000 bodies), the
+# both buffers: 584 bytes a point of capacity (16 a body of capacity: 93 MB at 10,000), the
 # same results bit for bit. Read between steps, they are the newest step's. (The step's time did
 # not change measurably: the loose pile's landing, in-process A/B of 6-8 runs, quiet or with the
 # other core streaming memory.)
