@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .physics.jit_cache import compiling
+from .physics.jit_cache import compiler_activity
 from .sensors import Sensors
 
 # In real time the loop wakes this often (wall s) and runs the steps due: two at 128 steps/s.
@@ -142,16 +142,19 @@ class Simulation:
 
     def call(self, fn, timeout=10.0):
         """submit(fn) and wait for its result. On timeout the command is withdrawn if it has
-        not started, so a caller told "timed out" can rely on nothing having changed. Numba
-        loading or compiling kernels does not run the clock out: a kernel compiles at its first
-        call (minutes on a first run, or after an engine edit), and a request made meanwhile (a
-        ~/load_scene just after start) waits for it instead of failing."""
+        not started, so a caller told "timed out" can rely on nothing having changed. A wait
+        in which Numba loaded or compiled kernels does not run the clock out: a kernel compiles
+        at its first call (minutes on a first run, or after an engine edit), and a request made
+        meanwhile (a ~/load_scene just after start) waits for it instead of failing."""
         future = self.submit(fn)
+        _, finished_before = compiler_activity()
         while True:
             try:
                 return future.result(timeout)
             except TimeoutError:
-                if compiling() and not self._finished.is_set():
+                compiling, finished = compiler_activity()
+                if (compiling or finished != finished_before) and not self._finished.is_set():
+                    finished_before = finished
                     continue
                 if future.cancel():
                     raise TimeoutError(f"the simulation thread did not take the command within {timeout:g} s") from None

@@ -23,11 +23,13 @@ def use_source_keyed_cache():
 
 
 class CompilerActivity(event.Listener):
-    """Counts the threads in Numba's compiler (its lock: a kernel's cache load or compile)."""
+    """Counts the threads in Numba's compiler (its lock: a kernel's cache load or compile) and
+    the times one left it."""
 
     def __init__(self):
         self._lock = threading.Lock()
         self.threads = 0
+        self.finished = 0
 
     def on_start(self, _event):
         with self._lock:
@@ -36,13 +38,16 @@ class CompilerActivity(event.Listener):
     def on_end(self, _event):
         with self._lock:
             self.threads -= 1
+            self.finished += 1
 
 
 _activity = CompilerActivity()
 event.register("numba:compiler_lock", _activity)
 
 
-def compiling():
-    """Whether a thread is loading or compiling kernels now: a kernel's first call does, which
-    on a first run (or after an engine edit) takes up to minutes."""
-    return _activity.threads > 0
+def compiler_activity():
+    """(threads loading or compiling kernels now, loads and compiles finished so far). A kernel
+    compiles at its first call, which on a first run (or after an engine edit) takes up to
+    minutes, kernel after kernel: between two of them no thread is in the compiler, so a
+    finished count that moved says a compile was under way too."""
+    return _activity.threads, _activity.finished
