@@ -1,14 +1,31 @@
-"""Where compiled kernels are cached.
+"""Where compiled kernels are cached, and how a cache is filled.
 
 Numba invalidates a cached kernel only when the file defining it changes, not when a kernel it
 calls (in another file) does, and would then run stale machine code. Keying the cache directory
 on a hash of every engine source makes any edit recompile everything once, and an unchanged
 engine start warm (SPEC 8: start to first pose under 5 s).
+
+A cache is filled by one process, start to end (`compile_once`). Numba names compiled code
+after a per-process counter, and a kernel cached by one process may refer to its callees by
+those names: a cache that one process began and another finished (the first interrupted during
+the first compile, minutes long) once held a step that segfaulted in every later process, until
+the directory was deleted (Numba issues #10128, #10486 describe the same names across
+processes). So the first World of a process whose cache is not marked complete takes a lock on
+it, clears what an interrupted process left, compiles the step and the other entry points in
+one go (`warm_up`), and marks it complete; other processes wait for the lock, then load.
 """
 import hashlib
+import logging
 import os
+import sys
 import threading
+import time
 from pathlib import Path
+
+try:
+    import fcntl
+except ImportError:  # not POSIX: no lock between processes
+    fcntl = None
 
 import numba
 from numba.core import event
@@ -17,14 +34,24 @@ from numba.core import event
 def use_source_keyed_cache():
     engine = Path(__file__).parent
     sources = sorted(engine.rglob("*.py"))  # the shapes/ package too
-    digest = hashlib.sha256(b"".join(str(p.relative_to(engine)).encode() + p.read_bytes() for p in sources))
+    # Numba's and Python's versions too: a cache marked complete holds one compiler's code.
+    digest = hashlib.sha256(f"{numba.__version__} {sys.version}".encode()
+                            + b"".join(str(p.relative_to(engine)).encode() + p.read_bytes() for p in sources))
     base = os.environ.get("VPLAYGROUND_JIT_CACHE") or Path.home() / ".cache" / "vplayground_ros" / "numba"
     numba.config.CACHE_DIR = str(Path(base) / digest.hexdigest()[:16])
 
 
+# The file in a complete cache directory (compile_once wrote it after a whole warm-up).
+COMPLETE_MARKER = "complete"
+
+
+def cache_directory():
+    return Path(numba.config.CACHE_DIR)
+
+
 class CompilerActivity(event.Listener):
-    """Counts the threads in Numba's compiler (its lock: a kernel's cache load or compile) and
-    the times one left it."""
+    """Counts the threads in Numba's compiler (its lock: a kernel's cache load or compile), or
+    waiting for another process to fill the cache (compile_once), and the times one left."""
 
     def __init__(self):
         self._lock = threading.Lock()
@@ -43,6 +70,50 @@ class CompilerActivity(event.Listener):
 
 _activity = CompilerActivity()
 event.register("numba:compiler_lock", _activity)
+
+
+_compile_lock = threading.Lock()
+_warming = threading.local()
+_log = logging.getLogger(__name__)
+# Files older than this process were left by another (compile_once clears them); kernels this
+# process compiled before its first World (a test calling one directly) stay.
+_PROCESS_START = time.time()
+
+
+def compile_once(warm_up):
+    """Makes sure the cache directory is complete before this process steps a world: if it is
+    not marked so, under an exclusive lock on it (other processes wait, counted as compiler
+    activity), deletes what other processes left in it and runs `warm_up` (which compiles the
+    kernels it calls), then marks it complete. Worlds that `warm_up` itself builds pass straight through."""
+    directory = cache_directory()
+    if getattr(_warming, "active", False) or (directory / COMPLETE_MARKER).exists():
+        return
+    with _compile_lock:
+        directory.mkdir(parents=True, exist_ok=True)
+        _activity.on_start(None)
+        try:
+            with open(directory.parent / f"{directory.name}.lock", "w") as lock:
+                if fcntl is not None:
+                    try:
+                        fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                    except BlockingIOError:
+                        _log.warning(f"waiting for another process compiling the engine into {directory}")
+                        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+                if (directory / COMPLETE_MARKER).exists():  # another process filled it meanwhile
+                    return
+                _log.warning(f"compiling the engine once into {directory} (about 5 minutes on "
+                             f"2 cores); later starts load it in about a second")
+                for entry in directory.rglob("*"):  # what an interrupted process left
+                    if entry.is_file() and entry.stat().st_mtime < _PROCESS_START:
+                        entry.unlink()
+                _warming.active = True
+                try:
+                    warm_up()
+                finally:
+                    _warming.active = False
+                (directory / COMPLETE_MARKER).touch()
+        finally:
+            _activity.on_end(None)
 
 
 def compiler_activity():

@@ -18,6 +18,7 @@ from .broad_phase import allocate_broad_phase
 from .constants import CONTACT_MARGIN
 from .contact import index_manifolds
 from .freezing import wake_body
+from .jit_cache import compile_once
 from .math3d import rpy_to_quat
 from .pipeline import (DONE, GROW_CONTACTS, GROW_INDEX, GROW_PAIRS, STAGES, STAT_FROZEN,
                        STAT_PAIRS, STAT_POINTS, STAT_TRIANGLES, STAT_WOKEN, resting_steps,
@@ -67,6 +68,7 @@ class World(WorldQueries):
     be asked is in queries.py."""
 
     def __init__(self, settings=None, ground=specs.DEFAULT_GROUND, capacity=64, solver_threads=None):
+        compile_once(warm_up)  # minutes on a first run; nothing once the kernels are cached
         self.settings = specs.validate_settings(settings)
         # Threads the contact solve may use (solver_threads below); not a scene setting: how
         # many cores to give is the host's choice, not the world's.
@@ -581,3 +583,28 @@ class World(WorldQueries):
             new[:len(old)] = old
         index_manifolds(kept)
         self._contacts = grown
+
+
+def warm_up():
+    """Compiles (or loads) the kernels of everything a world does, in this one process
+    (jit_cache.compile_once): a step of every shape on the ground, on a playground and under a
+    car (the step's whole call tree compiles at its first call), ray casts, contacts and the
+    octree's cells."""
+    world = World(capacity=8)
+    world.set_playground(np.array([[-4.0, -4.0, 0.0], [4.0, -4.0, 0.0], [4.0, 4.0, 0.5],
+                                   [-4.0, 4.0, 0.5]]), np.array([[0, 1, 2], [0, 2, 3]]))
+    cube = [[x, y, z] for x in (-0.2, 0.2) for y in (-0.2, 0.2) for z in (-0.2, 0.2)]
+    for k, shape in enumerate(({"size": [0.5, 0.5, 0.5]}, {"shape": "sphere", "radius": 0.3},
+                               {"shape": "capsule", "radius": 0.2, "length": 0.5},
+                               {"shape": "cylinder", "radius": 0.3, "length": 0.4},
+                               {"shape": "convex", "points": cube})):
+        world.add_body({**shape, "position": [1.2 * k - 2.4, 0.0, 1.0 + 0.3 * k]})
+    world.add_vehicle({"name": "car", "position": [0.0, 2.5, 1.0],
+                       "chassis": {"size": [2.0, 1.0, 0.4], "mass": 400.0},
+                       "wheels": [{"mount": [x, y, -0.2], "radius": 0.25}
+                                  for x in (0.7, -0.7) for y in (0.5, -0.5)]})
+    world.step(8)
+    world.cast_rays(np.zeros((2, 3)), np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0]]), 10.0)
+    world.contacts()
+    world.octree_cells()
+    world.state()

@@ -1,0 +1,91 @@
+"""How the kernel cache is filled (physics.jit_cache.compile_once): by one process, start to end,
+and never finished by another. Behaviour with a stand-in warm-up (nothing compiles here)."""
+import os
+import subprocess
+import sys
+import textwrap
+import threading
+import time
+
+import numba
+import pytest
+
+from helpers import wait_for
+from vplayground_ros.physics import jit_cache
+from vplayground_ros.physics.jit_cache import COMPLETE_MARKER, compile_once, compiler_activity
+
+
+@pytest.fixture
+def cache_dir(tmp_path, monkeypatch):
+    """An empty cache directory of its own, as numba.config.CACHE_DIR."""
+    directory = tmp_path / "0123456789abcdef"
+    monkeypatch.setattr(numba.config, "CACHE_DIR", str(directory))
+    return directory
+
+
+def test_an_interrupted_fill_is_cleared_and_the_cache_filled_once(cache_dir):
+    """What another process left without marking the cache complete (it died mid-compile) goes,
+    what this one compiled stays; the warm-up runs once, and the worlds it builds itself pass
+    straight through."""
+    (cache_dir / "physics_left").mkdir(parents=True)
+    left = [cache_dir / "physics_left" / "pipeline.step_world-194.py311.1.nbc", cache_dir / "stray.nbi"]
+    for path in left:
+        path.write_bytes(b"half")
+        os.utime(path, (time.time() - 3600, time.time() - 3600))  # from a process before this one
+    ours = cache_dir / "physics_left" / "narrow_phase.collide-436.py311.1.nbc"
+    ours.write_bytes(b"compiled by this process before its first World")
+    runs = []
+
+    def warm_up():
+        runs.append(sorted(str(p.relative_to(cache_dir)) for p in cache_dir.rglob("*") if p.is_file()))
+        compile_once(warm_up)  # a World built by the warm-up: no lock taken again, no recursion
+    compile_once(warm_up)
+    assert runs == [[str(ours.relative_to(cache_dir))]]  # the others' files went first
+    assert (cache_dir / COMPLETE_MARKER).exists()
+    compile_once(warm_up)
+    assert len(runs) == 1
+
+
+def test_a_failed_warm_up_leaves_the_cache_incomplete(cache_dir):
+    def failing():
+        raise RuntimeError("killed mid-compile")
+    with pytest.raises(RuntimeError):
+        compile_once(failing)
+    assert not (cache_dir / COMPLETE_MARKER).exists()
+    runs = []
+    compile_once(lambda: runs.append(1))
+    assert runs == [1] and (cache_dir / COMPLETE_MARKER).exists()
+
+
+@pytest.mark.skipif(jit_cache.fcntl is None, reason="no lock between processes here")
+def test_a_second_process_waits_for_the_first_to_fill_the_cache(cache_dir):
+    """Another process holds the cache's lock (its warm-up running) and then marks the cache
+    complete: this one waits for it, counted as compiler activity (so requests wait too), and
+    does not compile or clear anything itself."""
+    cache_dir.mkdir(parents=True)
+    (cache_dir / "kernel.nbc").write_bytes(b"theirs")
+    os.utime(cache_dir / "kernel.nbc", (time.time() - 3600, time.time() - 3600))
+    holder = textwrap.dedent(f"""
+        import fcntl, sys, time
+        with open({str(cache_dir.parent / (cache_dir.name + ".lock"))!r}, "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            print("locked", flush=True)
+            time.sleep(1.5)
+            open({str(cache_dir / COMPLETE_MARKER)!r}, "w").close()
+    """)
+    other = subprocess.Popen([sys.executable, "-c", holder], stdout=subprocess.PIPE, text=True)
+    try:
+        assert other.stdout.readline().strip() == "locked"
+        busy_before, _ = compiler_activity()
+        runs = []
+        waiter = threading.Thread(target=compile_once, args=(lambda: runs.append(1),))
+        started = time.monotonic()
+        waiter.start()
+        wait_for(lambda: compiler_activity()[0] > busy_before, timeout=5.0)
+        waiter.join(timeout=30.0)
+        assert not waiter.is_alive()
+        assert time.monotonic() - started >= 1.0  # it waited for the other's lock
+        assert runs == [] and (cache_dir / "kernel.nbc").read_bytes() == b"theirs"
+        assert compiler_activity()[0] == busy_before
+    finally:
+        other.wait(timeout=30.0)
