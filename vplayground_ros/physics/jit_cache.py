@@ -19,7 +19,6 @@ import logging
 import os
 import sys
 import threading
-import time
 from pathlib import Path
 
 try:
@@ -75,16 +74,13 @@ event.register("numba:compiler_lock", _activity)
 _compile_lock = threading.Lock()
 _warming = threading.local()
 _log = logging.getLogger(__name__)
-# Files older than this process were left by another (compile_once clears them); kernels this
-# process compiled before its first World (a test calling one directly) stay.
-_PROCESS_START = time.time()
 
 
 def compile_once(warm_up):
     """Makes sure the cache directory is complete before this process steps a world: if it is
     not marked so, under an exclusive lock on it (other processes wait, counted as compiler
-    activity), deletes what other processes left in it and runs `warm_up` (which compiles the
-    kernels it calls), then marks it complete. Worlds that `warm_up` itself builds pass straight through."""
+    activity), empties it and runs `warm_up` (which compiles the kernels it calls), then marks
+    it complete. Worlds that `warm_up` itself builds pass straight through."""
     directory = cache_directory()
     if getattr(_warming, "active", False) or (directory / COMPLETE_MARKER).exists():
         return
@@ -103,8 +99,10 @@ def compile_once(warm_up):
                     return
                 _log.warning(f"compiling the engine once into {directory} (about 5 minutes on "
                              f"2 cores); later starts load it in about a second")
-                for entry in directory.rglob("*"):  # what an interrupted process left
-                    if entry.is_file() and entry.stat().st_mtime < _PROCESS_START:
+                # What an interrupted process left; also what this one compiled before its first
+                # World (kernels called directly): those load or compile later, as before.
+                for entry in directory.rglob("*"):
+                    if entry.is_file():
                         entry.unlink()
                 _warming.active = True
                 try:
