@@ -53,10 +53,11 @@ def test_a_failed_warm_up_leaves_the_cache_incomplete(cache_dir):
 
 
 @pytest.mark.skipif(jit_cache.fcntl is None, reason="no lock between processes here")
-def test_a_second_process_waits_for_the_first_to_fill_the_cache(cache_dir):
+def test_a_second_process_waits_for_the_first_to_fill_the_cache(cache_dir, monkeypatch):
     """Another process holds the cache's lock (its warm-up running) and then marks the cache
     complete: this one waits for it, counted as compiler activity (so requests wait too), and
     does not compile or clear anything itself."""
+    monkeypatch.setattr(jit_cache, "_activity", jit_cache.CompilerActivity())  # this test's only
     cache_dir.mkdir(parents=True)
     (cache_dir / "kernel.nbc").write_bytes(b"theirs")
     holder = textwrap.dedent(f"""
@@ -70,16 +71,15 @@ def test_a_second_process_waits_for_the_first_to_fill_the_cache(cache_dir):
     other = subprocess.Popen([sys.executable, "-c", holder], stdout=subprocess.PIPE, text=True)
     try:
         assert other.stdout.readline().strip() == "locked"
-        busy_before, _ = compiler_activity()
         runs = []
         waiter = threading.Thread(target=compile_once, args=(lambda: runs.append(1),))
         started = time.monotonic()
         waiter.start()
-        wait_for(lambda: compiler_activity()[0] > busy_before, timeout=5.0)
+        wait_for(lambda: compiler_activity() == (1, 0), timeout=5.0)  # waiting, counted
         waiter.join(timeout=30.0)
         assert not waiter.is_alive()
         assert time.monotonic() - started >= 1.0  # it waited for the other's lock
         assert runs == [] and (cache_dir / "kernel.nbc").read_bytes() == b"theirs"
-        assert compiler_activity()[0] == busy_before
+        assert compiler_activity() == (0, 1)
     finally:
         other.wait(timeout=30.0)
