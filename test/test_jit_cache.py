@@ -52,6 +52,19 @@ def test_a_failed_warm_up_leaves_the_cache_incomplete(cache_dir):
     assert runs == [1] and (cache_dir / COMPLETE_MARKER).exists()
 
 
+def test_a_cache_that_cannot_be_written_is_left_to_numba(tmp_path, monkeypatch, caplog):
+    """A cache directory that cannot be made (here under a regular file): said once, no warm-up,
+    no error; Numba then compiles in memory as it does without a cache."""
+    (tmp_path / "file").write_text("not a directory")
+    monkeypatch.setattr(numba.config, "CACHE_DIR", str(tmp_path / "file" / "0123456789abcdef"))
+    runs = []
+    for _ in range(2):
+        compile_once(lambda: runs.append(1))
+    assert runs == []
+    said = [r.getMessage() for r in caplog.records if "cannot cache" in r.getMessage()]
+    assert len(said) == 1 and "file/0123456789abcdef" in said[0]
+
+
 @pytest.mark.skipif(jit_cache.fcntl is None, reason="no lock between processes here")
 def test_a_second_process_waits_for_the_first_to_fill_the_cache(cache_dir, monkeypatch):
     """Another process holds the cache's lock (its warm-up running) and then marks the cache

@@ -73,6 +73,7 @@ event.register("numba:compiler_lock", _activity)
 
 _compile_lock = threading.Lock()
 _warming = threading.local()
+_uncacheable = set()  # cache directories that could not be created or locked (said once)
 _log = logging.getLogger(__name__)
 
 
@@ -82,13 +83,20 @@ def compile_once(warm_up):
     activity), empties it and runs `warm_up` (which compiles the kernels it calls), then marks
     it complete. Worlds that `warm_up` itself builds pass straight through."""
     directory = cache_directory()
-    if getattr(_warming, "active", False) or (directory / COMPLETE_MARKER).exists():
+    if (getattr(_warming, "active", False) or directory in _uncacheable
+            or (directory / COMPLETE_MARKER).exists()):
         return
     with _compile_lock:
-        directory.mkdir(parents=True, exist_ok=True)
         _activity.on_start(None)
         try:
-            with open(directory.parent / f"{directory.name}.lock", "w") as lock:
+            try:
+                directory.mkdir(parents=True, exist_ok=True)
+                lock = open(directory.parent / f"{directory.name}.lock", "w")
+            except OSError as error:  # no cache to fill: Numba compiles in memory, as it would
+                _log.warning(f"cannot cache the engine's kernels in {directory}: {error}")
+                _uncacheable.add(directory)
+                return
+            with lock:
                 if fcntl is not None:
                     try:
                         fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
