@@ -92,7 +92,7 @@ def compile_once(warm_up):
             try:
                 directory.mkdir(parents=True, exist_ok=True)
                 lock = open(directory.parent / f"{directory.name}.lock", "w")
-            except OSError as error:  # no cache to fill: Numba compiles in memory, as it would
+            except OSError as error:  # left to Numba: its own cache locations, or memory
                 _log.warning(f"cannot cache the engine's kernels in {directory}: {error}")
                 _uncacheable.add(directory)
                 return
