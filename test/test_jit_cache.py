@@ -54,7 +54,7 @@ def test_a_failed_warm_up_leaves_the_cache_incomplete(cache_dir):
 
 def test_a_cache_that_cannot_be_written_is_left_to_numba(tmp_path, monkeypatch, caplog):
     """A cache directory that cannot be made (here under a regular file): said once, no warm-up,
-    no error; Numba then compiles in memory as it does without a cache."""
+    no error; Numba then caches where it can, or compiles in memory."""
     (tmp_path / "file").write_text("not a directory")
     monkeypatch.setattr(numba.config, "CACHE_DIR", str(tmp_path / "file" / "0123456789abcdef"))
     runs = []
@@ -74,7 +74,7 @@ def test_a_second_process_waits_for_the_first_to_fill_the_cache(cache_dir, monke
     cache_dir.mkdir(parents=True)
     (cache_dir / "kernel.nbc").write_bytes(b"theirs")
     holder = textwrap.dedent(f"""
-        import fcntl, sys, time
+        import fcntl, time
         with open({str(cache_dir.parent / (cache_dir.name + ".lock"))!r}, "w") as lock:
             fcntl.flock(lock, fcntl.LOCK_EX)
             print("locked", flush=True)
