@@ -1,10 +1,12 @@
 """How the kernel cache is filled (physics.jit_cache.compile_once): by one process, start to end,
 and never finished by another. Behaviour with a stand-in warm-up (nothing compiles here)."""
+import shutil
 import subprocess
 import sys
 import textwrap
 import threading
 import time
+from pathlib import Path
 
 import numba
 import pytest
@@ -96,3 +98,21 @@ def test_a_second_process_waits_for_the_first_to_fill_the_cache(cache_dir, monke
         assert compiler_activity() == (0, 1)
     finally:
         other.wait(timeout=30.0)
+
+
+def test_each_copy_of_the_engine_has_a_cache_of_its_own(tmp_path):
+    """Numba files kernels under their source file's full path: two copies of one engine (two
+    checkouts, a colcon install beside its source) sharing a directory would share its complete
+    marker but not its kernels. The same copy keeps its directory; an edit to any source moves
+    it."""
+    engine = Path(jit_cache.__file__).parent
+    copies = [tmp_path / name / "physics" for name in ("checkout", "install")]
+    for copy in copies:
+        shutil.copytree(engine, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    base = tmp_path / "cache"
+    first, second = (jit_cache.source_keyed_directory(copy, base) for copy in copies)
+    assert first.parent == second.parent == base and first != second
+    assert jit_cache.source_keyed_directory(copies[0], base) == first
+    with open(copies[0] / "shapes" / "__init__.py", "a") as source:
+        source.write("\n")
+    assert jit_cache.source_keyed_directory(copies[0], base) not in (first, second)

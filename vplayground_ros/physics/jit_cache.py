@@ -31,13 +31,22 @@ from numba.core import event
 
 
 def use_source_keyed_cache():
-    engine = Path(__file__).parent
-    sources = sorted(engine.rglob("*.py"))  # the shapes/ package too
-    # Numba's and Python's versions too: a cache marked complete holds one compiler's code.
-    digest = hashlib.sha256(f"{numba.__version__} {sys.version}".encode()
-                            + b"".join(str(p.relative_to(engine)).encode() + p.read_bytes() for p in sources))
     base = os.environ.get("VPLAYGROUND_JIT_CACHE") or Path.home() / ".cache" / "vplayground_ros" / "numba"
-    numba.config.CACHE_DIR = str(Path(base) / digest.hexdigest()[:16])
+    numba.config.CACHE_DIR = str(source_keyed_directory(Path(__file__).parent, Path(base)))
+
+
+def source_keyed_directory(engine, base):
+    """The cache directory under `base` of the engine whose sources are in `engine`: keyed on
+    every source, Numba's and Python's versions (a cache marked complete holds one compiler's
+    code), and where the engine lies. Numba files a kernel under a hash of its source file's
+    full path, so two copies of one engine (two checkouts, a colcon install beside its source)
+    sharing a directory shared its complete marker but not the kernels: the second copy then
+    compiled kernel by kernel, in whichever processes came first."""
+    engine = engine.resolve()
+    sources = sorted(engine.rglob("*.py"))  # the shapes/ package too
+    digest = hashlib.sha256(f"{numba.__version__} {sys.version} {engine}".encode()
+                            + b"".join(str(p.relative_to(engine)).encode() + p.read_bytes() for p in sources))
+    return base / digest.hexdigest()[:16]
 
 
 # The file in a complete cache directory (compile_once wrote it after a whole warm-up).
