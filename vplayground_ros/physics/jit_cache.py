@@ -41,8 +41,9 @@ def source_keyed_directory(engine, base):
     code), and where the engine lies. Numba files a kernel under a hash of its source file's
     full path, so two copies of one engine (two checkouts, a colcon install beside its source)
     sharing a directory shared its complete marker but not the kernels: the second copy then
-    compiled kernel by kernel, in whichever processes came first."""
-    engine = engine.resolve()
+    compiled kernel by kernel, in whichever processes came first. (The path as Numba takes it:
+    absolute, symbolic links kept.)"""
+    engine = Path(os.path.abspath(engine))
     sources = sorted(engine.rglob("*.py"))  # the shapes/ package too
     digest = hashlib.sha256(f"{numba.__version__} {sys.version} {engine}".encode()
                             + b"".join(str(p.relative_to(engine)).encode() + p.read_bytes() for p in sources))
