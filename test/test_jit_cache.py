@@ -103,7 +103,8 @@ def test_a_second_process_waits_for_the_first_to_fill_the_cache(cache_dir, monke
 def test_each_copy_of_the_engine_has_a_cache_of_its_own(tmp_path):
     """Numba files kernels under their source file's full path: two copies of one engine (two
     checkouts, a colcon install beside its source) sharing a directory would share its complete
-    marker but not its kernels. The same copy keeps its directory; an edit to any source moves
+    marker but not its kernels. The same copy keeps its directory, and a path through a symbolic
+    link is another copy (Numba does not resolve links either); an edit to any source moves
     it."""
     engine = Path(jit_cache.__file__).parent
     copies = [tmp_path / name / "physics" for name in ("checkout", "install")]
@@ -113,6 +114,8 @@ def test_each_copy_of_the_engine_has_a_cache_of_its_own(tmp_path):
     first, second = (jit_cache.source_keyed_directory(copy, base) for copy in copies)
     assert first.parent == second.parent == base and first != second
     assert jit_cache.source_keyed_directory(copies[0], base) == first
+    (tmp_path / "link").symlink_to(copies[0].parent)
+    assert jit_cache.source_keyed_directory(tmp_path / "link" / "physics", base) not in (first, second)
     with open(copies[0] / "shapes" / "__init__.py", "a") as source:
         source.write("\n")
     assert jit_cache.source_keyed_directory(copies[0], base) not in (first, second)
