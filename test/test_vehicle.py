@@ -128,6 +128,22 @@ def test_brakes_stop_it_and_it_does_not_creep():
     assert np.linalg.norm(world.state()["positions"][row(world)] - stopped) < 0.01
 
 
+@pytest.mark.parametrize("yaw", [0.0, math.pi / 2])
+def test_braked_it_stands_on_a_slope(yaw):
+    """Parked (brakes full, freezing off) on a 0.15 rad slope, facing downhill or across it: the
+    tyres hold, grip 1 being far above tan 0.15. They used to cancel the slip of the velocity
+    before this step's gravity, so the car crept at g sin(slope) dt: 6.6 cm in 5 s."""
+    slope = 0.15
+    world = World({"gravity": [G * math.sin(slope), 0.0, -G * math.cos(slope)],
+                   "freezing": {"enabled": False}})
+    world.add_vehicle(car_spec(yaw=yaw))
+    world.drive("car", 0.0, 0.0, timeout=100)
+    world.step(3 * 128)
+    parked = world.state()["positions"][row(world)].copy()
+    world.step(5 * 128)
+    assert np.linalg.norm(world.state()["positions"][row(world)] - parked) < 0.002
+
+
 def test_a_hard_stop_never_rolls_it_backwards():
     """Issue 17.14: odom read -0.20 m/s after a stop from 3 m/s, the body swinging back on its
     springs around tyres the brakes held."""
