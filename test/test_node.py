@@ -187,6 +187,15 @@ def test_entity_services_and_codes(ros):
     assert ros.text("remove", "{entity: node_box}")[1].startswith("RESULT_NOT_FOUND:")
 
 
+def test_a_reply_repeating_what_utf8_cannot_carry_still_arrives(ros):
+    """An unknown key written as a JSON escape of a lone surrogate: the coded error repeats it,
+    and rclpy's send_response raised on encoding it, which stopped the node. Such characters (and
+    a NUL, where ROS strings end) come back as backslash escapes."""
+    ok, message = ros.text("spawn", '{"size": [1, 1, 1], "\\ud800": 1, "a\\u0000b": 2}')
+    assert not ok and message.startswith("RESULT_OPERATION_FAILED:") and "\\ud800" in message, message
+    assert ros.text("get_entity", "{entity: car}")[0]  # still serving
+
+
 def test_scene_services(ros):
     tmp_path = ros.scene_directory
     assert ros.node.get_parameter("scene_directories").value == [str(tmp_path)]

@@ -15,34 +15,42 @@ from .physics.shapes import SHAPES, solid
 Service = namedtuple("Service", "name type handler")
 
 
+def carriable(message):
+    """A reply text every transport carries whole: what it repeats from a request (an unknown
+    key, a name) may hold characters UTF-8 cannot encode (a lone surrogate from a JSON escape),
+    on which rclpy's send_response raised after the handler had returned, and a NUL, at which
+    ROS strings end. Both are written as backslash escapes."""
+    return message.encode("utf-8", "backslashreplace").decode("utf-8").replace("\0", "\\x00")
+
+
 def service_table(runtime):
     requests, parameters = runtime.requests, runtime.parameters
 
     def text(handler):
         def serve(request):
             success, message = handler(str(request.load_namespace))
-            return {"success": success, "message": message}
+            return {"success": success, "message": carriable(message)}
         return serve
 
     def boolean(handler):
         def serve(request):
             success, message = handler(bool(request.data))
-            return {"success": success, "message": message}
+            return {"success": success, "message": carriable(message)}
         return serve
 
     def trigger(handler):
         def serve(_request):
             success, message = handler()
-            return {"success": success, "message": message}
+            return {"success": success, "message": carriable(message)}
         return serve
 
     def load_scene(request):
         result, message = requests.load_scene(str(request.map_url))
         if result == MAP_SUCCESS:
             runtime.broadcaster.scene_changed()  # marker ids restart with the new bodies
-            runtime.log.info(f"~/load_scene: {message}")
+            runtime.log.info(f"~/load_scene: {carriable(message)}")
         else:
-            runtime.log.warning(f"~/load_scene: {message}")
+            runtime.log.warning(f"~/load_scene: {carriable(message)}")
         return {"result": result}
 
     def get_entities(_request):
