@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from vplayground_ros.physics import World
-from vplayground_ros.scene import load_world
+from vplayground_ros.scene import load_world, save_world
 
 G = 9.81
 CHASSIS_MASS, WHEEL_MASS, STIFFNESS = 1200.0, 20.0, 40000.0
@@ -241,3 +241,28 @@ def test_edit_vehicle_changes_only_given_keys_and_acts():
     world.step(128)
     # engine_power 3000 N shared by power gains 1 + 1: 6000 N for one second.
     assert forward_speed(world) - v0 == pytest.approx(2 * 3000.0 / TOTAL_MASS, rel=0.1)
+
+
+def test_an_edited_car_saves_and_reloads_as_it_is(tmp_path):
+    """A saved scene reloads to the same world (SPEC 3), the car's chassis included: its mass,
+    size, material and flags as edited. Only its size and the mass given when it was added
+    were saved, so an edited car came back as it had been built."""
+    world = car_world(freezing=False)
+    world.edit_body("car", mass=3000.0, elasticity=0.7, static_friction=0.3, size=[4.2, 2.0, 0.5],
+                    allow_freezing=False)
+    world.edit_vehicle("car", wheels={0: {"mass": 100.0}})
+    assert world.body("car")["mass"] == 3080.0  # the car weighs its chassis and its wheels
+    world.step(64)
+    save_world(world, tmp_path / "car.yaml")
+    again = load_world(tmp_path / "car.yaml")
+    assert again.vehicle("car") == world.vehicle("car")
+    assert again.body("car") == world.body("car")
+    assert world.vehicle("car")["chassis"]["mass"] == 3080.0 - 160.0
+
+
+def test_a_car_cannot_weigh_less_than_its_wheels():
+    world = car_world()
+    before = world.body("car")
+    with pytest.raises(ValueError, match="car.mass: a car weighs its chassis and its wheels"):
+        world.edit_body("car", mass=50.0, elasticity=0.9)
+    assert world.body("car") == before

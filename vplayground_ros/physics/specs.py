@@ -278,6 +278,9 @@ VEHICLE_DEFAULTS = {
 VEHICLE_KEYS = {"name", "position", "rpy", "quaternion", "linear_velocity", "angular_velocity",
                 "chassis", "engine_power", "brake_power", "max_steer", "wheels"}
 WHEEL_COUNT = 4  # front-left, front-right, rear-left, rear-right
+# The chassis is a body: its material and flags, besides its size and (own) mass.
+CHASSIS_BODY_KEYS = {"elasticity", "static_friction", "dynamic_friction", "immovable",
+                     "allow_freezing", "frozen"}
 
 
 def validate_wheel(raw, path):
@@ -343,12 +346,13 @@ def validate_vehicle(raw, path="vehicle"):
         if key in PLACEMENT:
             out[key] = PLACEMENT[key](value, p)
         elif key == "chassis":
-            mapping(value, p, {"size", "mass"})
+            mapping(value, p, {"size", "mass"} | CHASSIS_BODY_KEYS)
             for required in ("size", "mass"):
                 if required not in value:
                     raise SpecError(child(p, required), "missing")
             out[key] = {"size": vector(value["size"], child(p, "size"), 3, 0.0, MAX_SIZE, low_open=True),
-                        "mass": number(value["mass"], child(p, "mass"), 0.0, 1.0e12, low_open=True)}
+                        "mass": number(value["mass"], child(p, "mass"), 0.0, 1.0e12, low_open=True),
+                        **validate_body_fields({k: v for k, v in value.items() if k in CHASSIS_BODY_KEYS}, p)}
         elif key in ("engine_power", "brake_power"):
             out[key] = number(value, p, 0.0, 1.0e9)
         elif key == "max_steer":

@@ -169,7 +169,7 @@ class World(WorldQueries):
         if name in self._slots:
             raise ValueError(f"vehicle.name: a body named {name!r} already exists")
         wheels = vehicle["wheels"]
-        chassis = {"name": name, "size": vehicle["chassis"]["size"], "position": vehicle["position"],
+        chassis = {**vehicle["chassis"], "name": name, "position": vehicle["position"],
                    "mass": vehicle["chassis"]["mass"] + sum(w["mass"] for w in wheels)}
         for key in ("rpy", "quaternion", "linear_velocity", "angular_velocity"):
             if key in vehicle:
@@ -182,9 +182,17 @@ class World(WorldQueries):
         """Changes only the given vehicle keys: engine_power, brake_power, max_steer, and wheels
         as {index: {wheel keys}} (0-3: front-left, front-right, rear-left, rear-right). The
         chassis is edited as a body (edit_body)."""
+        wheels_before = self._wheels_mass(name)
         self._vehicles.edit(name, fields)
+        # The chassis body weighs the chassis and its wheels (add_vehicle).
+        slot = self._slots[name]
+        self._bodies.mass[slot] += self._wheels_mass(name) - wheels_before
+        self._set_fields(slot, {})
         self.layout_version += 1  # its wheels
         self._wake(self._slots[name])
+
+    def _wheels_mass(self, name):
+        return sum(wheel["mass"] for wheel in self._vehicles.spec(name)["wheels"])
 
     def drive(self, name, speed, yaw_rate, timeout=DEFAULT_COMMAND_TIMEOUT):
         """Twist command for vehicle `name`: wanted forward speed (m/s, negative reverses) and
@@ -202,11 +210,15 @@ class World(WorldQueries):
         return list(self._current_layout().vehicle_names)
 
     def vehicle(self, name):
-        """The vehicle's spec with its chassis' current pose (what a scene file holds)."""
+        """The vehicle's spec with its chassis body as it is now (what a scene file holds): pose,
+        velocities, size, material and flags, and the chassis' own mass (the body's less the
+        wheels')."""
         spec = {k: v for k, v in self._vehicles.spec(name).items() if k not in ("rpy", "quaternion")}
-        chassis = self.body(name)
+        body = self.body(name)
         state = ("position", "quaternion", "linear_velocity", "angular_velocity")
-        return {**spec, **{key: chassis[key] for key in state}}
+        chassis = {"size": body["size"], "mass": body["mass"] - self._wheels_mass(name),
+                   **{key: body[key] for key in specs.CHASSIS_BODY_KEYS}}
+        return {**spec, "chassis": chassis, **{key: body[key] for key in state}}
 
     def edit_body(self, name, /, **fields):
         """Changes only the given SPEC 3 body keys (not name or shape). Size changes keep the
@@ -220,6 +232,11 @@ class World(WorldQueries):
             self.check_inside(body["position"], f"{name}.position")
         resized = shape.fields.keys() & body.keys()
         solid = shapes.solid(shape.name, {**shape.fields, **body}, name) if resized else None
+        if name in self._vehicles and ("mass" in body or "density" in body):
+            mass = body["mass"] if "mass" in body else body["density"] * (solid or self._solids[slot][1]).volume
+            if mass <= self._wheels_mass(name):
+                raise ValueError(f"{name}.mass: a car weighs its chassis and its wheels "
+                                 f"({self._wheels_mass(name):g} kg): {mass:g} kg is not more")
         self._wake_touching([slot])
         self._forget_contacts([slot])
         b = self._bodies
