@@ -107,3 +107,34 @@ def test_bad_mesh_files_are_refused_with_the_file_named(tmp_path, text, fragment
     mesh = write_obj(tmp_path / "bad.obj", text)
     message = broken(lambda s: s["playground"].update(mesh=str(mesh)))
     assert "playground.mesh" in message and fragment in message
+
+
+def test_explicit_names_win_over_generated_ones_wherever_they_stand(tmp_path):
+    """Unnamed entries get the World's box_<n> / car_<n> names, skipping every name the file
+    gives, even one given further down; the file's order is kept and survives a round trip."""
+    vehicle = copy.deepcopy(SCENE["vehicles"][0])
+    del vehicle["name"]
+    world = load_world({"version": 1, "bodies": [{"position": [0, 0, 1]}, {"name": "box_1", "position": [3, 0, 1]},
+                                                 {"position": [6, 0, 1]}, {"name": "car_4", "position": [9, 0, 1]}],
+                        "vehicles": [vehicle]})
+    assert world.body_names() == ["box_2", "box_1", "box_3", "car_4", "car_5"]
+    assert world.vehicle_names() == ["car_5"]
+    save_world(world, tmp_path / "saved.yaml")
+    assert load_world(tmp_path / "saved.yaml").body_names() == world.body_names()
+    # Without explicit names the generated ones are as before.
+    unnamed = load_world({"version": 1, "bodies": [{"position": [0, 0, 1]}], "vehicles": [vehicle]})
+    assert unnamed.body_names() == ["box_1", "car_2"]
+
+
+@pytest.mark.parametrize("key, value, found", [
+    ("bodies", False, "bool"), ("bodies", 0, "int"), ("bodies", {}, "dict"), ("bodies", "", "str"),
+    ("vehicles", "", "str"), ("vehicles", {"name": "car"}, "dict"),
+])
+def test_top_level_lists_of_the_wrong_type_are_refused(key, value, found):
+    message = broken(lambda s: s.update({key: value}))
+    assert f"<scene>: {key}: expected a list, got {found}" in message
+
+
+def test_missing_or_null_top_level_lists_are_empty():
+    assert load_world({"version": 1, "bodies": None, "vehicles": None}).body_names() == []
+    assert load_world({"version": 1}).body_names() == []

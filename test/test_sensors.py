@@ -245,6 +245,8 @@ def test_sensors_are_saved_with_the_scene_and_go_with_a_removed_parent(caplog):
     ({"name": "s", "type": "camera", "parent": "world", "channels": 4}, "sensors[0].channels: unknown key"),
     ({"name": "s", "type": "imu", "parent": "world", "rate": 0}, "sensors[0].rate: must be > 0"),
     ({"name": "b", "type": "imu", "parent": "world"}, "sensors[0].name: duplicate name 'b'"),
+    ({"name": "s", "type": "imu", "parent": [1]}, "sensors[0].parent: expected a string, got list"),
+    ({"name": "s", "type": "imu", "parent": {"a": 1}}, "sensors[0].parent: expected a string, got dict"),
     ({"name": "s", "type": "depth_camera", "parent": "world", "pose": [0, 0, 1]},
      "sensors[0].pose: expected 6 numbers"),
 ])
@@ -257,3 +259,24 @@ def test_seed_is_validated():
     with pytest.raises(SceneError, match=r"settings\.seed: must be between 0"):
         load_world(scene(seed=-1))
     assert World({"seed": 5}).settings["seed"] == 5
+
+
+UNNAMED_CAR = {k: v for k, v in car().items() if k != "name"}
+
+
+@pytest.mark.parametrize("sensor, bodies, vehicles, message", [
+    ("box_1", [{}], [], "sensors[0].name: duplicate name 'box_1': already the name generated for bodies[0]"),
+    ("box_1", [{"name": "box_1"}], [], "sensors[0].name: duplicate name 'box_1': already bodies[0]'s name"),
+    ("car_1", [], [UNNAMED_CAR], "sensors[0].name: duplicate name 'car_1': already the name generated for vehicles[0]"),
+    ("car", [], [car()], "sensors[0].name: duplicate name 'car': already vehicles[0]'s name"),
+])
+def test_a_sensor_may_not_take_a_body_or_vehicle_name_given_or_generated(sensor, bodies, vehicles, message):
+    """Sensor names are frames, as bodies' names are: two frames of one name would be ambiguous."""
+    imu = {"name": sensor, "type": "imu", "parent": "world"}
+    with pytest.raises(SceneError, match=re.escape(f"<scene>: {message}")):
+        load_world(scene(imu, bodies=bodies, vehicles=vehicles))
+
+
+def test_a_sensor_may_ride_a_body_by_its_generated_name():
+    world = load_world(scene({"name": "imu", "type": "imu", "parent": "box_1"}, bodies=[{}]))
+    assert world.sensor_specs[0]["parent"] == "box_1" and world.body_names() == ["box_1"]

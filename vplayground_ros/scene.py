@@ -177,7 +177,9 @@ def validate_playground(raw, base, directories=None):
 
 
 def validate_list(raw, key):
-    items = raw.get(key) or []
+    items = raw.get(key)
+    if items is None:  # missing or `key:` alone; any other non-list (false, 0, {}) is a mistake
+        return []
     if not isinstance(items, list):
         raise specs.SpecError(key, f"expected a list, got {type(items).__name__}")
     return items
@@ -200,8 +202,28 @@ def body_mesh_points(raw, path, base, directories=None):
     return {**body, "points": vertices[np.unique(faces)].tolist()}
 
 
+def name_unnamed(bodies, vehicles, taken):
+    """Gives the unnamed bodies and vehicles the names World._generate_name would (box_<n>, then
+    car_<n>, one counter, in the order load_world adds them) but skipping every name in `taken`,
+    so a name given further down the file still wins. `taken` gains them. Returns {name: what
+    has it} for the sensors' messages."""
+    owners, count = {}, 0
+    for key, prefix, entries in (("bodies", "box", bodies), ("vehicles", "car", vehicles)):
+        for k, entry in enumerate(entries):
+            if "name" in entry:
+                owners[entry["name"]] = f"{key}[{k}]'s name"
+                continue
+            count += 1
+            while f"{prefix}_{count}" in taken:
+                count += 1
+            entry["name"] = f"{prefix}_{count}"
+            taken.add(entry["name"])
+            owners[entry["name"]] = f"the name generated for {key}[{k}]"
+    return owners
+
+
 def validate_scene(scene, base, max_bodies=None, directories=None):
-    """Checks the whole scene; returns what load_world builds from."""
+    """Checks the whole scene; returns what load_world builds from, every body and vehicle named."""
     specs.mapping(scene, "", TOP_LEVEL_KEYS)
     if "version" not in scene:
         raise specs.SpecError("version", f"missing (this program reads version {SCENE_VERSION})")
@@ -231,7 +253,11 @@ def validate_scene(scene, base, max_bodies=None, directories=None):
               for k, raw in enumerate(validate_list(scene, "bodies"))]
     vehicles = [claim(specs.validate_vehicle(raw, f"vehicles[{k}]"), f"vehicles[{k}]")
                 for k, raw in enumerate(validate_list(scene, "vehicles"))]
-    return settings, ground, playground, bodies, vehicles
+    # Named before the sensors are checked: a sensor's name is a frame and must not be a body's,
+    # generated or not.
+    owners = name_unnamed(bodies, vehicles, names)
+    sensors = validate_sensors(scene.get("sensors"), owners)
+    return settings, ground, playground, bodies, vehicles, sensors
 
 
 def load_world(path_or_dict, max_bodies=None, directories=None):
@@ -239,8 +265,8 @@ def load_world(path_or_dict, max_bodies=None, directories=None):
     confines the playground mesh to them (and the package's meshes/)."""
     scene, label, base = read_scene(path_or_dict)
     try:
-        settings, ground, playground, bodies, vehicles = validate_scene(scene, base, max_bodies, directories)
-        sensor_specs = validate_sensors(scene.get("sensors"), {e["name"] for e in bodies + vehicles if "name" in e})
+        settings, ground, playground, bodies, vehicles, sensor_specs = validate_scene(
+            scene, base, max_bodies, directories)
     except specs.SpecError as error:
         raise SceneError(f"{label}: {error}") from None
     world = World(settings, ground, capacity=max(64, len(bodies) + len(vehicles)))

@@ -69,6 +69,8 @@ def validate_sensor(raw, path, parents):
                                                          f"(one of: {', '.join(TYPES)})")
     specs.mapping(raw, path, COMMON_KEYS | TYPE_KEYS[kind])
     parent = raw["parent"]
+    if not isinstance(parent, str):  # `parents` is a set or dict: a list would not even hash
+        raise specs.SpecError(specs.child(path, "parent"), f"expected a string, got {type(parent).__name__}")
     if parent != WORLD and parent not in parents:
         raise specs.SpecError(specs.child(path, "parent"), f"no vehicle or body named "
                                                            f"{specs.quote(parent)} (or 'world')")
@@ -105,17 +107,21 @@ def validate_sensor(raw, path, parents):
 
 def validate_sensors(raw, parents, path="sensors"):
     """The scene's `sensors` list, validated; names are unique among the sensors and the bodies
-    (a sensor's name is its frame, beside the bodies' frames)."""
+    (a sensor's name is its frame, beside the bodies' frames). `parents` maps every body's and
+    vehicle's name to what has it (e.g. "bodies[0]'s name"), for the messages."""
     raw = [] if raw is None else raw
     if not isinstance(raw, list):
         raise specs.SpecError(path, f"expected a list, got {type(raw).__name__}")
-    out, names = [], set()
+    out, owners = [], {**parents, WORLD: "the world frame"}
     for k, entry in enumerate(raw):
-        sensor = validate_sensor(entry, specs.child(path, k), parents)
-        if sensor["name"] in names or sensor["name"] in parents or sensor["name"] == WORLD:
-            raise specs.SpecError(specs.child(specs.child(path, k), "name"),
-                                  f"duplicate name {specs.quote(sensor['name'])} (sensor names are frames)")
-        names.add(sensor["name"])
+        at = specs.child(path, k)
+        sensor = validate_sensor(entry, at, parents)
+        if sensor["name"] in owners:
+            raise specs.SpecError(specs.child(at, "name"),
+                                  f"duplicate name {specs.quote(sensor['name'])}: already "
+                                  f"{owners[sensor['name']]} (sensor names are frames, unique "
+                                  "among bodies, vehicles and sensors)")
+        owners[sensor["name"]] = f"{at}'s name"
         out.append(sensor)
     return out
 
