@@ -295,3 +295,34 @@ def test_solver_threads_is_a_parameter_that_every_world_of_the_run_keeps(running
     before = sim.world
     assert runtime.requests.reset(255)[0]
     wait_for(lambda: sim.call(lambda world: world is not before and world.solver_threads == 1))
+
+
+def test_start_up_overrides_take_effect_like_the_command_line():
+    """Values given as ROS overrides (--ros-args -p) arrive after the Runtime was built from the
+    command line, before it starts: frames, the duration and start_paused must act, not only
+    read back (the frames stayed world/odom/base_link, the run went on past its duration)."""
+    options = parse_args(["--no-record", "--real-time-factor", "0"])
+    sim = Simulation(load_world(SCENE), real_time_factor=0.0)
+    runtime = Runtime(sim, options, logging.getLogger("test_broadcast"))
+    sink = Collector()
+    runtime.broadcaster.add_sink(sink)
+    runtime.parameters.override({"world_frame": "map", "odom_frame": "odom2", "base_frame": "chassis",
+                                 "duration": 0.5})
+    runtime.start()
+    try:
+        assert sim.wait(60)  # the run ended at its duration
+    finally:
+        runtime.stop()
+    assert sim.world.time == pytest.approx(0.5)
+    assert {message.header.frame_id for _, message in sink.of("poses", POSES)} == {"map"}
+    odometry = sink.of("odom", decoder("nav_msgs/msg/Odometry"))[-1][1]
+    assert (odometry.header.frame_id, odometry.child_frame_id) == ("odom2", "chassis")
+
+    paused = Runtime(Simulation(load_world(SCENE), real_time_factor=0.0), options, logging.getLogger("test_broadcast"))
+    paused.parameters.override({"start_paused": True})
+    paused.start()
+    try:
+        time.sleep(0.5)
+        assert paused.sim.paused and paused.sim.world.time == 0.0
+    finally:
+        paused.stop()

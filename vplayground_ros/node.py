@@ -40,6 +40,11 @@ def interface_class(type_name):
     return getattr(importlib.import_module(f"{package}.{kind}"), name)
 
 
+# Start-up parameters only the command line sets: they are opened before the node exists.
+COMMAND_LINE_ONLY = {"scene": "--scene", "record": "--record / --no-record",
+                     "record_split_size": "--record-split-size", "foxglove.port": "--foxglove PORT"}
+
+
 def fill(msg, fields):
     """Sets an rclpy message's fields from nested dicts (lists of dicts for message sequences)."""
     types = msg.get_fields_and_field_types()
@@ -139,9 +144,15 @@ class SimulatorNode(Node):
         store = self.runtime.parameters
         for spec in store.specs.values():
             self.declare_parameter(spec.name, store[spec.name], descriptor(spec))
-        # Overrides given with --ros-args -p: validated and applied like any other set.
+        # Overrides given with --ros-args -p: validated and applied like any other set, before
+        # the simulation starts. What was opened from the command line before the node existed
+        # (the scene, the bag, the Foxglove port) cannot follow one: refused, naming the option.
         overrides = {name: plain(self.get_parameter(name).value) for name in store.specs}
-        store.override({name: value for name, value in overrides.items() if value != store[name]})
+        overrides = {name: value for name, value in overrides.items() if value != store[name]}
+        for name in overrides.keys() & COMMAND_LINE_ONLY:
+            raise ValueError(f"{name}: give it on the command line ({COMMAND_LINE_ONLY[name]}), "
+                             f"not as a ROS parameter override")
+        store.override(overrides)
         self._from_rclpy = threading.local()  # .active: inside our set-parameters callback
         self._copying = threading.local()     # .active: copying a change into rclpy
         self.add_on_set_parameters_callback(self._on_parameters)

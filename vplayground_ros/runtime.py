@@ -8,7 +8,7 @@ from pathlib import Path
 from .api import DEFAULT_MAX_BODIES, Requests, default_scene_directories
 from .broadcast import BagSink, Broadcaster, resolve
 from .inputs import Inputs
-from .parameters import PHYSICS, Parameters, parameter_table, settings_from
+from .parameters import FRAMES, PHYSICS, Parameters, parameter_table, settings_from
 from .services import service_table
 
 
@@ -67,6 +67,14 @@ class Runtime:
             self.requests.max_bodies = changed["max_bodies"]
         if "scene_directories" in changed:
             self.requests.scene_directories = [Path(d) for d in changed["scene_directories"]]
+        # Start-up values a ROS override (--ros-args -p) may give after the command line's: they
+        # come before the simulation starts (SimulatorNode.attach), and take effect like them.
+        if "start_paused" in changed:
+            self.sim.paused = changed["start_paused"]
+        if "duration" in changed:
+            self.sim.duration = changed["duration"] or None  # 0: until stopped
+        if changed.keys() & FRAMES:
+            self.broadcaster.frames = tuple(self.parameters[name] for name in FRAMES)
 
 
 def take_settings(world, settings):
