@@ -262,16 +262,17 @@ class Broadcaster:
             self._hand_over((snapshot, due, cells))
 
     def _send_clock(self, snapshot):
-        """/clock at every step (capped by clock_rate): a batch of several steps in real time
-        (Simulation.BATCH_PERIOD) sends one for each, in order, when it ends. As fast as
-        possible, or when time jumped (a reset, another scene), one a batch."""
+        """/clock at every step (capped by clock_rate): a batch of several steps (two in real
+        time, Simulation.BATCH_PERIOD; up to FAST_BATCH_STEPS as fast as possible) sends one for
+        each, in order, when it ends. When time jumped (a reset, another scene) or a late batch
+        caught up on more than MAX_CLOCK_FILL steps, one a batch."""
         seconds, step = snapshot.time, snapshot.step
         if seconds == self._last_clock:
             return
         world, last = self.sim.world, self._last_clock_step
         steps = step - last[1] if last is not None and last[0] is world else 0
         times = (seconds,)
-        if 1 < steps <= MAX_CLOCK_FILL and seconds > self._last_clock and self.sim.real_time_factor > 0.0:
+        if 1 < steps <= MAX_CLOCK_FILL and seconds > self._last_clock:
             dt = 1.0 / world.settings["steps_per_second"]
             times = tuple(seconds - k * dt for k in range(steps - 1, 0, -1)) + times
         rate = self.parameters["clock_rate"]
