@@ -337,3 +337,20 @@ def test_clock_goes_out_for_every_step_as_fast_as_possible(running):
     times = np.array([t for t, _ in sink.of("clock")])
     steps = np.arange(1, 129) / 128.0
     assert np.allclose(times[times > 0.0], steps)
+
+
+def test_tf_carries_every_vehicles_wheels(running):
+    """SPEC 7: /tf has each body and each wheel. The driven car's wheels hang from base_link;
+    every other vehicle's from its body's frame, as <name>/wheel_<position> (only the driven
+    car's were sent)."""
+    other = {**CAR, "name": "car_b", "position": [0, 8, 1.6]}
+    runtime, sink = running({**SCENE, "vehicles": [CAR, other]}, "--real-time-factor", "0", "--duration", "0.2")
+    runtime.sim.wait(60)
+    runtime.stop()
+    _, tf = sink.of("tf", decoder("tf2_msgs/msg/TFMessage"))[-1]
+    parent_of = {t.child_frame_id: t.header.frame_id for t in tf.transforms}
+    positions = ("front_left", "front_right", "rear_left", "rear_right")
+    assert all(parent_of[f"wheel_{p}"] == "base_link" for p in positions)
+    assert all(parent_of[f"car_b/wheel_{p}"] == "car_b" for p in positions)
+    assert parent_of["car_b"] == "world" and parent_of["base_link"] == "odom"
+    assert len(parent_of) == len(tf.transforms)  # no frame twice

@@ -400,17 +400,24 @@ class Broadcaster:
                     self.send("transforms", cdr.transform_stamped(snap.time, parent, child, pose), snap.time)
         for parent, child, pose in self._sensor_frames:  # static: the same on every message
             self.send("transforms", cdr.transform_stamped(snap.time, parent, child, pose), snap.time)
+        # Every other vehicle's wheels, from its body's frame (its name): <name>/wheel_<position>.
+        other_wheels = [frame for name in snap.vehicles if name != car and name in snap.wheels
+                        for frame in messages.wheel_transforms(snap, name, name, f"{name}/", snap.wheels[name])]
         s = snap.state
         if self.parameters["publish_body_frames"]:
             for row, name in enumerate(snap.names):
                 self.send("transforms", cdr.transform_stamped(
                     snap.time, world_frame, name, [*s["positions"][row], *s["quaternions"][row]]), snap.time)
+            for parent, child, pose in other_wheels:
+                self.send("transforms", cdr.transform_stamped(snap.time, parent, child, pose), snap.time)
         if self.wanted("tf"):
-            # world -> every body (child = its name), odom -> base_link, base_link -> wheels.
-            parents, children = self.tf_frames(snap.names, car_frames)
+            # world -> every body (child = its name), odom -> base_link, base_link -> wheels,
+            # each other vehicle -> its wheels.
+            frames = car_frames + other_wheels
+            parents, children = self.tf_frames(snap.names, frames)
             poses = self.pose_block(snap)
-            if car_frames:
-                poses = np.concatenate([poses, np.asarray([p for _, _, p in car_frames], float).reshape(-1, 7)])
+            if frames:
+                poses = np.concatenate([poses, np.asarray([p for _, _, p in frames], float).reshape(-1, 7)])
             self.send("tf", self.tf_encoder.encode(snap.time, parents, children, poses), snap.time)
 
     def pose_block(self, snap):

@@ -289,18 +289,27 @@ def car_command(snapshot, name, frame):
 
 def car_transforms(snapshot, name, frames, wheels):
     """[(parent, child, pose xyz + xyzw)]: odom -> base_link, and base_link -> wheel_<position>
-    at the wheel's centre (the mount, down by the spring's current length), steered and spun."""
+    (wheel_transforms)."""
     _, odom_frame, base_frame = frames
     row = snapshot.names.index(name)
-    s, v = snapshot.state, snapshot.vehicles[name]
-    out = [(odom_frame, base_frame, np.concatenate([s["positions"][row], s["quaternions"][row]]))]
+    s = snapshot.state
+    return [(odom_frame, base_frame, np.concatenate([s["positions"][row], s["quaternions"][row]])),
+            *wheel_transforms(snapshot, name, base_frame, "", wheels)]
+
+
+def wheel_transforms(snapshot, name, parent, prefix, wheels):
+    """[(parent, child, pose xyz + xyzw)] of vehicle `name`'s wheels from its chassis frame
+    `parent`: <prefix>wheel_<position> at the wheel's centre (the mount, down by the spring's
+    current length), steered and spun."""
+    v = snapshot.vehicles[name]
+    out = []
     for w, wheel in enumerate(WHEEL_NAMES):
         centre = list(wheels[w]["mount"])
         centre[2] -= wheels[w]["spring_length"] - v["compression"][w]
         steer, spin = 0.5 * v["steer_angle"][w], 0.5 * v["spin_angle"][w]
         rotation = quaternion_multiply((0.0, 0.0, math.sin(steer), math.cos(steer)),
                                        (0.0, math.sin(spin), 0.0, math.cos(spin)))
-        out.append((base_frame, f"wheel_{wheel}", [*centre, *rotation]))
+        out.append((parent, f"{prefix}wheel_{wheel}", [*centre, *rotation]))
     return out
 
 
