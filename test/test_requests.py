@@ -396,3 +396,122 @@ def test_snapshots_follow_every_change_of_the_bodies(requests, tmp_path):
     assert requests.load_scene(str(tmp_path / "other.yaml"))[0] == MAP_SUCCESS
     assert sim.world.layout_version == versions and sim.snapshot.names == others
     rows_are_the_bodies()
+
+
+# ---------------------------------------------------------------- names and frames (SPEC 6.1, 6.3)
+DEFAULT_SCENE = yaml.safe_load((Path(__file__).parent.parent / "config" / "default_scene.yaml").read_text())
+CAR = {**DEFAULT_SCENE["vehicles"][0], "position": [10.0, -10.0, 1.0], "rpy": [0.0, 0.0, np.pi / 2]}  # facing +y
+CAR_SCENE = {"version": 1, "bodies": [{"name": "a", "position": [0, 0, 0.5]}], "vehicles": [CAR],
+             "sensors": [{"name": "laser", "type": "lidar_2d", "parent": "car", "pose": [1.8, 0.0, 0.45, 0, 0, 0]},
+                         {"name": "cam", "type": "camera", "parent": "a", "pose": [0, 0, 1, 0, 0, 0]},
+                         {"name": "beacon", "type": "imu", "parent": "world", "pose": [5, 5, 5, 0, 0, 0]}]}
+
+
+@pytest.fixture
+def car_requests():
+    return Requests(Simulation(load_world(CAR_SCENE)))
+
+
+@pytest.mark.parametrize("name", ["world", "odom", "base_link", "wheel_front_left", "wheel_rear_right", "cam_optical"])
+def test_bodies_and_sensors_may_not_take_the_node_frames(car_requests, name):
+    """A body's name is its /tf frame and a sensor's too: one named like a frame the node
+    publishes would give /tf a loop or a frame with two parents."""
+    before = snapshot(car_requests.sim.world)
+    ok, message = car_requests.spawn(f"{{name: {name}}}")
+    assert not ok and message.startswith(f"NAME_NOT_UNIQUE: spawn.name: '{name}' is ") and "frame" in message, message
+    ok, message = car_requests.spawn(f"{{name: {name}, type: imu, parent: world}}")
+    assert not ok and message.startswith(f"NAME_NOT_UNIQUE: spawn.name: '{name}' is "), message
+    assert unchanged(car_requests, before) and len(car_requests.sim.world.sensor_specs) == 3
+    assert car_requests.spawn(f"{{name: {name}, allow_renaming: true}}") == (True, f"RESULT_OK: {name}_2")
+
+
+def test_the_frame_names_are_the_parameters():
+    requests = Requests(Simulation(load_world(SCENE)),
+                        settings={"world_frame": "map", "odom_frame": "odom", "base_frame": "chassis"})
+    assert requests.spawn("{name: map}")[1].startswith("NAME_NOT_UNIQUE: spawn.name: 'map' is the world_frame")
+    assert requests.spawn("{name: chassis}")[1].startswith("NAME_NOT_UNIQUE: spawn.name: 'chassis' is the base_frame")
+    assert requests.spawn("{name: base_link}") == (True, "RESULT_OK: base_link")
+    requests.spawn("{name: cam, type: camera, parent: base_link}")
+    assert requests.spawn("{name: cam_optical}")[1].startswith("NAME_NOT_UNIQUE: spawn.name: 'cam_optical' is the "
+                                                               "optical frame of cam")
+
+
+def position_of(requests, name):
+    return np.asarray(requests.sim.world.body(name)["position"])
+
+
+def test_spawn_and_edit_poses_are_taken_in_their_frame(car_requests):
+    """A frame_id the node publishes is resolved: base_link and the car's name are the car
+    (here at (10, -10, 1) facing +y), odom is the world, a sensor's frame is its mount."""
+    world = car_requests.sim.world
+    car = position_of(car_requests, "car")
+    ok, message = car_requests.spawn("{name: r, initial_pose: {header: {frame_id: base_link}, "
+                                     "pose: {position: {x: 1, y: 0, z: 2}}}}")
+    assert ok, message
+    assert np.allclose(position_of(car_requests, "r"), car + [0, 1, 2])
+    assert np.allclose(world.body("r")["quaternion"], world.body("car")["quaternion"])  # turned with the car
+    ok, message = car_requests.edit("{entity: r, state: {header: {frame_id: car}, pose: {position: [2, 0, 3]}, "
+                                    "twist: {linear: [1, 0, 0], angular: [0, 0, 1]}}}")
+    assert ok, message
+    assert np.allclose(position_of(car_requests, "r"), car + [0, 2, 3])
+    assert np.allclose(world.body("r")["linear_velocity"], [0, 1, 0])  # expressed in the car's axes
+    assert np.allclose(world.body("r")["angular_velocity"], [0, 0, 1])
+    assert car_requests.spawn("{name: s, initial_pose: {header: {frame_id: laser}, pose: {position: [0, 0, 1]}}}")[0]
+    assert np.allclose(position_of(car_requests, "s"), car + [0, 1.8, 1.45])
+    for frame in ("", "world", "odom"):
+        assert car_requests.edit(f"{{entity: s, state: {{header: {{frame_id: '{frame}'}}, "
+                                 "pose: {position: [1, 2, 3]}}}")[0]
+        assert np.allclose(position_of(car_requests, "s"), [1, 2, 3])
+
+
+@pytest.mark.parametrize("call, payload", [
+    ("spawn", "{name: r, initial_pose: {header: {frame_id: nowhere}, pose: {position: [1, 0, 0]}}}"),
+    ("edit", "{entity: a, state: {header: {frame_id: nowhere}, pose: {position: [1, 0, 0]}}}"),
+    ("edit", "{entity: a, state: {header: {frame_id: nowhere}, twist: {linear: [1, 0, 0]}}}"),
+    ("edit", "{entity: a, state: {pose: {header: {frame_id: nowhere}, pose: {position: [1, 0, 0]}}}}"),
+])
+def test_poses_in_unknown_frames_are_refused(car_requests, call, payload):
+    before = snapshot(car_requests.sim.world)
+    ok, message = getattr(car_requests, call)(payload)
+    assert not ok and message.startswith("INVALID_POSE: ") and "'nowhere' is not a frame" in message, message
+    assert unchanged(car_requests, before)
+
+
+def test_accelerations_cannot_be_set(car_requests):
+    """simulation_interfaces 2.1.0 SetEntityState: `set_acceleration` chooses whether the
+    state's acceleration is set; this simulator cannot set one, so it says so."""
+    before = snapshot(car_requests.sim.world)
+    ok, message = car_requests.edit("{entity: a, state: {acceleration: {linear: [1, 0, 0]}}}")
+    assert not ok and message.startswith("RESULT_OPERATION_FAILED: edit.state.acceleration: accelerations "
+                                         "cannot be set"), message
+    assert not car_requests.edit("{entity: a, state: {pose: {position: [0, 0, 2]}}, set_acceleration: true}")[0]
+    assert unchanged(car_requests, before)
+    assert car_requests.edit("{entity: a, state: {pose: {position: [0, 0, 2]}, acceleration: {linear: [0, 0, 0]}}, "
+                             "set_acceleration: false}")[0]
+    assert np.allclose(position_of(car_requests, "a"), [0, 0, 2])
+
+
+def test_remove_all_removes_the_sensors_too(car_requests):
+    """~/get_entities lists sensors, a fixed one (parent: world) too: `all` is all of them."""
+    assert [name for name, _ in car_requests.entities()][-3:] == ["laser", "cam", "beacon"]
+    ok, message = car_requests.remove("{all: true}")
+    assert ok and set(message.removeprefix("RESULT_OK: ").split(", ")) == {"a", "car", "laser", "cam", "beacon"}
+    assert car_requests.entities() == [] and car_requests.sim.world.sensor_specs == []
+
+
+def test_the_reset_scope_parameter_takes_what_reset_takes(requests):
+    """One rule: a scope ~/reset refuses is refused when the parameter is set (SPEC 6.4)."""
+    import argparse
+
+    from vplayground_ros.parameters import Parameters, parameter_table
+    options = argparse.Namespace(scene="", real_time_factor=1.0, start_paused=False, duration=None, record=None,
+                                 record_split_size=0, foxglove=None)
+    parameters = Parameters(parameter_table(requests.sim.world.settings, options, [], 10))
+    for scope in (8, 100, 254, 0, 256):
+        ok, reason = parameters.set({"reset_scope": scope})
+        assert not ok and reason.startswith("reset_scope: ") and parameters["reset_scope"] == 255, (scope, reason)
+        assert not requests.reset(scope)[0]
+    for scope in (1, 2, 3, 4, 5, 6, 7, 255):
+        assert parameters.set({"reset_scope": scope}) == (True, "") and parameters["reset_scope"] == scope
+        assert requests.reset(scope)[0], scope
+    assert "8 is not a combination of 1 TIME, 2 STATE, 4 SPAWNED" in parameters.set({"reset_scope": 8})[1]

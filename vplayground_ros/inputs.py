@@ -11,9 +11,10 @@ from types import SimpleNamespace
 import numpy as np
 import yaml
 
+from .api.frames import frame_pose
 from .interfaces import decoder
 from .physics.math3d import rpy_to_quat
-from .physics.math3d import quaternions_to_matrices
+from .sensors import pose_matrix
 
 Subscription = namedtuple("Subscription", "key name type")
 SUBSCRIPTIONS = [
@@ -62,6 +63,18 @@ class Inputs:
             self.handlers[key](msg)
         except (AttributeError, TypeError, ValueError) as error:
             self.log.warning(f"{key}: malformed message ignored ({error})")
+        except TimeoutError as error:
+            self.log.warning(f"{key} ignored: {error}")
+
+    def submit(self, key, fn):
+        """sim.submit(fn) with what goes wrong there logged: nobody waits for an input's Future,
+        so an exception left in it would be lost (a teleport out of the world, say)."""
+        def report(future):
+            error = None if future.cancelled() else future.exception()
+            if error is not None:
+                reason = error.args[0] if isinstance(error, KeyError) and error.args else error
+                self.log.warning(f"{key} ignored: {reason}")
+        self.sim.submit(fn).add_done_callback(report)
 
     def cmd_vel(self, msg):
         twist = msg.twist if hasattr(msg, "twist") else msg
@@ -72,21 +85,17 @@ class Inputs:
             return
         car = self.car(self.sim.snapshot)
         if car is not None:
-            self.sim.submit(lambda world: world.drive(car, speed, yaw_rate, timeout))
+            self.submit("cmd_vel", lambda world: world.drive(car, speed, yaw_rate, timeout))
+
+    def frames(self):
+        """(world, odom, base) frame names."""
+        return tuple(self.parameters[p] for p in ("world_frame", "odom_frame", "base_frame"))
 
     def to_world(self, frame, point):
         """A point in any frame the simulator publishes, in the world frame (None if unknown)."""
-        snap = self.sim.snapshot
-        world_frame, odom_frame, base_frame = (self.parameters[p] for p in ("world_frame", "odom_frame", "base_frame"))
-        point = np.asarray(point, dtype=float)
-        if frame in ("", world_frame, odom_frame):
-            return point
-        name = self.car(snap) if frame == base_frame or frame.startswith("wheel_") else frame
-        if name not in snap.names:
-            return None
-        row = snap.names.index(name)
-        rotation = quaternions_to_matrices(snap.state["quaternions"][row][None])[0]
-        return snap.state["positions"][row] + rotation @ point
+        frames = self.frames()
+        transform = self.sim.call(lambda world: frame_pose(world, frame, frames))
+        return None if transform is None else (transform @ [*point, 1.0])[:3]
 
     def clicked_point(self, msg):
         frame = str(msg.header.frame_id)
@@ -97,27 +106,39 @@ class Inputs:
         size = self.parameters["click_spawn_size"]
         height = self.parameters["click_spawn_height"]
         spec = yaml.safe_dump({"size": [size] * 3, "position": [float(p[0]), float(p[1]), float(p[2] + height + size / 2)]})
-        self.log.info(f"clicked_point: {self.requests.spawn(spec)[1]}")
+        ok, message = self.requests.spawn(spec)
+        (self.log.info if ok else self.log.warning)(f"clicked_point: {message}")
 
     def initial_pose(self, msg):
         car = self.car(self.sim.snapshot)
+        frame = str(msg.header.frame_id)
         pose = msg.pose.pose
-        p = self.to_world(str(msg.header.frame_id), (float(pose.position.x), float(pose.position.y),
-                                                     float(pose.position.z)))
+        p = [float(getattr(pose.position, k)) for k in "xyz"]
         q = [float(getattr(pose.orientation, k)) for k in "xyzw"]
-        if car is None or p is None or not (np.all(np.isfinite(p)) and np.all(np.isfinite(q))):
-            self.log.warning("initialpose ignored: no car, an unknown frame, or not finite")
+        if car is None:
+            self.log.warning("initialpose ignored: there is no car")
             return
-        yaw = math.atan2(2 * (q[3] * q[2] + q[0] * q[1]), 1 - 2 * (q[1] ** 2 + q[2] ** 2))
+        if not (np.all(np.isfinite(p)) and np.all(np.isfinite(q))):
+            self.log.warning(f"initialpose ignored: the pose is not finite ({p}, {q})")
+            return
+        norm = float(np.linalg.norm(q))
+        q = [v / norm for v in q] if norm > 0.0 else [0.0, 0.0, 0.0, 1.0]  # no orientation: the frame's
+        frames = self.frames()
 
         def teleport(world):
+            transform = frame_pose(world, frame, frames)
+            if transform is None:
+                raise ValueError(f"header.frame_id {frame!r:.80} is not a frame the node publishes")
+            target = transform @ pose_matrix(p, q)
+            yaw = math.atan2(target[1, 0], target[0, 0])  # upright: only the heading is kept
             wheels = world.vehicle(car)["wheels"]
             lift = max(w["spring_length"] + w["radius"] - w["mount"][2] for w in wheels)
-            world.edit_body(car, position=[float(p[0]), float(p[1]), float(p[2]) + lift],
-                            quaternion=list(rpy_to_quat((0.0, 0.0, yaw))),
+            position = [float(target[0, 3]), float(target[1, 3]), float(target[2, 3]) + lift]
+            world.check_inside(position, "pose.position")
+            world.edit_body(car, position=position, quaternion=list(rpy_to_quat((0.0, 0.0, yaw))),
                             linear_velocity=[0, 0, 0], angular_velocity=[0, 0, 0])
             world.drive(car, 0.0, 0.0)
-        self.sim.submit(teleport)
+        self.submit("initialpose", teleport)
 
     def push(self, msg):
         name = str(msg.header.frame_id)
@@ -126,8 +147,5 @@ class Inputs:
 
         def push(world):
             dt = 1.0 / world.settings["steps_per_second"]
-            try:
-                world.apply_impulse(name, [f * dt for f in force], [t * dt for t in torque])
-            except (KeyError, ValueError) as error:
-                self.log.warning(f"~/push ignored: {error}")
-        self.sim.submit(push)
+            world.apply_impulse(name, [f * dt for f in force], [t * dt for t in torque])
+        self.submit("~/push", push)

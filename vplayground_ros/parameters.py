@@ -21,6 +21,19 @@ from .physics import specs
 
 PHYSICS = ("gravity", "steps_per_second", "resolve_iterations", "octree_depth", "freezing.enabled",
            "freezing.time", "freezing.linear_speed", "freezing.angular_speed")
+# The frames the node publishes (REP-105), read-only parameters: their defaults.
+FRAMES = {"world_frame": "world", "odom_frame": "odom", "base_frame": "base_link"}
+# ~/reset scopes (simulation_interfaces ResetSimulation): `reset_scope` and ~/reset take the
+# same values, by the one rule of reset_scope().
+SCOPE_TIME, SCOPE_STATE, SCOPE_SPAWNED, SCOPE_ALL = 1, 2, 4, 255
+
+
+def reset_scope(value, path):
+    """A reset scope: 255 ALL or a combination of 1 TIME, 2 STATE, 4 SPAWNED; SpecError otherwise."""
+    scope = specs.integer(value, path, 1, SCOPE_ALL)
+    if scope != SCOPE_ALL and scope & ~(SCOPE_TIME | SCOPE_STATE | SCOPE_SPAWNED):
+        raise specs.SpecError(path, f"{scope} is not a combination of 1 TIME, 2 STATE, 4 SPAWNED (or 255 ALL)")
+    return scope
 
 
 @dataclass(frozen=True)
@@ -32,6 +45,7 @@ class ParameterSpec:
     low: float = None      # inclusive range of numbers
     high: float = None
     read_only: bool = False
+    rule: object = None    # fn(value, name) raising ValueError: what a range cannot say
 
 
 def setting(name, default, description, kind):
@@ -74,12 +88,13 @@ def parameter_table(settings, options, scene_directories, max_bodies, solver_thr
         P("show_octree", False, "draw the occupied octree cells in ~/scene/markers", "bool"),
         P("cmd_vel_timeout", 1.2, "s without cmd_vel before the car brakes to rest", "float", 0.01, 3600),
         P("cmd_vel_stamped", False, "cmd_vel is geometry_msgs/TwistStamped", "bool", read_only=True),
-        P("world_frame", "world", "fixed frame of the simulation", "str", read_only=True),
-        P("odom_frame", "odom", "the car's odometry frame", "str", read_only=True),
-        P("base_frame", "base_link", "the car's body frame", "str", read_only=True),
+        P("world_frame", FRAMES["world_frame"], "fixed frame of the simulation", "str", read_only=True),
+        P("odom_frame", FRAMES["odom_frame"], "the car's odometry frame", "str", read_only=True),
+        P("base_frame", FRAMES["base_frame"], "the car's body frame", "str", read_only=True),
         P("publish_body_frames", False, "publish a transform per body on ~/transforms", "bool"),
         P("step_count", 1, "steps one ~/step call advances", "int", 1, 1000000),
-        P("reset_scope", 255, "~/reset scope bits: 1 TIME, 2 STATE, 4 SPAWNED, 255 ALL", "int", 1, 255),
+        P("reset_scope", SCOPE_ALL, "~/reset scope bits: 1 TIME, 2 STATE, 4 SPAWNED, 255 ALL", "int", 1, SCOPE_ALL,
+          rule=reset_scope),
         P("click_spawn_size", 0.5, "edge of the box a clicked_point drops, m", "float", 0.01, 100),
         P("click_spawn_height", 2.0, "height above the clicked point it drops from, m", "float", 0, 1000),
         P("record", str(options.record or ""), "MCAP bag being written ('' = not recording)", "str", read_only=True),
@@ -134,7 +149,10 @@ class Parameters:
             if not isinstance(value, (list, tuple)) or len(value) != 3:
                 raise ValueError(f"{name}: expected 3 numbers")
             return [self._number(name, v, float, spec) for v in value]
-        return self._number(name, value, int if spec.kind == "int" else float, spec)
+        value = self._number(name, value, int if spec.kind == "int" else float, spec)
+        if spec.rule is not None:
+            spec.rule(value, name)
+        return value
 
     @staticmethod
     def _number(name, value, kind, spec):
@@ -205,6 +223,8 @@ class WorldSettings:
         self.sim = sim
 
     def __getitem__(self, name):
+        if name in FRAMES:  # not the World's: the parameters' defaults
+            return FRAMES[name]
         return self.sim.call(lambda world: physics_parameters(world.settings)[name])
 
     def set(self, changes):

@@ -18,6 +18,7 @@ Where things are:
 - scene_files.py       ~/load_scene, ~/save_scene
 - results.py           result codes, RequestError, the coded reply of every failure
 - payload.py           request text -> plain data (size and depth limits), poses
+- frames.py            the frames the node publishes, in the world: frame_ids, reserved names
 - file_access.py       scene directories, path confinement, O_EXCL and atomic writes
 - name_filter.py       ~/remove's regular expressions, bounded in length and time
 - naming.py            free names for allow_renaming

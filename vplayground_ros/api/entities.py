@@ -1,5 +1,7 @@
 """The entity services: ~/spawn, ~/edit, ~/remove, ~/get_entity, ~/get_entities. Bodies,
-vehicles and sensors are entities; their names are unique among all three.
+vehicles and sensors are entities; their names are unique among all three, and are frames, so
+they are none of the frames the node publishes besides (world, odom, base_link, the wheels', the
+cameras' optical frames). A pose's frame_id may be any frame the node publishes (frames.py).
 """
 import logging
 from pathlib import Path
@@ -9,11 +11,13 @@ import yaml
 from ..physics import specs
 from ..physics.shapes import solid
 from ..scene import body_mesh_points
+from ..sensor_messages import optical_frame
 from ..sensors import TYPES as SENSOR_TYPES, validate_sensor
 from .descriptions import describe, describe_sensor
+from .frames import CAMERAS, frame_pose, node_frames, optical_frames, pose_in_world
 from .name_filter import MAX_FILTER, match_names
 from .naming import unique_name
-from .payload import YAML_DUMPER, as_mapping, parse, pose_fields, xyz
+from .payload import YAML_DUMPER, as_mapping, header_frame, parse, pose_fields, xyz
 from .results import FAILED, INVALID_POSE, NAME_NOT_UNIQUE, NOT_FOUND, OK, RequestError, handled, reply
 
 log = logging.getLogger(__name__)
@@ -32,6 +36,23 @@ def drop_sensors_of(world, removed):
         log.warning(f"sensors {', '.join(orphans)} removed with their parent")
         world.sensor_specs = [s for s in world.sensor_specs if s["parent"] not in removed]
     return orphans
+
+
+def in_world(world, frame, fields, path, frames):
+    """Body keys given in `frame` in the world frame (frames.pose_in_world); INVALID_POSE naming
+    the frame unless the node publishes it."""
+    transform = frame_pose(world, frame, frames)
+    if transform is None:
+        raise RequestError(INVALID_POSE, f"{path}.header.frame_id: {specs.quote(frame)} is not a frame the node "
+                                         f"publishes (world, odom, base_link, wheel, sensor or body frames)")
+    return pose_in_world(transform, fields)
+
+
+def taken_name(name, frames_taken):
+    """Why `name` is taken, for a NAME_NOT_UNIQUE message."""
+    if name in frames_taken:
+        return f"{name!r} is {frames_taken[name]}, a frame the node publishes"
+    return f"{name!r} is taken"
 
 
 def check_inside(world, position, path):
@@ -55,56 +76,69 @@ class EntityRequests:
             raise RequestError(FAILED, f"spawn of {len(items)} entities: more than max_bodies ({cap})")
         prepared = [self._prepare_spawn(raw, f"[{k}]" if isinstance(request, list) else "spawn")
                     for k, raw in enumerate(items)]
-        return self.sim.call(lambda world: self._spawn(world, prepared, cap))
+        frames = self.frames()
+        return self.sim.call(lambda world: self._spawn(world, prepared, cap, frames))
 
     def _prepare_spawn(self, raw, path):
-        """(path, is vehicle, validated spec, allow_renaming) of one spawn entry. A convex
-        body's `mesh:` is read here (from the scene directories or the package's meshes/, as
-        a loaded scene's playground) and its hull taken, off the simulation thread."""
+        """(path, is vehicle, validated spec, allow_renaming, the initial pose's frame_id) of one
+        spawn entry. A convex body's `mesh:` is read here (from the scene directories or the
+        package's meshes/, as a loaded scene's playground) and its hull taken, off the
+        simulation thread."""
         item = body_mesh_points(dict(as_mapping(raw, path)), path, Path.cwd(), self.scene_directories)
         rename = specs.boolean(item.pop("allow_renaming", False), f"{path}.allow_renaming")
+        frame = ""
         if "initial_pose" in item:
             pose = as_mapping(item.pop("initial_pose"), f"{path}.initial_pose")
+            frame = header_frame(pose, f"{path}.initial_pose")
             item.update(pose_fields(pose, f"{path}.initial_pose"))
             if "quaternion" in item:
                 item.pop("rpy", None)  # the pose's orientation wins over the spec's
         if item.get("type") in SENSOR_TYPES:  # its parent is checked against the world
-            return path, "sensor", item, rename
+            return path, "sensor", item, rename, frame
         vehicle = "wheels" in item or "chassis" in item
         spec = specs.validate_vehicle(item, path) if vehicle else specs.validate_body(item, path)
         if not vehicle and spec["shape"] == "convex":
             solid("convex", spec, path)  # a hull it cannot have is refused before the world is asked
-        return path, vehicle, spec, rename
+        return path, vehicle, spec, rename, frame
 
-    def _spawn(self, world, prepared, cap):
+    def _spawn(self, world, prepared, cap, frames):
         existing = world.body_names()
         if len(existing) + len(prepared) > cap:
             raise RequestError(FAILED, f"spawn of {len(prepared)} entities: the world has {len(existing)} "
                                        f"bodies and max_bodies is {cap}")
-        names, suffixes = set(existing) | {s["name"] for s in world.sensor_specs}, {}
-        parents = set(existing) | {spec.get("name") for _, kind, spec, _ in prepared if kind != "sensor"}
+        # Names are frames (a body's on /tf, a sensor's), so the node's own frames are taken too.
+        frames_taken = {**node_frames(frames), **optical_frames(world.sensor_specs)}
+        names, suffixes = set(existing) | {s["name"] for s in world.sensor_specs} | set(frames_taken), {}
+        parents = set(existing) | {spec.get("name") for _, kind, spec, _, _ in prepared if kind != "sensor"}
         sensors = []
-        for path, vehicle, spec, rename in prepared:
+        for path, vehicle, spec, rename, frame in prepared:
             if vehicle == "sensor":
                 sensor = validate_sensor(spec, path, parents)
-                if sensor["name"] in names or sensor["name"] == "world":
-                    raise RequestError(NAME_NOT_UNIQUE, f"{path}.name: {sensor['name']!r} is taken "
-                                                        "(sensor names are frames, unique among entities)")
-                names.add(sensor["name"])
+                frame_names = [sensor["name"]] + ([optical_frame(sensor["name"])] if sensor["type"] in CAMERAS else [])
+                clash = next((n for n in frame_names if n in names), None)
+                if clash is not None:
+                    raise RequestError(NAME_NOT_UNIQUE, f"{path}.name: {taken_name(clash, frames_taken)} "
+                                                        "(sensor names are frames, unique among entities and frames)")
+                names.update(frame_names)
                 sensors.append(sensor)
                 continue
             name = spec.get("name")
             if name is not None and name in names:
                 if not rename:
-                    raise RequestError(NAME_NOT_UNIQUE, f"{path}.name: {name!r} is taken "
+                    raise RequestError(NAME_NOT_UNIQUE, f"{path}.name: {taken_name(name, frames_taken)} "
                                                         "(allow_renaming: true picks a free name)")
                 spec["name"] = name = unique_name(name, names, suffixes)
             if name is not None:
                 names.add(name)
+            if frame:
+                pose = {key: spec.pop(key) for key in ("position", "quaternion", "rpy") if key in spec}
+                if "rpy" not in pose:
+                    pose.setdefault("quaternion", [0.0, 0.0, 0.0, 1.0])  # none given: the frame's
+                spec.update(in_world(world, frame, pose, f"{path}.initial_pose", frames))
             check_inside(world, spec["position"], f"{path}.position")
         added = []
         try:
-            for _, vehicle, spec, _ in prepared:
+            for _, vehicle, spec, _, _ in prepared:
                 if vehicle != "sensor":
                     added.append(world.add_vehicle(spec) if vehicle else world.add_body(spec))
         except Exception:
@@ -127,29 +161,43 @@ class EntityRequests:
         specs.mapping(state, "edit.state", {"pose", "twist", "header", "acceleration"})
         set_pose = specs.boolean(request.pop("set_pose", "pose" in state), "edit.set_pose")
         set_twist = specs.boolean(request.pop("set_twist", "twist" in state), "edit.set_twist")
+        if specs.boolean(request.pop("set_acceleration", "acceleration" in state), "edit.set_acceleration"):
+            raise RequestError(FAILED, "edit.state.acceleration: accelerations cannot be set (the forces on a body "
+                                       "make them; set_acceleration: false ignores the field)")
         vehicle_edit = request.pop("vehicle", None)
-        fields = dict(request)
+        frame = header_frame(state, "edit.state")  # of the pose and the twist (EntityState.header)
+        stamped = {}  # the state's keys, given in `frame`
         if set_pose:
-            fields.update(pose_fields(as_mapping(state.get("pose", {}), "edit.state.pose"), "edit.state.pose"))
+            pose = as_mapping(state.get("pose", {}), "edit.state.pose")
+            pose_frame = header_frame(pose, "edit.state.pose")  # a PoseStamped
+            if frame and pose_frame and pose_frame != frame:
+                raise RequestError(INVALID_POSE, f"edit.state.pose.header.frame_id: {specs.quote(pose_frame)} is not "
+                                                 f"edit.state.header.frame_id {specs.quote(frame)}")
+            frame = frame or pose_frame
+            stamped.update(pose_fields(pose, "edit.state.pose"))
         if set_twist:
             twist = as_mapping(state.get("twist", {}), "edit.state.twist")
             specs.mapping(twist, "edit.state.twist", {"linear", "angular"})
             if "linear" in twist:
-                fields["linear_velocity"] = xyz(twist["linear"], "edit.state.twist.linear")
+                stamped["linear_velocity"] = xyz(twist["linear"], "edit.state.twist.linear")
             if "angular" in twist:
-                fields["angular_velocity"] = xyz(twist["angular"], "edit.state.twist.angular")
+                stamped["angular_velocity"] = xyz(twist["angular"], "edit.state.twist.angular")
         # Validate everything before changing anything.
-        fields = specs.validate_body_fields(fields, label, specs.BODY_KEYS - {"name", "shape"})
+        fields = specs.validate_body_fields({**request, **stamped}, label, specs.BODY_KEYS - {"name", "shape"})
         if vehicle_edit is not None:
             specs.validate_vehicle_edit(as_mapping(vehicle_edit, f"{label}.vehicle"), f"{label}.vehicle")
-        return self.sim.call(lambda world: self._edit(world, name, label, fields, vehicle_edit))
+        frames = self.frames()
+        return self.sim.call(lambda world: self._edit(world, name, label, fields, vehicle_edit,
+                                                      frame, set(stamped), frames))
 
     @staticmethod
-    def _edit(world, name, label, fields, vehicle_edit):
+    def _edit(world, name, label, fields, vehicle_edit, frame, stamped, frames):
         if name not in world.body_names():
             raise RequestError(NOT_FOUND, f"no entity named {label}")
         if vehicle_edit is not None and name not in world.vehicle_names():
             raise RequestError(FAILED, f"{label}.vehicle: {specs.quote(name)} is not a vehicle")
+        if frame:
+            fields = {**fields, **in_world(world, frame, {key: fields[key] for key in stamped}, "edit.state", frames)}
         if "position" in fields:
             check_inside(world, fields["position"], f"{label}.position")
         if fields:
@@ -196,7 +244,9 @@ class EntityRequests:
             return self.sim.call(lambda world: self._remove(world, doomed, strict=False))
         if request["all"] is not True:
             raise RequestError(FAILED, "remove.all: must be true")
-        return self.sim.call(lambda world: self._remove(world, world.body_names(), strict=True))
+        # Every entity: the sensors too (~/get_entities lists them), fixed ones included.
+        return self.sim.call(lambda world: self._remove(
+            world, world.body_names() + [s["name"] for s in world.sensor_specs], strict=True))
 
     @staticmethod
     def _remove(world, doomed, strict):

@@ -66,3 +66,15 @@ def pose_fields(pose, path):
     except specs.SpecError as error:
         raise RequestError(INVALID_POSE, str(error)) from None
 
+
+
+def header_frame(stamped, path):
+    """The `header.frame_id` of a stamped mapping (a PoseStamped, an EntityState): '' without
+    one. The stamp is ignored (simulation_interfaces: the state is set now)."""
+    if not isinstance(stamped, dict) or stamped.get("header") is None:
+        return ""
+    header = specs.mapping(stamped["header"], f"{path}.header", {"frame_id", "stamp"})
+    frame = header.get("frame_id", "")
+    if not isinstance(frame, str):
+        raise RequestError(INVALID_POSE, f"{path}.header.frame_id: expected a frame name, got {specs.quote(frame)}")
+    return frame

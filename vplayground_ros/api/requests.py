@@ -8,7 +8,7 @@ import copy
 import logging
 from pathlib import Path
 
-from ..parameters import WorldSettings
+from ..parameters import FRAMES, WorldSettings
 from ..scene import world_to_scene
 from .entities import EntityRequests
 from .file_access import default_scene_directories
@@ -39,6 +39,10 @@ class Requests(EntityRequests, ControlRequests, SceneRequests):
                                   else default_scene_directories(bag_directory))
         self.max_bodies = max_bodies
         self.initial = copy.deepcopy(world_to_scene(simulation.world))
+
+    def frames(self):
+        """(world, odom, base) frame names: the parameters' (read-only)."""
+        return tuple(self.settings[name] for name in FRAMES)
 
     def _follow_scene_settings(self):
         """The settings owner takes the loaded scene's settings, which the new World has."""

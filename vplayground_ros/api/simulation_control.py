@@ -5,14 +5,15 @@ import copy
 
 import yaml
 
+from ..parameters import SCOPE_ALL, SCOPE_SPAWNED, SCOPE_STATE, SCOPE_TIME, reset_scope
 from ..physics import specs
 from ..scene import load_world
 from ..simulation import PAUSED
 from .entities import drop_sensors_of
-from .results import ALREADY, FAILED, INCORRECT_STATE, OK, RequestError, handled, reply
+from .results import ALREADY, FAILED, INCORRECT_STATE, OK, handled, reply
 
-# Reset scopes (simulation_interfaces ResetSimulation).
-SCOPE_TIME, SCOPE_STATE, SCOPE_SPAWNED, SCOPE_ALL = 1, 2, 4, 255
+# Reset scopes (simulation_interfaces ResetSimulation): SCOPE_*, and the rule reset_scope()
+# that the `reset_scope` parameter is checked by too, live in ../parameters.py.
 # The features this simulator honours, as ~/get_simulator_features lists them: names and
 # numbers copied from simulation_interfaces 2.1.0 msg/SimulatorFeatures.msg (the tests check
 # them against the copy in test/simulation_interfaces-2.1.0/), each with what honours it.
@@ -63,9 +64,7 @@ class ControlRequests:
 
     @handled
     def reset(self, scope):
-        scope = specs.integer(scope, "reset.scope", 1, SCOPE_ALL)
-        if scope != SCOPE_ALL and scope & ~(SCOPE_TIME | SCOPE_STATE | SCOPE_SPAWNED):
-            raise RequestError(FAILED, f"reset scope {scope} is not a combination of 1 TIME, 2 STATE, 4 SPAWNED")
+        scope = reset_scope(scope, "reset.scope")
         ok, message = self.sim.call(lambda world: self._reset(world, scope))
         if ok and scope == SCOPE_ALL:
             self._follow_scene_settings()

@@ -1,0 +1,96 @@
+"""The subscription handlers (SPEC 6.2), ROS-free: messages as the Foxglove server's JSON gives them."""
+import json
+import math
+
+import numpy as np
+import pytest
+
+from test_requests import CAR_SCENE
+from vplayground_ros.api import Requests
+from vplayground_ros.inputs import Inputs, from_json
+from vplayground_ros.scene import load_world
+from vplayground_ros.simulation import Simulation
+
+PARAMETERS = {"world_frame": "world", "odom_frame": "odom", "base_frame": "base_link", "cmd_vel_timeout": 1.2,
+              "click_spawn_size": 0.5, "click_spawn_height": 2.0}
+
+
+class Log:
+    def __init__(self):
+        self.lines = []
+
+    def info(self, text):
+        self.lines.append(("info", text))
+
+    def warning(self, text):
+        self.lines.append(("warning", text))
+
+    def warnings(self):
+        return [text for level, text in self.lines if level == "warning"]
+
+
+@pytest.fixture
+def inputs():
+    sim = Simulation(load_world(CAR_SCENE))  # not started: commands run as they are submitted
+    return Inputs(sim, Requests(sim), PARAMETERS, Log(), lambda snapshot: next(iter(snapshot.vehicles), None))
+
+
+def message(**fields):
+    return from_json(json.dumps(fields))
+
+
+def click(inputs, frame, point=(0.0, 0.0, 0.0)):
+    """The box a click drops, where it appears (None if none did)."""
+    before = set(inputs.sim.world.body_names())
+    inputs.handle("clicked_point", message(header={"frame_id": frame}, point=dict(zip("xyz", point))))
+    new = set(inputs.sim.world.body_names()) - before
+    return np.asarray(inputs.sim.world.body(new.pop())["position"]) if new else None
+
+
+def test_clicks_in_the_frames_the_node_publishes(inputs):
+    """The car is at (10, -10, 1) facing +y; its laser at (1.8, 0, 0.45) in base_link, its
+    front-left wheel's frame at the wheel's centre (mount, down by the spring's length)."""
+    world = inputs.sim.world
+    car = np.asarray(world.body("car")["position"])
+    drop = np.array([0.0, 0.0, 2.0 + 0.25])  # click_spawn_height + half the box
+    assert np.allclose(click(inputs, "base_link", (1, 0, 0)), car + [0, 1, 0] + drop)
+    assert np.allclose(click(inputs, "laser", (1, 0, 0)), car + [0, 2.8, 0.45] + drop)
+    wheel = world.vehicle("car")["wheels"][0]
+    centre = np.asarray(wheel["mount"]) - [0, 0, wheel["spring_length"] - world.vehicle_state("car")["compression"][0]]
+    assert np.allclose(click(inputs, "wheel_front_left"), car + [-centre[1], centre[0], centre[2]] + drop)
+    assert np.allclose(click(inputs, "cam"), np.asarray(world.body("a")["position"]) + [0, 0, 1] + drop)
+    assert np.allclose(click(inputs, "beacon"), [5, 5, 5] + drop)
+    assert np.allclose(click(inputs, "odom", (1, 2, 3)), [1, 2, 3] + drop)
+    assert not inputs.log.warnings()
+    assert click(inputs, "nowhere") is None and "unknown frame 'nowhere'" in inputs.log.warnings()[-1]
+
+
+def test_refused_inputs_are_logged(inputs):
+    """What the simulation thread refuses is logged, not left in a Future nobody reads."""
+    world = inputs.sim.world
+    before = world.body("car")["position"]
+    pose = {"position": {"x": 5000.0, "y": 0.0, "z": 0.0}, "orientation": {"x": 0, "y": 0, "z": 0, "w": 1}}
+    inputs.handle("initial_pose", message(header={"frame_id": "world"}, pose={"pose": pose}))
+    assert world.body("car")["position"] == before
+    assert len(inputs.log.warnings()) == 1 and "initialpose ignored: pose.position: [5000.0" in inputs.log.warnings()[0]
+    assert "outside the world" in inputs.log.warnings()[0]
+    inputs.handle("initial_pose", message(header={"frame_id": "nowhere"}, pose={"pose": pose}))
+    assert "initialpose ignored" in inputs.log.warnings()[-1] and "'nowhere'" in inputs.log.warnings()[-1]
+    wrench = {"force": {"x": 1.0, "y": 0.0, "z": 0.0}, "torque": {"x": 0.0, "y": 0.0, "z": 0.0}}
+    inputs.handle("push", message(header={"frame_id": "nobody"}, wrench=wrench))
+    assert inputs.log.warnings()[-1] == "~/push ignored: no body named 'nobody'"
+    assert click(inputs, "world", (5000.0, 0.0, 0.0)) is None
+    assert inputs.log.warnings()[-1].startswith("clicked_point: INVALID_POSE: ")
+
+
+def test_initialpose_in_base_link_turns_with_the_car(inputs):
+    """A pose in base_link: 2 m ahead of the car (facing +y), turned a further quarter turn."""
+    world = inputs.sim.world
+    car = np.asarray(world.body("car")["position"])
+    pose = {"position": {"x": 2.0, "y": 0.0, "z": 0.0},
+            "orientation": {"x": 0, "y": 0, "z": math.sin(math.pi / 4), "w": math.cos(math.pi / 4)}}
+    inputs.handle("initial_pose", message(header={"frame_id": "base_link"}, pose={"pose": pose}))
+    assert not inputs.log.warnings()
+    moved = world.body("car")
+    assert np.allclose(moved["position"][:2], car[:2] + [0, 2])
+    assert np.allclose(np.abs(moved["quaternion"]), [0, 0, 1, 0], atol=1e-9)  # facing -x
