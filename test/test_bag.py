@@ -308,6 +308,71 @@ def test_a_killed_run_recovers(tmp_path):
     assert saved == len(messages) > 50
 
 
+
+def small_bag(path):
+    """A finished bag as the recorder writes it, small enough to cut at every byte: chunks of
+    ~500 bytes, two channels, so each chunk is followed by two message indexes. Returns the
+    messages' (log time, data) in order."""
+    rng, written = np.random.default_rng(2), []
+    with open(path, "wb") as out:
+        writer = recorder_module.BagWriter(out, 500, recorder_module.PROFILE, "vplayground_ros")
+        channels = [writer.register_channel(topic, "cdr", writer.register_schema(f"pkg/msg/{topic[1:]}", "ros2msg",
+                                                                                 b"int32 x"))
+                    for topic in ("/a", "/b")]
+        for k in range(24):
+            data = rng.bytes(int(rng.integers(0, 120)))
+            writer.add_message(channels[k % 2], 1000 * k, data)
+            written.append((1000 * k, data))
+        writer.finish()
+    return written
+
+
+def test_a_bag_cut_off_anywhere_recovers_every_complete_chunk(tmp_path):
+    # A crash can stop the file at any byte; cut inside the message indexes that follow a
+    # chunk, the salvage once died of a struct.error and left an unfinished file.
+    path = tmp_path / "whole.mcap"
+    written = small_bag(path)
+    data = path.read_bytes()
+    with open(path, "rb") as stream:
+        chunks = make_reader(stream).get_summary().chunk_indexes
+    assert len(chunks) >= 4
+    cut, fixed = tmp_path / "cut.mcap", tmp_path / "fixed.mcap"
+    for size in range(len(data) + 1):
+        cut.write_bytes(data[:size])
+        whole = [c for c in chunks if c.chunk_start_offset + c.chunk_length <= size]
+        expected = [message for stamp, message in written
+                    if any(c.message_start_time <= stamp <= c.message_end_time for c in whole)]
+        assert recover(cut, fixed) == len(expected), size
+        with open(fixed, "rb") as stream:
+            reader = make_reader(stream, validate_crcs=True)
+            assert reader.get_summary().statistics.message_count == len(expected), size  # finished
+            assert [message.data for _, _, message in reader.iter_messages()] == expected, size
+
+
+def test_a_finished_bag_recovers_as_it_was(tmp_path):
+    # Its summary repeats the schemas and channels: they once came out twice.
+    path, fixed = tmp_path / "whole.mcap", tmp_path / "fixed.mcap"
+    written = small_bag(path)
+    assert recover(path, fixed) == len(written)
+    summaries = []
+    for bag in (path, fixed):
+        with open(bag, "rb") as stream:
+            summaries.append(make_reader(stream).get_summary())
+    original, recovered = summaries
+    assert len(recovered.schemas) == len(original.schemas) == 2
+    assert len(recovered.channels) == len(original.channels) == 2
+    assert recovered.statistics.channel_message_counts == original.statistics.channel_message_counts
+
+
+@pytest.mark.parametrize("source", ["missing.mcap", "not_mcap.txt"])
+def test_recover_names_a_source_it_cannot_read_in_one_line(tmp_path, source):
+    (tmp_path / "not_mcap.txt").write_text("hello, this is no bag\n")
+    result = subprocess.run([sys.executable, "-m", "vplayground_ros.recorder", str(tmp_path / source),
+                             str(tmp_path / "fixed.mcap")], capture_output=True, text=True, timeout=60)
+    assert result.returncode != 0
+    assert result.stderr.count("\n") == 1 and str(tmp_path / source) in result.stderr, result.stderr
+    assert not (tmp_path / "fixed.mcap").exists()
+
 FOXGLOVE_READER = r"""
 const fs = require("fs");
 const { McapIndexedReader } = require("@mcap/core");

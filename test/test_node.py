@@ -394,6 +394,15 @@ def test_duration_and_sigterm_stop_cleanly():
     assert "stopped:" in output
 
 
+def test_a_ros_override_of_what_only_the_command_line_sets_is_refused():
+    """The scene (like the bag and the Foxglove port) is opened before the node exists: a
+    --ros-args -p override of it read back but acted nowhere. Refused, naming the option."""
+    refused = run_console("--no-record", "--duration", "1", "--ros-args", "-p", "scene:=/elsewhere.yaml")
+    output, _ = refused.communicate(timeout=120)
+    assert refused.returncode == 2, output
+    assert "cannot start: scene: give it on the command line (--scene)" in output
+
+
 def test_marker_and_contact_topics_carry_the_bodies(ros):
     from sensor_msgs.msg import JointState, PointCloud2
     from visualization_msgs.msg import MarkerArray

@@ -7,12 +7,12 @@ simulated time has passed.
 """
 import argparse
 import logging
+import math
 import os
 import signal
 import sys
 import threading
 import time
-import traceback
 from pathlib import Path
 
 from .resources import find_shared
@@ -23,12 +23,21 @@ STATUS_PERIOD = 2.0  # s of wall time between status lines
 STARTING = "starting: Numba loads the engine from its cache, or compiles it (about 5 minutes on a first run)"
 
 
+def finite_float(text):
+    """A float option's value: NaN passes every `<= 0` check and inf no step count can hold, so
+    both are refused here rather than ending the physics thread later."""
+    value = float(text)
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number, not {text!r}")
+    return value
+
+
 def parse_args(argv):
     parser = argparse.ArgumentParser(prog="vplayground", description="Real-time rigid-body sandbox.")
     parser.add_argument("--scene", type=Path, default=None, help="scene file (default: built-in)")
-    parser.add_argument("--duration", type=float, default=None,
+    parser.add_argument("--duration", type=finite_float, default=None,
                         help="stop after this many simulated seconds (default: run until stopped)")
-    parser.add_argument("--real-time-factor", type=float, default=1.0,
+    parser.add_argument("--real-time-factor", type=finite_float, default=1.0,
                         help="simulated seconds per wall-clock second; 0 = as fast as possible")
     parser.add_argument("--start-paused", action="store_true", help="start paused")
     parser.add_argument("--no-ros", action="store_true", help="no ROS node even where rclpy imports")
@@ -132,21 +141,61 @@ def use_middleware_profile(environ=os.environ):
     return profile
 
 
-def spin(executor, log, stop):
+def spin(executor, stop, fault):
     """The ROS callbacks (services, subscriptions, parameters), on their own thread: rclpy's
     executor waits for work without a timeout, where the main thread's spin_once(0.1) had
-    rebuilt its wait set of ~40 entities ten times a second (~0.7 % of a core). A callback's
-    exception ends the run, as it did on the main thread."""
+    rebuilt its wait set of ~40 entities ten times a second (~0.7 % of a core). An exception
+    out of a callback (or out of rclpy sending its reply) goes to fault(where, error), which
+    logs each distinct one once and counts it for /diagnostics, and the executor spins on: one
+    bad request must not take every service away. Returns once the executor or the ROS context
+    is shut down, and then stops the run (nothing would answer ROS any more)."""
+    from rclpy.executors import ExternalShutdownException
     try:
-        executor.spin()
-    except Exception:
-        log.error(f"a ROS callback failed, stopping:\n{traceback.format_exc()}")
+        while True:
+            try:
+                executor.spin()  # returns once shut down
+                return
+            except ExternalShutdownException:
+                return
+            except Exception as error:
+                fault("ROS callback", error)
+    finally:
         stop.set()
+
+
+class ThreadDeaths:
+    """Threads ended by an exception while the run lasts (threading.excepthook, which still
+    prints the traceback): a physics or publisher thread gone would leave a run that looks
+    alive, or one that ends with exit 0 having simulated nothing. Each death stops the run."""
+
+    def __init__(self, stop):
+        self.stop = stop
+        self.names = []
+
+    def __enter__(self):
+        self._previous = threading.excepthook
+        threading.excepthook = self._died
+        return self
+
+    def _died(self, args):
+        self._previous(args)
+        name = args.thread.name if args.thread is not None else "a thread"
+        self.names.append(f"{name} ({args.exc_type.__name__}: {args.exc_value})")
+        self.stop.set()
+
+    def __exit__(self, *_):
+        threading.excepthook = self._previous
 
 
 def run(sim, options, recorder, ros_args, stop):
     """The main thread: the status line, until stopped; the ROS callbacks (if any) on a thread
-    of their own."""
+    of their own. Returns the exit status: 1 if a thread of the run died of an exception."""
+    with ThreadDeaths(stop) as deaths:
+        status = run_until_stopped(sim, options, recorder, ros_args, stop, deaths)
+    return status
+
+
+def run_until_stopped(sim, options, recorder, ros_args, stop, deaths):
     from .runtime import Runtime
 
     node = executor = spinner = server = None
@@ -172,10 +221,15 @@ def run(sim, options, recorder, ros_args, stop):
             from .foxglove_server import FoxgloveServer
             server = FoxgloveServer(runtime, options.foxglove_host, options.foxglove)
         if node is not None:
-            node.attach(runtime)
+            try:
+                node.attach(runtime)
+            except ValueError as error:  # a --ros-args -p override refused
+                log.error(f"cannot start: {error}")
+                return 2
             executor = SingleThreadedExecutor()
             executor.add_node(node)
-            spinner = threading.Thread(target=spin, args=(executor, log, stop), name="vplayground-ros", daemon=True)
+            spinner = threading.Thread(target=spin, args=(executor, stop, sim.fault), name="vplayground-ros",
+                                       daemon=True)
         log.info(f"{options.scene}: {len(sim.world.body_names())} bodies; real-time factor "
                  f"{options.real_time_factor:g}{'' if options.duration is None else f', {options.duration:g} s'}; "
                  f"{'ROS node' if node else 'no ROS node'}; "
@@ -200,7 +254,9 @@ def run(sim, options, recorder, ros_args, stop):
         if spinner is not None and spinner.is_alive():
             executor.shutdown(timeout_sec=5.0)  # no callback runs past here, as none ran after the loop
             spinner.join(5.0)
-        runtime.stop()
+        runtime.stop()  # joins the physics thread: a death in it is known past here
+        if deaths.names:
+            log.error(f"stopping: {', '.join(deaths.names)} ended by an exception (traceback above)")
         if server is not None:
             server.stop()
         if recorder is not None:
@@ -209,10 +265,11 @@ def run(sim, options, recorder, ros_args, stop):
                      f"messages, {recorder.dropped} dropped){'; error: ' + recorder.error if recorder.error else ''}")
         log.info(f"stopped: {status_line(sim)}, {sim.world.step_count} steps")
         if node is not None:
-            executor.remove_node(node)
+            if executor is not None:
+                executor.remove_node(node)
             node.destroy_node()
             rclpy.try_shutdown()
-    return 0
+    return 1 if deaths.names else 0
 
 
 if __name__ == "__main__":

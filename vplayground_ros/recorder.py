@@ -22,6 +22,8 @@ the package free of a native extension wherever it is built (colcon, pip); zstd 
   rewrites them into a proper, summarised file (as `mcap recover` does).
 """
 import argparse
+import io
+import os
 import struct
 import sys
 import threading
@@ -33,13 +35,13 @@ from pathlib import Path
 
 import mcap.writer
 import zstandard
-from mcap.data_stream import RecordBuilder
+from mcap.data_stream import ReadDataStream, RecordBuilder
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
 from mcap.reader import make_reader
 from mcap.records import (Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Message, Schema, Statistics,
                           SummaryOffset)
-from mcap.stream_reader import StreamReader
+from mcap.stream_reader import breakup_chunk
 from mcap.writer import MCAP0_MAGIC, CompressionType, Writer
 
 from .interfaces import schema
@@ -377,28 +379,68 @@ class Recorder:
         self.error = self.error or f"{self._file.name}: {getattr(error, 'strerror', None) or error}"
 
 
+# Every record's opening: opcode, length of the rest.
+RECORD_HEAD = struct.Struct("<BQ")
+
+
+def whole_records(stream):
+    """The records of an MCAP file after its magic, each read only once all the bytes its head
+    announces are there: a file cut off anywhere (a crash) ends with its last whole record,
+    instead of failing inside the next one (mcap's StreamReader raises whatever the cut-off
+    field's read does: EndOfFile, struct.error, a zstd error). A whole record that does not
+    parse (damaged bytes) ends it too. The records inside a chunk come in its place; indexes,
+    statistics and the like are left out (a writer makes its own)."""
+    size = os.fstat(stream.fileno()).st_size
+    while True:
+        head = stream.read(RECORD_HEAD.size)
+        if len(head) < RECORD_HEAD.size:
+            return
+        opcode, length = RECORD_HEAD.unpack(head)
+        if length > size - stream.tell():
+            return  # torn here, or a damaged length: never read past the file's end
+        body = ReadDataStream(io.BytesIO(stream.read(length)))
+        try:
+            if opcode == Opcode.CHUNK:
+                records = breakup_chunk(Chunk.read(body), validate_crc=True)
+            elif opcode == Opcode.MESSAGE:
+                records = [Message.read(body, length)]
+            elif opcode == Opcode.SCHEMA:
+                records = [Schema.read(body)]
+            elif opcode == Opcode.CHANNEL:
+                records = [Channel.read(body)]
+            else:
+                continue
+        except Exception:  # whatever damaged bytes make the reader raise: what came before is saved
+            return
+        yield from records
+
+
 def recover(source, target):
     """Copies every complete message of a damaged MCAP (a crashed run's) into a new, summarised
-    file. Returns how many messages were saved."""
+    file. Returns how many messages were saved. Raises OSError for a source that cannot be
+    read, McapError for one that is no MCAP file (the target is not made then)."""
     saved = 0
-    with open(source, "rb") as stream, open(target, "wb") as out:
-        writer = Writer(out, chunk_size=CHUNK_SIZE, compression=CompressionType.ZSTD)
-        writer.start(profile=PROFILE, library="vplayground_ros recover")
-        schemas, channels = {}, {}
-        try:
-            for record in StreamReader(stream, skip_magic=False, emit_chunks=False).records:
-                if isinstance(record, Schema):
+    with open(source, "rb") as stream:
+        magic = stream.read(len(MCAP0_MAGIC))
+        if magic != MCAP0_MAGIC[:len(magic)]:  # a file cut inside its magic is a torn MCAP still
+            raise McapError(f"{source}: not an MCAP file")
+        with open(target, "wb") as out:
+            writer = Writer(out, chunk_size=CHUNK_SIZE, compression=CompressionType.ZSTD)
+            writer.start(profile=PROFILE, library="vplayground_ros recover")
+            schemas, channels = {}, {}
+            for record in whole_records(stream):
+                # A finished bag's summary repeats its schemas and channels (and other writers
+                # repeat them in every chunk): each is the one its id first named.
+                if isinstance(record, Schema) and record.id not in schemas:
                     schemas[record.id] = writer.register_schema(record.name, record.encoding, record.data)
-                elif isinstance(record, Channel):
+                elif isinstance(record, Channel) and record.id not in channels:
                     channels[record.id] = writer.register_channel(
                         record.topic, record.message_encoding, schemas.get(record.schema_id, 0), record.metadata)
                 elif isinstance(record, Message) and record.channel_id in channels:
                     writer.add_message(channels[record.channel_id], record.log_time, record.data,
                                        record.publish_time, record.sequence)
                     saved += 1
-        except (McapError, EOFError, ValueError, OSError):
-            pass  # the torn end of the file: everything before it is saved
-        writer.finish()
+            writer.finish()
     return saved
 
 
@@ -416,7 +458,14 @@ def recover_main(argv=None):
     parser.add_argument("source", type=Path)
     parser.add_argument("target", type=Path)
     args = parser.parse_args(argv)
-    saved = recover(args.source, args.target)
+    try:
+        saved = recover(args.source, args.target)
+    except OSError as error:
+        print(f"vplayground-recover: {error.filename or args.source}: {error.strerror or error}", file=sys.stderr)
+        return 1
+    except McapError as error:
+        print(f"vplayground-recover: {error}", file=sys.stderr)
+        return 1
     print(f"{args.target}: {saved} messages recovered")
     return 0
 

@@ -95,7 +95,7 @@ class Simulation:
         self.next_publish_time = math.inf
         self.sensors = Sensors()  # the world's `sensors:`, read when due after a step
         self.removed = []          # names of bodies removed for going non-finite or away
-        self.faults = []           # texts of the first exceptions the loop survived (listeners, steps)
+        self.faults = []           # texts of the first exceptions survived (listeners, steps, ROS callbacks)
         self.fault_count = 0       # all of them
         self._commands = queue.SimpleQueue()
         self._listeners = []
@@ -240,7 +240,7 @@ class Simulation:
                     world.step(steps)
                 except Exception as error:  # an engine bug: keep the loop (and the node) alive
                     self.paused, self._pending_steps = True, 0  # not the same failure 100 times a second
-                    self._fault("step", error)
+                    self.fault("step", error)
                 self.engine_cpu_seconds += world.engine_cpu_seconds - engine_before
                 if not first_batch:
                     self.step_seconds += time.perf_counter() - started
@@ -320,7 +320,7 @@ class Simulation:
         try:
             return self.sensors.sample(world)
         except Exception as error:
-            self._fault("sensors", error)
+            self.fault("sensors", error)
             return []
 
     def _publish(self, readings=()):
@@ -330,16 +330,18 @@ class Simulation:
             try:
                 listener(self.snapshot)
             except Exception as error:  # a publisher's bug must not stop the physics
-                self._fault("listener", error)
+                self.fault("listener", error)
 
-    def _fault(self, where, error):
+    def fault(self, where, error):
+        """Counts an exception a long-lived thread survived (this loop's, the ROS callbacks'):
+        /diagnostics shows the count and the first ones; each distinct one is logged once."""
         self.fault_count += 1
         text = f"{where}: {type(error).__name__}: {error}"
         if len(self.faults) < 100 and text not in self.faults:
             # Each distinct error once, with its traceback: a listener failing every batch
             # would flood the log.
             self.faults.append(text)
-            log.exception("simulation loop survived an error in %s (logged once, counted on /diagnostics)", where)
+            log.exception("survived an error in %s (logged once, counted on /diagnostics)", where)
 
     def _take_snapshot(self):
         world = self.world

@@ -1,0 +1,129 @@
+"""The `vplayground` entry point (cli.py): options refused with a reason, a thread that dies
+ending the run with a failure status, and the ROS thread surviving a failing callback."""
+import logging
+import threading
+
+import pytest
+
+from vplayground_ros import cli
+from vplayground_ros.scene import load_world
+from vplayground_ros.simulation import Simulation
+from helpers import wait_for
+
+SCENE = {"version": 1, "bodies": [{"name": "box", "position": [0, 0, 0.5]}]}
+
+
+@pytest.mark.parametrize("option", ["--duration", "--real-time-factor"])
+@pytest.mark.parametrize("value", ["nan", "inf", "-inf", "NaN"])
+def test_a_non_finite_duration_or_speed_is_refused(capsys, option, value):
+    # NaN passed the `<= 0` checks and inf reached the physics thread, which died of it.
+    with pytest.raises(SystemExit) as refused:
+        cli.parse_args([f"{option}={value}", "--no-record"])  # "=": "-inf" alone reads as an option
+    assert refused.value.code == 2
+    assert f"argument {option}: must be a finite number" in capsys.readouterr().err
+
+
+def test_finite_values_still_pass():
+    options = cli.parse_args(["--duration", "2.5", "--real-time-factor", "0", "--no-record"])
+    assert (options.duration, options.real_time_factor) == (2.5, 0.0)
+
+
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnhandledThreadExceptionWarning")
+def test_a_simulation_thread_that_dies_ends_the_run_with_a_failure_status(caplog, monkeypatch):
+    # The loop used to take the physics thread's end for a finished --duration: exit 0.
+    sim = Simulation(load_world(SCENE), real_time_factor=0.0)
+
+    def die():
+        raise OverflowError("cannot convert float infinity to integer")
+    monkeypatch.setattr(sim, "_loop", die)
+    hook = threading.excepthook
+    with caplog.at_level(logging.INFO):
+        status = cli.run(sim, cli.parse_args(["--no-record", "--no-ros"]), None, None, threading.Event())
+    assert status == 1
+    assert any(record.levelno == logging.ERROR and "vplayground-physics (OverflowError: cannot convert" in
+               record.getMessage() for record in caplog.records), caplog.text
+    assert threading.excepthook is hook  # the run's watch on its threads ended with it
+
+
+class FlakyExecutor:
+    """An executor whose spin() raises each of `errors` in turn (a callback failing), then
+    returns (shut down)."""
+
+    def __init__(self, *errors):
+        self.errors = list(errors)
+        self.spins = 0
+
+    def spin(self):
+        self.spins += 1
+        if self.errors:
+            raise self.errors.pop(0)
+
+
+def test_a_failing_ros_callback_is_logged_once_counted_and_spun_past(caplog):
+    pytest.importorskip("rclpy")
+    sim = Simulation(load_world(SCENE))
+    executor = FlakyExecutor(RuntimeError("bad request"), RuntimeError("bad request"), KeyError("reply"))
+    stop = threading.Event()
+    with caplog.at_level(logging.ERROR):
+        cli.spin(executor, stop, sim.fault)
+    assert executor.spins == 4  # spun on after each failure, until it returned
+    assert sim.fault_count == 3  # on /diagnostics
+    assert sim.faults == ["ROS callback: RuntimeError: bad request", "ROS callback: KeyError: 'reply'"]
+    logged = [record for record in caplog.records if record.levelno == logging.ERROR]
+    assert len(logged) == 2 and all(record.exc_info for record in logged)  # each once, with its traceback
+    assert stop.is_set()  # the executor was shut down: so is the run
+
+
+def test_the_ros_thread_ends_when_ros_shuts_down():
+    executors = pytest.importorskip("rclpy.executors")
+    faults, stop = [], threading.Event()
+    executor = FlakyExecutor(executors.ExternalShutdownException())  # the context was shut down
+    cli.spin(executor, stop, lambda where, error: faults.append(error))
+    assert executor.spins == 1 and faults == [] and stop.is_set()  # no fault, no second spin
+
+
+def test_a_real_node_answers_after_a_callback_failed():
+    """Through rclpy: a service callback raises out of the executor's spin; the next request
+    is answered, and shutting the executor down still ends the thread."""
+    rclpy = pytest.importorskip("rclpy")
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from std_srvs.srv import Trigger
+
+    context = Context()
+    rclpy.init(context=context)
+    server = rclpy.create_node("flaky_server", context=context)
+    client = rclpy.create_node("flaky_client", context=context)
+    requests = []
+
+    def answer(request, response):
+        requests.append(request)
+        if len(requests) == 1:
+            raise RuntimeError("handler bug")
+        response.success, response.message = True, "fine"
+        return response
+    server.create_service(Trigger, "flaky", answer)
+    server_executor, client_executor = SingleThreadedExecutor(context=context), SingleThreadedExecutor(context=context)
+    server_executor.add_node(server)
+    client_executor.add_node(client)
+    faults, stop = [], threading.Event()
+    spinner = threading.Thread(target=cli.spin, args=(server_executor, stop, lambda where, error: faults.append(
+        f"{where}: {error}")), daemon=True)
+    spinner.start()
+    try:
+        service = client.create_client(Trigger, "flaky")
+        assert service.wait_for_service(timeout_sec=30.0)
+        service.call_async(Trigger.Request())  # never answered: its callback raised
+        wait_for(lambda: faults, explain=lambda: (requests, spinner.is_alive()))
+        assert faults == ["ROS callback: handler bug"] and spinner.is_alive() and not stop.is_set()
+        future = service.call_async(Trigger.Request())
+        client_executor.spin_until_future_complete(future, timeout_sec=30.0)
+        assert future.done() and future.result().message == "fine"
+    finally:
+        server_executor.shutdown(timeout_sec=5.0)
+        spinner.join(10.0)
+        client_executor.shutdown()
+        server.destroy_node()
+        client.destroy_node()
+        rclpy.try_shutdown(context=context)
+    assert not spinner.is_alive() and stop.is_set()
