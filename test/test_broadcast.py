@@ -300,9 +300,12 @@ def test_solver_threads_is_a_parameter_that_every_world_of_the_run_keeps(running
 def test_start_up_overrides_take_effect_like_the_command_line():
     """Values given as ROS overrides (--ros-args -p) arrive after the Runtime was built from the
     command line, before it starts: frames, the duration and start_paused must act, not only
-    read back (the frames stayed world/odom/base_link, the run went on past its duration)."""
+    read back (the frames stayed world/odom/base_link, the run went on past its duration). A
+    sensor fixed in the world hangs from the world frame, whatever its name (it hung from a
+    `world` frame that nothing connected to `map`)."""
     options = parse_args(["--no-record", "--real-time-factor", "0"])
-    sim = Simulation(load_world(SCENE), real_time_factor=0.0)
+    post = {"name": "post", "type": "imu", "parent": "world", "pose": [1, 2, 3, 0, 0, 0]}
+    sim = Simulation(load_world({**SCENE, "sensors": [post]}), real_time_factor=0.0)
     runtime = Runtime(sim, options, logging.getLogger("test_broadcast"))
     sink = Collector()
     runtime.broadcaster.add_sink(sink)
@@ -317,6 +320,9 @@ def test_start_up_overrides_take_effect_like_the_command_line():
     assert {message.header.frame_id for _, message in sink.of("poses", POSES)} == {"map"}
     odometry = sink.of("odom", decoder("nav_msgs/msg/Odometry"))[-1][1]
     assert (odometry.header.frame_id, odometry.child_frame_id) == ("odom2", "chassis")
+
+    tf_static = sink.of("tf_static", decoder("tf2_msgs/msg/TFMessage"))[-1][1]
+    assert {(t.header.frame_id, t.child_frame_id) for t in tf_static.transforms} == {("map", "odom2"), ("map", "post")}
 
     paused = Runtime(Simulation(load_world(SCENE), real_time_factor=0.0), options, logging.getLogger("test_broadcast"))
     paused.parameters.override({"start_paused": True})

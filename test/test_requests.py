@@ -425,6 +425,24 @@ def test_bodies_and_sensors_may_not_take_the_node_frames(car_requests, name):
     assert car_requests.spawn(f"{{name: {name}, allow_renaming: true}}") == (True, f"RESULT_OK: {name}_2")
 
 
+def test_sensors_take_allow_renaming_and_ride_the_bodies_of_their_request(car_requests):
+    """A sensor's name may be renamed like a body's (it was refused with allow_renaming), also
+    when only its optical frame is taken; a sensor of a list rides the body of the list its
+    parent names, under that body's new name; initial_pose is a body's, refused clearly."""
+    assert car_requests.spawn("{name: laser, type: imu, parent: world, allow_renaming: true}") == (True, "RESULT_OK: laser_2")
+    assert car_requests.spawn("{name: lens_optical, type: imu, parent: world}")[0]
+    assert car_requests.spawn("{name: lens, type: camera, parent: world}")[1].startswith(
+        "NAME_NOT_UNIQUE: spawn.name: 'lens_optical' is ")
+    assert car_requests.spawn("{name: lens, type: camera, parent: world, allow_renaming: true}") == (True, "RESULT_OK: lens_2")
+    ok, message = car_requests.spawn("[{name: a, allow_renaming: true}, {name: a_imu, type: imu, parent: a}]")
+    assert (ok, message) == (True, "RESULT_OK: a_2, a_imu")
+    assert car_requests.sim.world.sensor_specs[-1]["parent"] == "a_2"
+    before = snapshot(car_requests.sim.world)
+    ok, message = car_requests.spawn("{name: s, type: imu, parent: world, initial_pose: {position: {x: 1}}}")
+    assert not ok and message.startswith("INVALID_POSE: spawn.initial_pose: a sensor is placed by `pose`"), message
+    assert unchanged(car_requests, before)
+
+
 def test_the_frame_names_are_the_parameters():
     requests = Requests(Simulation(load_world(SCENE)),
                         settings={"world_frame": "map", "odom_frame": "odom", "base_frame": "chassis"})

@@ -131,21 +131,24 @@ def test_the_depth_image_is_32fc1_metres_with_nan_for_no_return(ros):
     for row, slope in enumerate(down):
         if slope * WALL > HEIGHT:  # the ground before the wall, at depth HEIGHT / slope
             expected = HEIGHT / slope
-        elif -slope * WALL > 4.0 - HEIGHT:  # above the wall's top: nothing within range
-            expected = math.nan
+        elif -slope * WALL > 4.0 - HEIGHT:  # above the wall's top: nothing within range (REP 117's +inf)
+            expected = math.inf
         else:
             expected = WALL
         np.testing.assert_allclose(depth[row], expected, atol=1e-3, err_msg=f"row {row}")
-    assert np.isnan(depth[0]).all()
+    assert np.isposinf(depth[0]).all()
 
 
 def test_camera_info_k_and_p_follow_the_field_of_view(ros):
+    """Pixel centres at integer coordinates (image_geometry): the principal point is the
+    image's centre, ((W - 1) / 2, (H - 1) / 2)."""
     f = 0.5 * WIDTH / math.tan(0.5 * FOV)
+    cx, cy = (WIDTH - 1) / 2, (ROWS - 1) / 2
     for topic in ("/depth/depth/camera_info", "/eye/camera_info"):
         info = ros.latest[topic]
         assert (info.width, info.height) == (WIDTH, ROWS)
-        np.testing.assert_allclose(info.k, [f, 0, WIDTH / 2, 0, f, ROWS / 2, 0, 0, 1])
-        np.testing.assert_allclose(info.p, [f, 0, WIDTH / 2, 0, 0, f, ROWS / 2, 0, 0, 0, 1, 0])
+        np.testing.assert_allclose(info.k, [f, 0, cx, 0, f, cy, 0, 0, 1])
+        np.testing.assert_allclose(info.p, [f, 0, cx, 0, 0, f, cy, 0, 0, 0, 1, 0])
 
 
 def test_the_colour_image_is_rgb8_sky_above_and_the_shaded_wall_ahead(ros):

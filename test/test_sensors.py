@@ -7,7 +7,7 @@ import pytest
 
 from vplayground_ros.physics import World
 from vplayground_ros.scene import SceneError, load_world, world_to_scene
-from vplayground_ros.sensors import Sensors
+from vplayground_ros.sensors import Sensors, camera_intrinsics, lidar_2d_angles, validate_sensor
 
 G = 9.81
 
@@ -91,11 +91,43 @@ def test_depth_camera_over_the_ground_reads_its_height_per_pixel():
     assert readings["tilted"]["depth"] == pytest.approx(np.repeat(expected[:, None], 32, axis=1), abs=1e-3)
 
 
-def test_depth_camera_gives_nan_for_no_return():
+def test_depth_camera_reads_plus_inf_for_no_return_and_minus_inf_nearer_than_range_min():
+    """REP 118 takes REP 117's special values: +inf nothing within range, -inf too close."""
     camera = {"name": "sky", "type": "depth_camera", "parent": "world", "pose": [0, 0, 1, 0, -1.2, 0],
               "width": 8, "height": 6, "horizontal_fov": 1.0}
-    depth = read_once(load_world(scene(camera)), "sky")["depth"]
-    assert np.all(np.isnan(depth))
+    close = {**camera, "name": "close", "pose": [4.85, 0, 1, 0, 0, 0], "range_min": 0.5}
+    readings = read_once(load_world(scene(camera, close, bodies=[WALL])))
+    assert np.all(np.isposinf(readings["sky"]["depth"]))
+    assert np.all(np.isneginf(readings["close"]["depth"]))  # the wall's face is 0.15 m ahead
+
+
+def test_depth_camera_range_max_is_a_far_plane_along_its_axis():
+    """A wall 20 m ahead fills the image of a camera reaching 25 m, corners too (their rays
+    are longer than 25 m; their depth is 20)."""
+    wall = {"name": "far", "size": [0.2, 200.0, 100.0], "position": [20.1, 0.0, 40.0], "immovable": True}
+    camera = {"name": "cam", "type": "depth_camera", "parent": "world", "pose": [0, 0, 40, 0, 0, 0],
+              "width": 16, "height": 12, "horizontal_fov": 2.0, "range_max": 25.0}
+    depth = read_once(load_world(scene(camera, bodies=[wall])), "cam")["depth"]
+    assert depth == pytest.approx(np.full((12, 16), 20.0), abs=1e-4)
+
+
+def test_camera_info_unprojects_each_pixel_onto_what_it_saw():
+    """image_geometry / depth_image_proc take pixel (u, v) at integer coordinates through
+    ((u - cx) / fx, (v - cy) / fy, 1): every pixel of a tilted camera over flat ground comes
+    back onto the ground, the rows next to the horizon too."""
+    h, pitch = 1.0, 0.35
+    spec = {"name": "cam", "type": "depth_camera", "parent": "world", "pose": [0, 0, h, 0, pitch, 0],
+            "width": 160, "height": 120, "horizontal_fov": math.radians(90.0), "range_max": 500.0}
+    depth = read_once(load_world(scene(spec)), "cam")["depth"].astype(float)
+    fx, fy, cx, cy = camera_intrinsics(validate_sensor(spec, "cam", {}))
+    v, u = np.meshgrid(np.arange(120), np.arange(160), indexing="ij")
+    seen = np.isfinite(depth)
+    assert seen.sum() > 5000
+    optical = np.stack([(u - cx) / fx * depth, (v - cy) / fy * depth, depth], axis=-1)[seen]
+    # Optical (x right, y down, z forward) -> sensor (x forward, y left, z up), pitched down.
+    forward, down = optical[:, 2], optical[:, 1]
+    height = h - forward * math.sin(pitch) - down * math.cos(pitch)
+    assert np.all(np.abs(height) <= 1e-3 * np.maximum(forward, 1.0))  # float32 depths of up to 500 m
 
 
 def test_camera_paints_what_it_sees_in_the_marker_colours():
@@ -280,3 +312,111 @@ def test_a_sensor_may_not_take_a_body_or_vehicle_name_given_or_generated(sensor,
 def test_a_sensor_may_ride_a_body_by_its_generated_name():
     world = load_world(scene({"name": "imu", "type": "imu", "parent": "box_1"}, bodies=[{}]))
     assert world.sensor_specs[0]["parent"] == "box_1" and world.body_names() == ["box_1"]
+
+
+@pytest.mark.parametrize("rate", [64.0, 100.0, 30.0, 1000.0])
+def test_imu_in_free_fall_reads_no_specific_force_at_any_rate(rate):
+    """Samples fall on whole steps (at 100 Hz one or two steps apart at 128 steps/s, at 1,000 Hz
+    every step): the acceleration is over the time between them, from the first sample on."""
+    box = {"name": "b", "size": [1.0, 1.0, 1.0], "position": [0.0, 0.0, 50.0]}
+    imu = {"name": "imu", "type": "imu", "parent": "b", "rate": rate}
+    world = load_world(scene(imu, bodies=[box]))
+    sensors = Sensors()
+    readings = []
+    while world.time < 0.5:
+        world.step(sensors.steps_until_due(world))
+        readings += [r["linear_acceleration"] for _, r in sensors.sample(world)]
+    assert len(readings) >= 10
+    assert np.array(readings) == pytest.approx(np.zeros((len(readings), 3)), abs=1e-6)
+
+
+def test_imu_on_a_spinning_body_reads_its_centripetal_acceleration():
+    """A body spinning at w about z, no gravity, an IMU r from the axis: -w^2 r towards the
+    axis (in the sensor's frame, which turns with the body), w about z, at 100 Hz."""
+    w, r = 2.0, 1.0
+    box = {"name": "b", "size": [0.5, 0.5, 0.5], "position": [0.0, 0.0, 5.0], "angular_velocity": [0, 0, w]}
+    imu = {"name": "imu", "type": "imu", "parent": "b", "pose": [r, 0, 0, 0, 0, 0], "rate": 100.0}
+    world = load_world(scene(imu, bodies=[box], gravity=[0.0, 0.0, 0.0]))
+    sensors = Sensors()
+    readings = []
+    while world.time < 1.0:
+        world.step(sensors.steps_until_due(world))
+        readings += [r for _, r in sensors.sample(world)]
+    # The mean acceleration over a sample's interval T is the chord's: (2 sin(wT/2) / T) w r,
+    # pointing to the axis from the interval's middle, so w^2 r within (wT)^2 / 24 and a
+    # sideways part of wT / 2 turned away: the x reading is within 0.05 % of -w^2 r.
+    for reading in readings[1:]:
+        assert reading["linear_acceleration"][0] == pytest.approx(-w * w * r, rel=2e-3)
+        assert reading["angular_velocity"] == pytest.approx([0.0, 0.0, w], abs=1e-9)
+
+
+def test_a_full_turn_scan_given_as_plus_minus_pi_to_eight_places_does_not_repeat_a_beam():
+    """The default scene writes +-3.14159265: 360 beams one degree apart, not 1.0028."""
+    spec = {"type": "lidar_2d", "angle_min": -3.14159265, "angle_max": 3.14159265, "samples": 360}
+    angles = lidar_2d_angles(spec)
+    assert np.diff(angles) == pytest.approx(np.full(359, math.radians(1.0)), abs=1e-10)
+
+
+def test_noisy_returns_stay_within_the_ranges():
+    """Noise added to a return near range_max or range_min would put it outside the range
+    LaserScan and the cloud claim: such returns are +inf / -inf (dropped from the cloud)."""
+    wall = {**WALL, "position": [29.95, 0.0, 2.0]}
+    scan = {"name": "scan", "type": "lidar_2d", "parent": "world", "pose": [0, 0, 1, 0, 0, 0],
+            "samples": 200, "angle_min": -0.05, "angle_max": 0.05, "range_max": 30.0, "noise_stddev": 0.2}
+    cloud = {"name": "cloud", "type": "lidar_3d", "parent": "world", "pose": [0, 0, 1, 0, 0, 0],
+             "horizontal_samples": 4096, "channels": 2, "vertical_min": -0.01, "vertical_max": 0.01,
+             "range_max": 30.0, "noise_stddev": 0.2}
+    readings = read_once(load_world(scene(scan, cloud, bodies=[wall])))
+    ranges = readings["scan"]["ranges"]
+    finite = ranges[np.isfinite(ranges)]
+    assert 20 < len(finite) < 200 and np.all(finite <= 30.0) and np.sum(np.isposinf(ranges)) > 20
+    assert np.all(np.linalg.norm(readings["cloud"]["points"], axis=1) <= 30.0 + 1e-4)
+
+
+def test_the_colour_camera_does_not_draw_what_is_nearer_than_range_min():
+    """range_min is its near clipping plane: a box 1 m ahead vanishes at range_min 3, and the
+    image is the one without the box."""
+    box = {"name": "near", "size": [0.5, 4.0, 4.0], "position": [1.25, 0.0, 1.0], "immovable": True}
+    camera = {"name": "cam", "type": "camera", "parent": "world", "pose": [0, 0, 1, 0, 0.2, 0],
+              "width": 32, "height": 24, "range_min": 3.0}
+    clipped = read_once(load_world(scene(camera, bodies=[box])), "cam")["rgb"]
+    empty = read_once(load_world(scene(camera)), "cam")["rgb"]
+    seen = read_once(load_world(scene({**camera, "range_min": 0.1}, bodies=[box])), "cam")["rgb"]
+    assert np.array_equal(clipped, empty) and not np.array_equal(seen, empty)
+
+
+def test_a_new_sensor_leaves_the_others_running():
+    """Spawning a sensor changes the world's sensor list; the sensors already there keep their
+    noise streams and IMU histories (the next scan is not the first one again; a falling IMU
+    does not read a fresh start's +9.81)."""
+    falling = {"name": "b", "size": [1.0, 1.0, 1.0], "position": [0.0, 0.0, 50.0]}
+    lidar = {"name": "scan", "type": "lidar_2d", "parent": "world", "pose": [0, 0, 1, 0, 0, 0],
+             "noise_stddev": 0.05}
+    imu = {"name": "imu", "type": "imu", "parent": "b", "rate": 10.0}
+    world = load_world(scene(lidar, imu, bodies=[WALL, falling]))
+    sensors = Sensors()
+    world.step(sensors.steps_until_due(world))
+    first = {s.name: r for s, r in sensors.sample(world)}
+    world.sensor_specs = [*world.sensor_specs, {**world.sensor_specs[1], "name": "imu_2"}]
+    world.step(sensors.steps_until_due(world))
+    second = {s.name: r for s, r in sensors.sample(world)}
+    assert not np.array_equal(second["scan"]["ranges"], first["scan"]["ranges"])
+    assert second["imu"]["linear_acceleration"] == pytest.approx([0.0, 0.0, 0.0], abs=1e-6)
+
+
+CAMERA = {"name": "cam", "type": "camera", "parent": "world"}
+
+
+@pytest.mark.parametrize("sensors, bodies, message", [
+    ([{"name": "odom", "type": "imu", "parent": "world"}], [], "sensors[0].name: 'odom' is the odom_frame"),
+    ([{"name": "wheel_front_left", "type": "imu", "parent": "world"}], [],
+     "sensors[0].name: 'wheel_front_left' is a wheel frame of the car"),
+    ([], [{"name": "base_link"}], "bodies[0].name: 'base_link' is the base_frame (the car)"),
+    ([CAMERA], [{"name": "cam_optical"}], "bodies[0].name: 'cam_optical' is the optical frame of cam"),
+    ([CAMERA, {"name": "cam_optical", "type": "imu", "parent": "world"}], [],
+     "sensors[1].name: 'cam_optical' is the optical frame of cam"),
+])
+def test_a_scene_may_not_name_an_entity_like_a_frame_of_the_node(sensors, bodies, message):
+    """As ~/spawn refuses them: such a name gives /tf a frame with two parents, or a loop."""
+    with pytest.raises(SceneError, match=re.escape(f"<scene>: {message}")):
+        load_world(scene(*sensors, bodies=bodies))

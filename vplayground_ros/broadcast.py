@@ -16,6 +16,7 @@ from collections import deque, namedtuple
 import numpy as np
 
 from . import cdr, messages, sensor_messages
+from .frame_names import mount_frame
 
 Topic = namedtuple("Topic", "key name type qos")
 # qos: "reliable_1", "reliable_10", "reliable_100", "latched" (reliable, transient local, depth 1)
@@ -290,9 +291,7 @@ class Broadcaster:
         if self._static_key is not None and all(a is b for a, b in zip(key, self._static_key)):
             return False
         self._static_key = key
-        base_frame = self.frames[2]
-        self._sensor_frames = sensor_messages.static_frames(
-            world.sensor_specs, lambda parent: base_frame if parent == car else parent)
+        self._sensor_frames = sensor_messages.static_frames(world.sensor_specs, mount_frame(self.frames, car))
         return True
 
     def _send_state(self, seconds, frames_changed=False):

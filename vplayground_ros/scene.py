@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from .frame_names import DEFAULT_FRAMES, node_frames, optical_frames
 from .mesh_files import MeshError, read_obj, read_with_trimesh
 from .physics import World
 from .physics import specs
@@ -222,8 +223,9 @@ def name_unnamed(bodies, vehicles, taken):
     return owners
 
 
-def validate_scene(scene, base, max_bodies=None, directories=None):
-    """Checks the whole scene; returns what load_world builds from, every body and vehicle named."""
+def validate_scene(scene, base, max_bodies=None, directories=None, frames=DEFAULT_FRAMES):
+    """Checks the whole scene; returns what load_world builds from, every body and vehicle named.
+    `frames`: the node's (world, odom, base) frame names, which no entity may take."""
     specs.mapping(scene, "", TOP_LEVEL_KEYS)
     if "version" not in scene:
         raise specs.SpecError("version", f"missing (this program reads version {SCENE_VERSION})")
@@ -257,16 +259,23 @@ def validate_scene(scene, base, max_bodies=None, directories=None):
     # generated or not.
     owners = name_unnamed(bodies, vehicles, names)
     sensors = validate_sensors(scene.get("sensors"), owners)
+    reserved = {**node_frames(frames), **optical_frames(sensors)}
+    for key, entries in (("bodies", bodies), ("vehicles", vehicles), ("sensors", sensors)):
+        for k, entry in enumerate(entries):
+            if entry["name"] in reserved:
+                raise specs.SpecError(f"{key}[{k}].name", f"{specs.quote(entry['name'])} is {reserved[entry['name']]} "
+                                                          "(names are frames: the node publishes that one)")
     return settings, ground, playground, bodies, vehicles, sensors
 
 
-def load_world(path_or_dict, max_bodies=None, directories=None):
+def load_world(path_or_dict, max_bodies=None, directories=None, frames=DEFAULT_FRAMES):
     """A World from a scene file or dict. `max_bodies` caps bodies plus vehicles; `directories`
-    confines the playground mesh to them (and the package's meshes/)."""
+    confines the playground mesh to them (and the package's meshes/); `frames` are the node's
+    (world, odom, base) frame names, which no body or sensor may take."""
     scene, label, base = read_scene(path_or_dict)
     try:
         settings, ground, playground, bodies, vehicles, sensor_specs = validate_scene(
-            scene, base, max_bodies, directories)
+            scene, base, max_bodies, directories, frames)
     except specs.SpecError as error:
         raise SceneError(f"{label}: {error}") from None
     world = World(settings, ground, capacity=max(64, len(bodies) + len(vehicles)))

@@ -14,7 +14,7 @@ import numpy as np
 from . import cdr
 from .interfaces import encode
 from .physics.math3d import rpy_to_quat
-from .sensors import WORLD, camera_intrinsics, lidar_2d_angles
+from .sensors import camera_intrinsics, lidar_2d_angles
 
 # Topics of each sensor type: (suffix, message type); names relative to the node's namespace.
 TOPIC_SUFFIXES = {
@@ -51,12 +51,12 @@ def optical_frame(name):
 
 def static_frames(specs, parent_frame):
     """[(parent, child, pose xyz + xyzw)] of every sensor: its mount in its parent's frame
-    (`parent_frame(parent name)`; `world` for a fixed mount), and a camera's optical frame."""
+    (`parent_frame(the spec's parent)`: `world` means the world frame), and a camera's optical
+    frame."""
     out = []
     for spec in specs:
         pose = spec["pose"]
-        parent = WORLD if spec["parent"] == WORLD else parent_frame(spec["parent"])
-        out.append((parent, spec["name"], [*pose[:3], *rpy_to_quat(pose[3:])]))
+        out.append((parent_frame(spec["parent"]), spec["name"], [*pose[:3], *rpy_to_quat(pose[3:])]))
         if spec["type"] in ("depth_camera", "camera"):
             out.append((spec["name"], optical_frame(spec["name"]), [0.0, 0.0, 0.0, *OPTICAL_ROTATION]))
     return out

@@ -1,7 +1,6 @@
 """Sensors (scene key `sensors`): 2D and 3D lidars, depth and colour cameras and IMUs, computed
-from the World by its ray casts. ROS-free: readings are numpy arrays. Scene files take the
-`sensors` key and keep it on saving; the node does not publish the readings yet (ROS messages,
-topics and the Simulation's batches ending on due steps are the next stage of issue 18).
+from the World by its ray casts. ROS-free: readings are numpy arrays (sensor_messages.py makes
+them ROS messages). Scene files take the `sensors` key and keep it on saving.
 
 Sampling runs on simulation time: a sensor of rate r is read after the step that first reaches
 each multiple of 1/r, from the state after that step. The Simulation ends its batches on those
@@ -10,8 +9,16 @@ one generator per sensor seeded from `settings.seed` and the sensor's name: the 
 bit-identical readings.
 
 Frames: a sensor's frame is its name, posed by `pose` (xyz + rpy) in its parent's frame (a
-vehicle's base_link, a body's own frame, or `world`). Lidars and the IMU look along +x with z up
-(REP 103); cameras also have `<name>_optical` (z forward, x right, y down).
+vehicle's base_link, a body's own frame, or the world frame for `parent: world`). Lidars and the
+IMU look along +x with z up (REP 103); cameras also have `<name>_optical` (z forward, x right,
+y down; pixel centres at integer coordinates, as OpenCV and image_geometry take them).
+
+Ranges (REP 117, and REP 118 for depth images): a return nearer than range_min is -inf, none
+within range_max +inf; noise is added before that test, so a noisy return never lies outside
+[range_min, range_max]. Cameras measure along the optical axis: their range_max is a far plane
+(a wall 20 m away fills a 25 m camera's image), the depth camera's range_min a near one under
+which pixels read -inf, and the colour camera's range_min its near clipping plane (what is
+nearer is not drawn).
 """
 import logging
 import math
@@ -26,6 +33,7 @@ from .physics.math3d import rpy_to_quat
 from .physics.math3d import quaternions_to_matrices
 
 TYPES = ("lidar_2d", "lidar_3d", "depth_camera", "camera", "imu")
+CAMERAS = ("depth_camera", "camera")  # the types that see through a pinhole, with an optical frame
 COMMON_KEYS = {"name", "type", "parent", "pose", "rate"}
 RANGE_KEYS = {"range_min", "range_max", "noise_stddev"}
 TYPE_KEYS = {
@@ -144,23 +152,32 @@ def spread(low, high, count, closed):
     return low + (high - low) * np.arange(count) / (count - 1 if closed else count)
 
 
+# A scan at least this close to a full turn is one (its last beam would repeat its first): the
+# default scene's -3.14159265..3.14159265, pi to eight places, falls 7e-9 short of 2 pi.
+FULL_TURN_TOLERANCE = 1e-6
+
+
 def lidar_2d_angles(spec):
     """The beam angles; a full turn does not repeat its first beam at its end."""
-    full = spec["angle_max"] - spec["angle_min"] >= 2.0 * math.pi - 1e-9
+    full = spec["angle_max"] - spec["angle_min"] >= 2.0 * math.pi - FULL_TURN_TOLERANCE
     return spread(spec["angle_min"], spec["angle_max"], spec["samples"], not full)
 
 
 def camera_intrinsics(spec):
-    """fx = fy, cx, cy of a pinhole camera with the given horizontal field of view."""
+    """fx = fy, cx, cy of a pinhole camera with the given horizontal field of view, pixel
+    centres at integer coordinates (OpenCV, image_geometry, depth_image_proc): the image's
+    centre is ((width - 1) / 2, (height - 1) / 2), its edges half a pixel beyond the first
+    and the last centres."""
     width, height = spec["width"], spec["height"]
     f = 0.5 * width / math.tan(0.5 * spec["horizontal_fov"])
-    return f, f, 0.5 * width, 0.5 * height
+    return f, f, 0.5 * (width - 1), 0.5 * (height - 1)
 
 
 def local_directions(spec):
     """Unit ray directions in the sensor frame (x forward, y left, z up), scan order: a 2D scan
     counter-clockwise; a 3D scan ring by ring (lowest first), each counter-clockwise from
-    behind; a camera image row by row from the top left, through pixel centres."""
+    behind; a camera image row by row from the top left, through pixel centres (at integer
+    pixel coordinates, camera_intrinsics)."""
     kind = spec["type"]
     if kind == "lidar_2d":
         a = lidar_2d_angles(spec)
@@ -171,7 +188,7 @@ def local_directions(spec):
         e, a = np.meshgrid(elevation, azimuth, indexing="ij")
         return np.stack([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)], axis=-1).reshape(-1, 3)
     fx, fy, cx, cy = camera_intrinsics(spec)
-    v, u = np.meshgrid(np.arange(spec["height"]) + 0.5, np.arange(spec["width"]) + 0.5, indexing="ij")
+    v, u = np.meshgrid(np.arange(spec["height"]), np.arange(spec["width"]), indexing="ij")
     # Optical (x right, y down, z forward) -> sensor frame (x forward, y left, z up).
     right, down = (u - cx) / fx, (v - cy) / fy
     d = np.stack([np.ones_like(right), -right, -down], axis=-1).reshape(-1, 3)
@@ -193,10 +210,18 @@ class Sensor:
         self.name, self.kind, self.parent = spec["name"], spec["type"], spec["parent"]
         self.mount = pose_matrix(spec["pose"][:3], rpy_to_quat(spec["pose"][3:]))
         self.directions = local_directions(spec) if self.kind != "imu" else np.zeros((0, 3))
+        # How far along each ray it reaches (range_max; a camera's far plane) and where it
+        # starts (the colour camera's near clipping plane).
+        self.reach, self.clip = spec.get("range_max", 0.0), 0.0
+        if self.kind in CAMERAS:
+            self.reach = spec["range_max"] / self.directions[:, 0]
+        if self.kind == "camera":
+            self.clip = spec["range_min"] / self.directions[:, 0]
         self.rng = np.random.Generator(np.random.PCG64([seed, zlib.crc32(self.name.encode())]))
         self.hits = None  # the RayHits each scan is cast into (allocated once: a scan's size is fixed)
         self.samples_taken = 0  # n of the next sample time n / rate
-        self.last_velocity = None  # the parent's (linear, angular) world velocity at the last IMU sample
+        self.last_velocity = None  # an IMU's mount point's world velocity at its last sample, or
+        self.last_time = None      # when it was made (None: its parent was not there then)
 
     def due_step(self, steps_per_second):
         """The step count at which the next sample is read: the first step at or after n / rate."""
@@ -214,15 +239,31 @@ class Sensors:
         self._world, self._specs, self._step = None, None, -1
 
     def follow(self, world):
-        if world is not self._world or world.sensor_specs is not self._specs or world.step_count < self._step:
+        """New sensors for a new world, or when its time went back; when only its sensor specs
+        changed, new ones for the specs that changed while the others go on (their noise,
+        schedule and IMU history: spawning a sensor does not reset the rest)."""
+        fresh = world is not self._world or world.step_count < self._step
+        if fresh or world.sensor_specs is not self._specs:
+            kept = {} if fresh else {sensor.name: sensor for sensor in self.sensors}
             self._world, self._specs = world, world.sensor_specs
-            self.sensors = [Sensor(spec, world.settings["seed"]) for spec in world.sensor_specs]
-            rate = world.settings["steps_per_second"]
-            for sensor in self.sensors:  # the first sample is the next one after now
-                sensor.samples_taken = math.floor(world.step_count * sensor.spec["rate"] / rate) + 1
-                while sensor.due_step(rate) <= world.step_count:
-                    sensor.samples_taken += 1
+            self.sensors = []
+            for spec in world.sensor_specs:
+                sensor = kept.get(spec["name"])
+                if sensor is None or sensor.spec != spec:
+                    sensor = Sensor(spec, world.settings["seed"])
+                    self.start(sensor, world)
+                self.sensors.append(sensor)
         self._step = world.step_count
+
+    def start(self, sensor, world):
+        """A new sensor's first sample is the next one after now; an IMU measures its
+        acceleration from now on."""
+        rate = world.settings["steps_per_second"]
+        sensor.samples_taken = math.floor(world.step_count * sensor.spec["rate"] / rate) + 1
+        while sensor.due_step(rate) <= world.step_count:
+            sensor.samples_taken += 1
+        if sensor.kind == "imu" and (sensor.parent == WORLD or sensor.parent in world.body_names()):
+            sensor.last_velocity, sensor.last_time = self.mount_motion(sensor, world)[2], world.time
 
     def steps_until_due(self, world):
         """Steps the world may take before the next sample (at least 1): a batch ends there."""
@@ -273,7 +314,7 @@ class Sensors:
                 origin, sensor_directions, reach = self.rays(sensor, world)
                 origins.append(np.broadcast_to(origin, sensor_directions.shape))
                 directions.append(sensor_directions)
-                ranges.append(np.full(len(sensor_directions), reach))
+                ranges.append(np.broadcast_to(reach, len(sensor_directions)))
         return np.concatenate(origins), np.concatenate(directions), np.concatenate(ranges)
 
     # ------------------------------------------------------------------ readings
@@ -285,15 +326,21 @@ class Sensors:
         return pose_matrix(body["position"], body["quaternion"]) @ sensor.mount, body
 
     def rays(self, sensor, world):
-        """The sensor's rays now, in the world frame: (its origin (3,), the directions (R, 3), range_max)."""
+        """The sensor's rays now, in the world frame: (their origins (3,) or (R, 3), the
+        directions (R, 3), how far each reaches from its origin: a number or (R,))."""
         pose, _ = self.frame_pose(sensor, world)
-        return pose[:3, 3], sensor.directions @ pose[:3, :3].T, sensor.spec["range_max"]
+        directions = sensor.directions @ pose[:3, :3].T
+        origin = pose[:3, 3]
+        if sensor.kind == "camera":  # from the near clipping plane
+            return origin + directions * sensor.clip[:, None], directions, sensor.reach - sensor.clip
+        return origin, directions, sensor.reach
 
     def read(self, sensor, world, scene):
         """A dict of the reading, by type:
         lidar_2d: ranges (N,) float32 (REP 117: +inf no return, -inf nearer than range_min);
         lidar_3d: points (N, 3) float32 in the sensor frame of the returns, intensity, ring;
-        depth_camera: depth (H, W) float32 along the optical axis, NaN for no return (REP 118);
+        depth_camera: depth (H, W) float32 along the optical axis (REP 118, with REP 117's
+        -inf nearer than range_min and +inf no return);
         camera: rgb (H, W, 3) uint8; imu: orientation (xyzw), angular_velocity,
         linear_acceleration (specific force, sensor frame)."""
         time = world.time
@@ -302,29 +349,29 @@ class Sensors:
         origin, directions, reach = self.rays(sensor, world)
         exclude = () if sensor.parent == WORLD else (sensor.parent,)
         hits = sensor.hits = scene.cast(origin, directions, reach, exclude, out=sensor.hits)
-        distance = hits.distance.copy()
         spec = sensor.spec
-        if spec.get("noise_stddev", 0.0) > 0.0:
+        if sensor.kind == "camera":
+            return {"time": time, "rgb": self.shade(hits, directions, world).reshape(spec["height"], spec["width"], 3)}
+        distance = hits.distance.copy()
+        if spec["noise_stddev"] > 0.0:
             finite = np.isfinite(distance)
             distance[finite] += sensor.rng.normal(0.0, spec["noise_stddev"], int(finite.sum()))
+        if sensor.kind == "depth_camera":
+            distance *= sensor.directions[:, 0]  # depth is along the optical axis, not the ray
+        far = ~(distance <= spec["range_max"])  # no return (inf), or noise took it beyond
         near = distance < spec["range_min"]
-        if sensor.kind == "lidar_2d":
-            ranges = distance.astype(np.float32)
-            ranges[near] = -np.inf
-            return {"time": time, "ranges": ranges}
         if sensor.kind == "lidar_3d":
-            keep = np.isfinite(distance) & ~near
+            keep = ~(far | near)
             local = sensor.directions[keep] * distance[keep, None]
             ring = np.repeat(np.arange(spec["channels"], dtype=np.uint16), spec["horizontal_samples"])[keep]
             return {"time": time, "points": local.astype(np.float32), "ring": ring,
                     "intensity": self.intensity(hits, directions)[keep].astype(np.float32)}
-        shape = (spec["height"], spec["width"])
-        if sensor.kind == "depth_camera":
-            # Depth is along the optical axis (x of the sensor frame), not along the ray.
-            depth = (distance * sensor.directions[:, 0]).astype(np.float32)
-            depth[~np.isfinite(distance) | near] = np.nan
-            return {"time": time, "depth": depth.reshape(shape)}
-        return {"time": time, "rgb": self.shade(hits, directions, world).reshape(shape + (3,))}
+        ranges = distance.astype(np.float32)
+        ranges[far] = np.inf
+        ranges[near] = -np.inf
+        if sensor.kind == "lidar_2d":
+            return {"time": time, "ranges": ranges}
+        return {"time": time, "depth": ranges.reshape(spec["height"], spec["width"])}
 
     @staticmethod
     def intensity(hits, directions):
@@ -352,24 +399,30 @@ class Sensors:
         colour = palette[hits.body % len(palette)] * light[:, None]
         return np.rint(colour * 255.0).astype(np.uint8)
 
+    def mount_motion(self, sensor, world):
+        """(the sensor's pose (4 x 4), its parent's angular velocity and the world velocity of
+        the mount point), all in the world frame."""
+        pose, body = self.frame_pose(sensor, world)
+        if body is None:
+            return pose, np.zeros(3), np.zeros(3)
+        angular = np.asarray(body["angular_velocity"], float)
+        arm = pose[:3, 3] - np.asarray(body["position"], float)
+        return pose, angular, np.asarray(body["linear_velocity"], float) + np.cross(angular, arm)
+
     def read_imu(self, sensor, world):
         """REP 145 readings of the parent body at the sensor: orientation (sensor frame in the
         world), angular velocity (sensor frame) and specific force: a - g, where a is the mean
-        acceleration of the mount point over the last sampling interval (the difference of the
-        velocities of two samples divided by 1 / rate; zero at the first sample), so at rest it
-        reads +9.81 m/s^2 up."""
-        pose, body = self.frame_pose(sensor, world)
+        acceleration of the mount point since the last sample (the change of its velocity over
+        the simulated time between them: samples fall on whole steps, so that interval is 1 /
+        rate only on average), so at rest it reads +9.81 m/s^2 up and in free fall 0. The first
+        sample measures from when the sensor was made (spawned, loaded, time reset)."""
+        pose, angular, linear = self.mount_motion(sensor, world)
         rotation = pose[:3, :3]
         gravity = np.asarray(world.settings["gravity"], float)
-        if body is None:
-            linear, angular = np.zeros(3), np.zeros(3)
-        else:
-            angular = np.asarray(body["angular_velocity"], float)
-            arm = pose[:3, 3] - np.asarray(body["position"], float)
-            linear = np.asarray(body["linear_velocity"], float) + np.cross(angular, arm)
-        previous = sensor.last_velocity if sensor.last_velocity is not None else linear
-        acceleration = (linear - previous) * sensor.spec["rate"]
-        sensor.last_velocity = linear
+        acceleration = np.zeros(3)
+        if sensor.last_time is not None and world.time > sensor.last_time:
+            acceleration = (linear - sensor.last_velocity) / (world.time - sensor.last_time)
+        sensor.last_velocity, sensor.last_time = linear, world.time
         spec = sensor.spec
         gyro = rotation.T @ angular + spec["gyro_bias"]
         accel = rotation.T @ (acceleration - gravity) + spec["accel_bias"]

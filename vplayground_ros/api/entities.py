@@ -8,13 +8,14 @@ from pathlib import Path
 
 import yaml
 
+from ..frame_names import node_frames, optical_frames
 from ..physics import specs
 from ..physics.shapes import solid
 from ..scene import body_mesh_points
 from ..sensor_messages import optical_frame
-from ..sensors import TYPES as SENSOR_TYPES, validate_sensor
+from ..sensors import CAMERAS, TYPES as SENSOR_TYPES, validate_sensor
 from .descriptions import describe, describe_sensor
-from .frames import CAMERAS, frame_pose, node_frames, optical_frames, pose_in_world
+from .frames import frame_pose, pose_in_world
 from .name_filter import MAX_FILTER, match_names
 from .naming import unique_name
 from .payload import YAML_DUMPER, as_mapping, header_frame, parse, pose_fields, xyz
@@ -86,6 +87,11 @@ class EntityRequests:
         simulation thread."""
         item = body_mesh_points(dict(as_mapping(raw, path)), path, Path.cwd(), self.scene_directories)
         rename = specs.boolean(item.pop("allow_renaming", False), f"{path}.allow_renaming")
+        if item.get("type") in SENSOR_TYPES:  # its parent is checked against the world
+            if "initial_pose" in item:
+                raise RequestError(INVALID_POSE, f"{path}.initial_pose: a sensor is placed by `pose` "
+                                                 "(x y z roll pitch yaw in its parent's frame)")
+            return path, "sensor", item, rename, ""
         frame = ""
         if "initial_pose" in item:
             pose = as_mapping(item.pop("initial_pose"), f"{path}.initial_pose")
@@ -93,8 +99,6 @@ class EntityRequests:
             item.update(pose_fields(pose, f"{path}.initial_pose"))
             if "quaternion" in item:
                 item.pop("rpy", None)  # the pose's orientation wins over the spec's
-        if item.get("type") in SENSOR_TYPES:  # its parent is checked against the world
-            return path, "sensor", item, rename, frame
         vehicle = "wheels" in item or "chassis" in item
         spec = specs.validate_vehicle(item, path) if vehicle else specs.validate_body(item, path)
         if not vehicle and spec["shape"] == "convex":
@@ -109,25 +113,19 @@ class EntityRequests:
         # Names are frames (a body's on /tf, a sensor's), so the node's own frames are taken too.
         frames_taken = {**node_frames(frames), **optical_frames(world.sensor_specs)}
         names, suffixes = set(existing) | {s["name"] for s in world.sensor_specs} | set(frames_taken), {}
-        parents = set(existing) | {spec.get("name") for _, kind, spec, _, _ in prepared if kind != "sensor"}
-        sensors = []
+        # Bodies and vehicles first: a sensor of the request rides the body of the request that
+        # its parent names, under the name that body gets.
+        renamed = {}
         for path, vehicle, spec, rename, frame in prepared:
             if vehicle == "sensor":
-                sensor = validate_sensor(spec, path, parents)
-                frame_names = [sensor["name"]] + ([optical_frame(sensor["name"])] if sensor["type"] in CAMERAS else [])
-                clash = next((n for n in frame_names if n in names), None)
-                if clash is not None:
-                    raise RequestError(NAME_NOT_UNIQUE, f"{path}.name: {taken_name(clash, frames_taken)} "
-                                                        "(sensor names are frames, unique among entities and frames)")
-                names.update(frame_names)
-                sensors.append(sensor)
                 continue
             name = spec.get("name")
             if name is not None and name in names:
                 if not rename:
                     raise RequestError(NAME_NOT_UNIQUE, f"{path}.name: {taken_name(name, frames_taken)} "
                                                         "(allow_renaming: true picks a free name)")
-                spec["name"] = name = unique_name(name, names, suffixes)
+                spec["name"] = renamed[name] = unique_name(name, names, suffixes)
+                name = spec["name"]
             if name is not None:
                 names.add(name)
             if frame:
@@ -136,6 +134,27 @@ class EntityRequests:
                     pose.setdefault("quaternion", [0.0, 0.0, 0.0, 1.0])  # none given: the frame's
                 spec.update(in_world(world, frame, pose, f"{path}.initial_pose", frames))
             check_inside(world, spec["position"], f"{path}.position")
+        parents = set(existing) | {spec.get("name") for _, kind, spec, _, _ in prepared if kind != "sensor"}
+        sensors = []
+        for path, vehicle, spec, rename, _ in prepared:
+            if vehicle != "sensor":
+                continue
+            if isinstance(spec.get("parent"), str):
+                spec = {**spec, "parent": renamed.get(spec["parent"], spec["parent"])}
+            sensor = validate_sensor(spec, path, parents)
+            wanted = sensor["name"]
+            while True:
+                frame_names = [sensor["name"]] + ([optical_frame(sensor["name"])] if sensor["type"] in CAMERAS else [])
+                clash = next((n for n in frame_names if n in names), None)
+                if clash is None:
+                    break
+                if not rename:
+                    raise RequestError(NAME_NOT_UNIQUE, f"{path}.name: {taken_name(clash, frames_taken)} (sensor names "
+                                                        "are frames; allow_renaming: true picks a free name)")
+                names.add(sensor["name"])  # the next candidate's search goes on past this one
+                sensor["name"] = unique_name(wanted, names, suffixes)
+            names.update(frame_names)
+            sensors.append(sensor)
         added = []
         try:
             for _, vehicle, spec, _, _ in prepared:

@@ -1,6 +1,6 @@
 """The frames the node publishes (broadcast.py; SPEC 6.1) as poses in the world frame: what a
 `frame_id` means in a request (~/spawn's initial_pose, ~/edit's state) and in a subscribed
-message (clicked_point, initialpose), and the names no body or sensor may take.
+message (clicked_point, initialpose). The names no body or sensor may take: ../frame_names.py.
 
 `frames` are the (world, odom, base) frame names, the parameters'. Read on the simulation
 thread, from the World: the state the next step starts from.
@@ -9,27 +9,11 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from ..messages import WHEEL_NAMES, car_transforms
-from ..sensor_messages import optical_frame, static_frames
+from ..frame_names import WHEEL_FRAMES, mount_frame
+from ..messages import car_transforms
+from ..sensor_messages import static_frames
 from ..sensors import WORLD, matrix_to_quaternion, pose_matrix
 from ..physics.math3d import rpy_to_quat
-
-WHEEL_FRAMES = tuple(f"wheel_{wheel}" for wheel in WHEEL_NAMES)  # base_link -> wheel_<position>
-CAMERAS = ("depth_camera", "camera")  # the sensor types with an optical frame under their own
-
-
-def node_frames(frames):
-    """{frame: what it is} of the frames the node publishes beside the entities' own. A body's
-    name is its frame and a sensor's too: one of these would give /tf a frame with two parents
-    or a loop."""
-    world_frame, odom_frame, base_frame = frames
-    return {WORLD: "the sensors' fixed frame", **{wheel: "a wheel frame of the car" for wheel in WHEEL_FRAMES},
-            world_frame: "the world_frame", odom_frame: "the odom_frame", base_frame: "the base_frame (the car)"}
-
-
-def optical_frames(sensor_specs):
-    """{frame: what it is} of the cameras' optical frames."""
-    return {optical_frame(s["name"]): f"the optical frame of {s['name']}" for s in sensor_specs if s["type"] in CAMERAS}
 
 
 def driven_car(world):
@@ -45,11 +29,11 @@ def frame_pose(world, frame, frames):
     down by the spring); a sensor's frame is its mount on its parent, a camera's optical frame
     under it; a body's name is its frame (/tf in the bag, ~/transforms with publish_body_frames)."""
     world_frame, odom_frame, base_frame = frames
-    if frame in ("", world_frame, odom_frame, WORLD):  # WORLD: the sensors' fixed frame, whatever world_frame is
+    if frame in ("", world_frame, odom_frame, WORLD):  # WORLD: what a sensor's parent calls the world frame
         return np.eye(4)
     car = driven_car(world)
     edges = car_frames(world, car, frames) if car is not None and (frame == base_frame or frame in WHEEL_FRAMES) else []
-    edges += static_frames(world.sensor_specs, lambda parent: base_frame if parent == car else parent)
+    edges += static_frames(world.sensor_specs, mount_frame(frames, car))
     for parent, child, pose in edges:
         if child == frame:  # names are unique among frames, so the chain up ends at the world
             up = frame_pose(world, parent, frames)

@@ -27,7 +27,8 @@ class SceneRequests:
         if not target.is_file():
             return MAP_DOES_NOT_EXIST, f"{NOT_FOUND}: no scene file at {specs.quote(path)}"
         try:
-            world = load_world(target, max_bodies=int(self.max_bodies), directories=allowed_directories(self.scene_directories))
+            world = load_world(target, max_bodies=int(self.max_bodies),
+                               directories=allowed_directories(self.scene_directories), frames=self.frames())
             initial = copy.deepcopy(world_to_scene(world))
         except SceneError as error:
             return INVALID_MAP_DATA, f"{FAILED}: {str(error)[:1000]}"
