@@ -9,6 +9,7 @@ import zlib
 
 import numpy as np
 import pytest
+import yaml
 import zstandard
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
@@ -160,14 +161,38 @@ def test_tf_has_a_transform_for_every_body(bag):
 
 
 def test_split_files_each_open_on_their_own(tmp_path):
+    """Every file has the latched topics, logged when it starts: they kept their first stamps
+    (0 s), so each file claimed the run from its start."""
     path = tmp_path / "split.mcap"
     output = run("--duration", "4", "--real-time-factor", "2", "--record", str(path),
                  "--record-split-size", "150000")
-    files = sorted(tmp_path.glob("split*.mcap"))
-    assert len(files) >= 2, output
+    files = sorted(tmp_path.glob("split*.mcap"), key=lambda f: (len(f.name), f.name))
+    assert len(files) >= 3, output
+    end = None
     for f in files:
         _, _, messages = read_all(f)
         assert LATCHED - {"/vplayground/state"} <= {topic for topic, *_ in messages}, f
+        times = [log_time for _, log_time, *_ in messages]
+        if end is not None:
+            assert min(times) >= end - 10**9, f  # near where the file before ended (a 1 Hz topic may lag)
+        end = max(times)
+
+
+def test_every_channel_offers_its_qos_as_rosbag2_records_it(bag):
+    """The ROS 2 profile's offered_qos_profiles (rosbag2's YAML, Jazzy's spelling): ros2 bag
+    play offers the publishers' QoS again, so the latched topics stay latched in a replay."""
+    with open(bag, "rb") as stream:
+        channels = make_reader(stream).get_summary().channels.values()
+    assert len(channels) > 10
+    for channel in channels:
+        profiles = yaml.safe_load(channel.metadata["offered_qos_profiles"])
+        assert len(profiles) == 1, channel.topic
+        qos = profiles[0]
+        assert (qos["history"], qos["reliability"], qos["liveliness"]) == ("keep_last", "reliable", "automatic")
+        latched = channel.topic in LATCHED
+        assert qos["durability"] == ("transient_local" if latched else "volatile"), channel.topic
+        assert qos["depth"] >= 1 and (qos["depth"] == 1 or not latched)
+        assert qos["deadline"] == qos["lifespan"] == {"sec": 0, "nsec": 0}
 
 
 def test_sigterm_leaves_a_finished_bag(tmp_path):

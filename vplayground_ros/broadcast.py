@@ -69,7 +69,7 @@ class BagSink:
         self.recorder = recorder
 
     def publish(self, topic, data, seconds):
-        self.recorder.write(topic.name, topic.type, data, seconds, topic.qos == "latched")
+        self.recorder.write(topic.name, topic.type, data, seconds, topic.qos)
 
     def subscribed(self, topic):
         return True

@@ -9,11 +9,14 @@ the package free of a native extension wherever it is built (colcon, pip); zstd 
 - ROS 2 profile, `ros2msg` schemas with full definitions (interfaces.schema), `cdr` messages,
   zstd chunks, message indexes and a summary.
 - log time = publish time = simulation time (ns).
+- Each channel carries the ROS 2 profile's `offered_qos_profiles` (rosbag2's YAML, Jazzy's
+  spelling): `ros2 bag play` offers the publishers' QoS again, so the latched topics (the
+  scenery, /tf_static, the state) are latched in a replay too.
 - Writes happen on the recorder's own thread, every WAKE_PERIOD, from a bounded queue: the
   simulation and the publishers never wait on the disk; what does not fit is dropped and counted.
 - record_split_size: a new file <stem>_<n>.mcap starts past that many bytes, and the latched
-  topics (the scenery, /tf_static, the state) are written again at its start, so every file
-  opens on its own.
+  topics (the scenery, /tf_static, the state) are written again at its start, at the time it
+  starts, so every file opens on its own and covers its own stretch of time.
 - A disk that fills or a path that cannot be written stops the recording, never the simulation:
   the first failure is kept in `error` (the node puts it on /diagnostics) and later messages are
   dropped.
@@ -157,9 +160,9 @@ class BagWriter:
         self._add_record(record_bytes(schema))
         return schema.id
 
-    def register_channel(self, topic, message_encoding, schema_id):
+    def register_channel(self, topic, message_encoding, schema_id, metadata=None):
         channel = Channel(id=len(self._channels) + 1, topic=topic, message_encoding=message_encoding,
-                          metadata={}, schema_id=schema_id)
+                          metadata=metadata or {}, schema_id=schema_id)
         self._channels.append(channel)
         self._add_record(record_bytes(channel))
         return channel.id
@@ -259,6 +262,23 @@ class BagWriter:
         self._stream.write(MCAP0_MAGIC)
 
 
+# The publishers' QoS (broadcast.Topic.qos: node.py makes them): history depth and durability;
+# every one is reliable, keep-last, with the rmw defaults otherwise.
+QOS_PROFILES = {"reliable_1": (1, "volatile"), "reliable_10": (10, "volatile"),
+                "reliable_100": (100, "volatile"), "latched": (1, "transient_local")}
+UNSPECIFIED = "{sec: 0, nsec: 0}"  # RMW_DURATION_UNSPECIFIED: compatible with any request
+
+
+def offered_qos_profiles(qos):
+    """The channel metadata rosbag2 writes for a topic published with `qos` (a QOS_PROFILES
+    key): one offered profile, in the YAML of rosbag2_storage's qos.cpp (version 9, Jazzy)."""
+    depth, durability = QOS_PROFILES[qos]
+    return {"offered_qos_profiles": (
+        f"- history: keep_last\n  depth: {depth}\n  reliability: reliable\n  durability: {durability}\n"
+        f"  deadline: {UNSPECIFIED}\n  lifespan: {UNSPECIFIED}\n  liveliness: automatic\n"
+        f"  liveliness_lease_duration: {UNSPECIFIED}\n  avoid_ros_namespace_conventions: false\n")}
+
+
 class Recorder:
     def __init__(self, path, split_size=0):
         self.path = Path(path)
@@ -270,7 +290,7 @@ class Recorder:
         self.dropped = 0
         self.error = None        # the first failure (disk full, unwritable path); then nothing is written
         self.files = []
-        self._latched = {}       # topic -> (type, data, time_ns): re-written into every split
+        self._latched = {}       # topic -> (type, data, qos): re-written into every split
         # Appended by any thread, taken by the writer (deque operations are atomic): a
         # queue.Queue's lock and condition per message cost more than the rest of write().
         self._queue = deque()
@@ -284,18 +304,19 @@ class Recorder:
         self._thread.start()
 
     # ------------------------------------------------------------- any thread
-    def write(self, topic, type_name, data, seconds, latched=False):
-        """Queues one message (CDR bytes, encapsulation header included)."""
+    def write(self, topic, type_name, data, seconds, qos="reliable_10"):
+        """Queues one message (CDR bytes, encapsulation header included) of a topic published
+        with `qos` (a QOS_PROFILES key)."""
         if self.error is not None:
             self.dropped += 1
             return
         stamp = int(round(seconds * 1e9))
-        if latched:
-            self._latched[topic] = (type_name, data, stamp)
+        if qos == "latched":
+            self._latched[topic] = (type_name, data, qos)
         if len(self._queue) >= QUEUE_MESSAGES:
             self.dropped += 1
             return
-        self._queue.append((topic, type_name, data, stamp))
+        self._queue.append((topic, type_name, data, stamp, qos))
 
     def close(self, timeout=30.0):
         """Writes what is queued and finishes the file (summary, footer)."""
@@ -318,29 +339,32 @@ class Recorder:
         finally:
             self._file.close()  # whatever finish() hit, the descriptor is not leaked
 
-    def _channel(self, topic, type_name):
+    def _channel(self, topic, type_name, qos):
         key = (topic, type_name)
         if key not in self._channels:
             schema_id = self._writer.register_schema(name=type_name, encoding="ros2msg",
                                                      data=schema(type_name).encode("utf-8"))
             self._channels[key] = self._writer.register_channel(topic=topic, message_encoding="cdr",
-                                                                schema_id=schema_id)
+                                                                schema_id=schema_id,
+                                                                metadata=offered_qos_profiles(qos))
         return self._channels[key]
 
-    def _add(self, topic, type_name, data, stamp):
-        channel = self._channel(topic, type_name)
+    def _add(self, topic, type_name, data, stamp, qos):
+        channel = self._channel(topic, type_name, qos)
         self._writer.add_message(channel, stamp, data)
         # A chunk reaches the disk as soon as it is complete (crash safety); with nothing
         # buffered this is no system call at all.
         self._file.flush()
         self.bytes_written += len(data)
 
-    def _split(self):
+    def _split(self, stamp):
+        """A new file from time `stamp` on, opening with the latched topics' latest messages
+        (logged at `stamp`: in the file before, they were sent long ago)."""
         self._finish()
         stem, suffix = self.path.stem, self.path.suffix or ".mcap"
         self._open(self.path.with_name(f"{stem}_{len(self.files)}{suffix}"))
-        for topic, (type_name, data, stamp) in list(self._latched.items()):
-            self._add(topic, type_name, data, stamp)
+        for topic, (type_name, data, qos) in list(self._latched.items()):
+            self._add(topic, type_name, data, stamp, qos)
 
     def _run(self):
         closing = False
@@ -356,7 +380,7 @@ class Recorder:
                     continue  # the disk failed: keep draining so nobody blocks, record nothing
                 try:
                     if self.split_size and self._file.tell() > self.split_size:
-                        self._split()
+                        self._split(item[3])
                     self._add(*item)
                 except Exception as error:  # anything must not kill the thread
                     self._failed(error)
