@@ -18,6 +18,7 @@ from mcap.stream_reader import StreamReader
 from mcap_ros2.decoder import DecoderFactory
 
 from foxglove_js import needs_node, run_script
+from helpers import wait_for
 from vplayground_ros import cdr
 from vplayground_ros import recorder as recorder_module
 from vplayground_ros.recorder import Recorder, recover
@@ -450,3 +451,43 @@ def test_foxglove_layout_names_only_what_the_node_offers():
     def leaves(node):
         return [node] if isinstance(node, str) else leaves(node["first"]) + leaves(node["second"])
     assert sorted(leaves(layout["layout"])) == sorted(panels)
+
+
+def test_a_reset_or_another_scene_continues_the_bag_in_a_new_file(tmp_path):
+    """Time starts again at 0 after ~/reset and ~/load_scene: in one file, a seek showed both
+    worlds (every channel went back in time). Each run of time gets its own file, which opens
+    on its own (the latched topics) and whose channels only go forward."""
+    import logging
+
+    from vplayground_ros.cli import parse_args
+    from vplayground_ros.runtime import Runtime
+    from vplayground_ros.scene import load_world
+    from vplayground_ros.simulation import Simulation
+
+    path = tmp_path / "run.mcap"
+    options = parse_args(["--record", str(path), "--real-time-factor", "4"])
+    recorder = Recorder(path)
+    sim = Simulation(load_world(options.scene), real_time_factor=4.0)
+    runtime = Runtime(sim, options, logging.getLogger("test_bag"), recorder)
+    runtime.start()
+    try:
+        assert wait_for(lambda: sim.snapshot.time > 1.0)
+        assert runtime.requests.reset(255)[0]
+        assert wait_for(lambda: sim.snapshot.time > 1.0)
+        other = tmp_path / "other.yaml"  # the bag's folder is a scene directory
+        other.write_text("version: 1\nbodies: [{name: crate, position: [0, 0, 2]}]\n")
+        assert runtime.requests.load_scene(str(other))[0] == 0
+        assert wait_for(lambda: sim.snapshot.time > 1.0)
+    finally:
+        runtime.stop()
+        recorder.close()
+    files = [path, tmp_path / "run_1.mcap", tmp_path / "run_2.mcap"]
+    assert sorted(tmp_path.glob("*.mcap")) == sorted(files)
+    for f in files:
+        _, _, messages = read_all(f)
+        last = {}
+        for topic, log_time, *_ in messages:
+            assert log_time >= last.get(topic, 0), (f, topic)
+            last[topic] = log_time
+        assert LATCHED <= set(last) and last["/clock"] > 10**9, f
+        assert min(log_time for topic, log_time, *_ in messages if topic == "/clock") < 10**8, f

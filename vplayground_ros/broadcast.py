@@ -71,6 +71,9 @@ class BagSink:
     def publish(self, topic, data, seconds):
         self.recorder.write(topic.name, topic.type, data, seconds, topic.qos)
 
+    def new_timeline(self):
+        self.recorder.new_timeline()
+
     def subscribed(self, topic):
         return True
 
@@ -160,6 +163,7 @@ class Broadcaster:
         self._schedule_time = -math.inf  # the time of the last snapshot the listener saw
         self._scheduled_world = None     # and its world
         self._pending = deque()  # (snapshot, due jobs, octree cells or None for no scenery)
+        self._in_round = 0       # rounds taken from _pending and not yet published
         self._ready = threading.Condition()
         self.skipped = 0  # snapshots the publisher fell too far behind to publish
         parameters.listen(self._on_parameters)
@@ -243,6 +247,8 @@ class Broadcaster:
             self._removed_reported += 1
             self.log.warning(f"removed {name}: its state went non-finite or it left the world")
         seconds = snapshot.time
+        if seconds < self._schedule_time:
+            self._end_timeline()
         self._send_clock(snapshot)
         if seconds < self._schedule_time or self.sim.world is not self._scheduled_world:
             # A new scene or a reset of the time: every job at once, the schedule from here.
@@ -324,9 +330,21 @@ class Broadcaster:
         with self._ready:
             if not self._pending:
                 self._ready.wait(self._paused_wait(timeout))
-            item = self._pending.popleft() if self._pending else None
-            self._ready.notify_all()
+            item = self._take_round()
         if item is not None:
+            self._publish_round(item)
+        elif self.sim.paused:
+            self._publish_paused()
+
+    def _take_round(self):
+        """The next round handed over, or None (with the lock held)."""
+        item = self._pending.popleft() if self._pending else None
+        self._in_round += item is not None
+        self._ready.notify_all()
+        return item
+
+    def _publish_round(self, item):
+        try:
             snapshot, jobs, cells = item
             for job in jobs:
                 self._run(job, snapshot)
@@ -335,8 +353,26 @@ class Broadcaster:
                 self._run(self._scenery, snapshot, cells)
             if snapshot.readings:
                 self._run(self._sensor_job, snapshot)
-        elif self.sim.paused:
-            self._publish_paused()
+        finally:
+            with self._ready:
+                self._in_round -= 1
+                self._ready.notify_all()
+
+    def _end_timeline(self):
+        """Time went back (a reset, another scene): the rounds of the time before are sent
+        first, here on the simulation thread or by the publisher thread, and then the sinks
+        that keep a timeline (the bag) are told: a bag holds one run of time a file, so seeking
+        in it never mixes two worlds."""
+        while True:
+            with self._ready:
+                item = self._take_round()
+                if item is None:
+                    self._ready.wait_for(lambda: self._in_round == 0, HAND_OVER_TIMEOUT)
+                    break
+            self._publish_round(item)
+        for sink in self.sinks:
+            if hasattr(sink, "new_timeline"):
+                sink.new_timeline()
 
     def _paused_wait(self, timeout):
         if not self.sim.paused:

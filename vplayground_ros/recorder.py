@@ -16,7 +16,9 @@ the package free of a native extension wherever it is built (colcon, pip); zstd 
   simulation and the publishers never wait on the disk; what does not fit is dropped and counted.
 - record_split_size: a new file <stem>_<n>.mcap starts past that many bytes, and the latched
   topics (the scenery, /tf_static, the state) are written again at its start, at the time it
-  starts, so every file opens on its own and covers its own stretch of time.
+  starts, so every file opens on its own and covers its own stretch of time. When the
+  simulation's time goes back (~/reset, ~/load_scene: new_timeline) a new file starts too: a
+  file never holds two runs over the same times.
 - A disk that fills or a path that cannot be written stops the recording, never the simulation:
   the first failure is kept in `error` (the node puts it on /diagnostics) and later messages are
   dropped.
@@ -147,6 +149,10 @@ class BagWriter:
         self._new_chunk()
         stream.write(MCAP0_MAGIC)
         stream.write(record_bytes(Header(profile, library)))
+
+    @property
+    def has_messages(self):
+        return self._message_count > 0
 
     def _new_chunk(self):
         self.chunk_opened = None  # time.monotonic() at the chunk's first message
@@ -279,6 +285,9 @@ def offered_qos_profiles(qos):
         f"  liveliness_lease_duration: {UNSPECIFIED}\n  avoid_ros_namespace_conventions: false\n")}
 
 
+NEW_TIMELINE = object()  # in the recorder's queue: what follows starts again in time
+
+
 class Recorder:
     def __init__(self, path, split_size=0):
         self.path = Path(path)
@@ -317,6 +326,10 @@ class Recorder:
             self.dropped += 1
             return
         self._queue.append((topic, type_name, data, stamp, qos))
+
+    def new_timeline(self):
+        """The messages after this one start again in time: they go to a new file."""
+        self._queue.append(NEW_TIMELINE)
 
     def close(self, timeout=30.0):
         """Writes what is queued and finishes the file (summary, footer)."""
@@ -368,6 +381,7 @@ class Recorder:
 
     def _run(self):
         closing = False
+        new_timeline = False
         while not closing:
             batch = []
             while self._queue:  # everything queued meanwhile, taken at once
@@ -376,11 +390,16 @@ class Recorder:
                 if item is None:
                     closing = True
                     break
+                if item is NEW_TIMELINE:
+                    new_timeline = True
+                    continue
                 if self.error is not None:
                     continue  # the disk failed: keep draining so nobody blocks, record nothing
                 try:
-                    if self.split_size and self._file.tell() > self.split_size:
+                    if (new_timeline and self._writer.has_messages) or (
+                            self.split_size and self._file.tell() > self.split_size):
                         self._split(item[3])
+                    new_timeline = False
                     self._add(*item)
                 except Exception as error:  # anything must not kill the thread
                     self._failed(error)
