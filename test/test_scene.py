@@ -60,6 +60,42 @@ def test_mesh_is_found_next_to_the_scene_file_first(tmp_path):
     assert len(world.playground_triangles) == 1
 
 
+def test_a_saved_scene_keeps_the_packages_mesh_beside_another_of_its_name(tmp_path):
+    """A saved scene names the package's mesh as package://vplayground_ros/meshes/<file>: as a
+    bare name, a file of that name beside the saved scene was taken instead on reloading."""
+    write_obj(tmp_path / "playground.obj", "v 0 0 0\nv 4 0 0\nv 0 4 0\nf 1 2 3\n")
+    world = load_world(SCENE)
+    save_world(world, tmp_path / "saved.yaml")
+    assert "mesh: package://vplayground_ros/meshes/playground.obj" in (tmp_path / "saved.yaml").read_text()
+    again = load_world(tmp_path / "saved.yaml")
+    assert np.array_equal(again.playground_triangles, world.playground_triangles)
+    with pytest.raises(SceneError, match="the package has no mesh 'nothing.obj'"):
+        load_world({"version": 1, "playground": {"mesh": "package://vplayground_ros/meshes/nothing.obj"}})
+    with pytest.raises(SceneError, match="the package has no mesh '../config/default_scene.yaml'"):
+        load_world({"version": 1, "playground": {"mesh": "package://vplayground_ros/meshes/../config/default_scene.yaml"}})
+
+
+def test_a_scene_saved_by_the_node_reloads_with_a_mesh_beside_its_start_scene(tmp_path, monkeypatch):
+    """The node started with --scene elsewhere (its mesh beside it), saves to its working
+    directory and loads that again: the saved file names the mesh by its path, which lies in
+    the start scene's folder, so that folder is a scene directory (it was refused)."""
+    from vplayground_ros.api import MAP_SUCCESS
+    from vplayground_ros.cli import parse_args
+    from vplayground_ros.runtime import Runtime
+    from vplayground_ros.simulation import Simulation
+
+    elsewhere, work = tmp_path / "scenes", tmp_path / "work"
+    elsewhere.mkdir()
+    work.mkdir()
+    write_obj(elsewhere / "tile.obj", "v -9 -9 0\nv 9 -9 0\nv 0 9 0\nf 1 2 3\n")
+    (elsewhere / "start.yaml").write_text("version: 1\nplayground: {mesh: tile.obj}\nbodies: [{name: crate}]\n")
+    monkeypatch.chdir(work)
+    options = parse_args(["--scene", str(elsewhere / "start.yaml"), "--no-record"])
+    runtime = Runtime(Simulation(load_world(options.scene)), options, logging.getLogger("test_scene"))
+    assert runtime.requests.save_scene("saved.yaml")[0]
+    assert runtime.requests.load_scene("saved.yaml")[0] == MAP_SUCCESS
+
+
 def test_degenerate_triangles_are_dropped_with_a_warning(tmp_path, caplog):
     write_obj(tmp_path / "tiles.obj", "v 0 0 0\nv 4 0 0\nv 0 4 0\nv 8 0 0\n"
                                       "f 1 2 3\nf 1 2 4\nf 1 1 3\n")
@@ -138,3 +174,16 @@ def test_top_level_lists_of_the_wrong_type_are_refused(key, value, found):
 def test_missing_or_null_top_level_lists_are_empty():
     assert load_world({"version": 1, "bodies": None, "vehicles": None}).body_names() == []
     assert load_world({"version": 1}).body_names() == []
+
+
+@pytest.mark.parametrize("scene, message", [
+    ({"bodies": [{}, {"position": [5000.0, 0.0, 1.0]}]}, "<scene>: bodies[1].position: "),
+    ({"vehicles": [{**SCENE["vehicles"][0], "position": [0.0, 5000.0, 1.0]}]}, "<scene>: vehicles[0].position: "),
+    ({"bodies": [{"shape": "convex", "points": [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]]}]},
+     "<scene>: bodies[0].points: the points are flat"),
+])
+def test_errors_found_while_building_the_world_name_the_scenes_key(scene, message):
+    """They read `bodies[0]: body.points: ...` and `vehicles[0]: body.position: ...`."""
+    with pytest.raises(SceneError) as error:
+        load_world({"version": 1, **scene})
+    assert str(error.value).startswith(message), str(error.value)

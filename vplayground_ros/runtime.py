@@ -20,7 +20,8 @@ class Runtime:
         self.recorder = recorder
         self.resolve_name = resolve_name
         # The parameters own every setting (parameters.py); the requests change them through it.
-        directories = default_scene_directories(recorder.path.parent if recorder is not None else None)
+        directories = default_scene_directories(recorder.path.parent if recorder is not None else None,
+                                                options.scene)
         self.parameters = Parameters(parameter_table(sim.world.settings, options, directories, DEFAULT_MAX_BODIES,
                                                      sim.world.solver_threads))
         self.parameters.listen(self._apply)

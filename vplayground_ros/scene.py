@@ -79,11 +79,23 @@ def read_scene(path_or_dict):
     return data, str(path), path.resolve().parent
 
 
+# How a scene names a mesh of the package's meshes/ wherever the package is installed (the ROS
+# resource URI): what saved scenes write, so a file of the same name beside them is not taken.
+PACKAGE_MESHES = "package://vplayground_ros/meshes/"
+
+
 def resolve_mesh(name, base, directories=None, key="playground.mesh"):
-    """A mesh path as written in a scene: absolute, else relative to the scene file's folder,
-    else one of the package's meshes/. With `directories` (scenes loaded for a service call),
-    a mesh outside them and the package's meshes/ is refused, symbolic links resolved. Returns
-    the path or raises SpecError listing where it looked."""
+    """A mesh path as written in a scene: `package://vplayground_ros/meshes/<file>`, absolute,
+    else relative to the scene file's folder, else one of the package's meshes/. With
+    `directories` (scenes loaded for a service call), a mesh outside them and the package's
+    meshes/ is refused, symbolic links resolved. Returns the path or raises SpecError listing
+    where it looked."""
+    if name.startswith(PACKAGE_MESHES):
+        file_name = name[len(PACKAGE_MESHES):]
+        shared = find_shared(f"meshes/{file_name}") if file_name and Path(file_name).name == file_name else None
+        if shared is None:
+            raise specs.SpecError(key, f"mesh file {specs.quote(name)}: the package has no mesh {specs.quote(file_name)}")
+        return shared
     candidate = Path(name)
     tried = [candidate] if candidate.is_absolute() else [base / candidate]
     if tried[0].is_file():
@@ -294,19 +306,20 @@ def load_world(path_or_dict, max_bodies=None, directories=None, frames=DEFAULT_F
     for key, entries, add in (("bodies", bodies, world.add_body), ("vehicles", vehicles, world.add_vehicle)):
         for k, entry in enumerate(entries):
             try:
-                add(entry)
+                add(entry, f"{key}[{k}]")
             except ValueError as error:  # checks that need the world (e.g. inside its bounds)
-                raise SceneError(f"{label}: {key}[{k}]: {error}") from None
+                raise SceneError(f"{label}: {error}") from None
     world.sensor_specs = sensor_specs
     return world
 
 
 def packaged_mesh_name(path):
-    """The bare file name when `path` is the package's own copy of it, so a saved scene keeps
-    working wherever the package is installed; otherwise the absolute path."""
+    """`package://vplayground_ros/meshes/<file>` when `path` is the package's own copy of it, so
+    a saved scene keeps working wherever the package is installed (and a file of that name
+    beside the saved scene is not taken for it); otherwise the absolute path."""
     name = Path(path).name
     shared = find_shared(f"meshes/{name}")
-    return name if shared is not None and shared.resolve() == Path(path).resolve() else str(path)
+    return PACKAGE_MESHES + name if shared is not None and shared.resolve() == Path(path).resolve() else str(path)
 
 
 def save_world(world, path):

@@ -14,13 +14,15 @@ MAX_PATH = 4096  # characters of a scene path (PATH_MAX)
 SCENE_SUFFIXES = (".yaml", ".yml")  # ~/save_scene with overwrite never replaces anything else
 
 
-def default_scene_directories(bag_directory=None):
-    """The package's config/, the current working directory, and the bag's directory."""
+def default_scene_directories(bag_directory=None, scene_file=None):
+    """The package's config/, the current working directory, the bag's directory, and the
+    folder of the scene the node started with (whose meshes a scene saved from it names)."""
     config = find_shared("config/default_scene.yaml")
     directories = [config.parent] if config is not None else []
     directories.append(Path.cwd())
-    if bag_directory is not None:
-        directories.append(Path(bag_directory))
+    for directory in (bag_directory, Path(scene_file).parent if scene_file else None):
+        if directory is not None:
+            directories.append(Path(directory))
     return directories
 
 

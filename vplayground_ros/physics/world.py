@@ -133,16 +133,17 @@ class World(WorldQueries):
         """Every body (vehicle chassis included), in the row order of state()."""
         return list(self._current_layout().names)
 
-    def add_body(self, spec):
-        """Adds a box from a SPEC 3 body spec; returns its (given or generated) unique name."""
-        body = specs.validate_body(spec)
-        self.check_inside(body["position"], "body.position")
-        solid = shapes.solid(body["shape"], body)  # a hull may still be refused: before any change
+    def add_body(self, spec, path="body"):
+        """Adds a box from a SPEC 3 body spec; returns its (given or generated) unique name.
+        Errors name the key from `path` (a scene's `bodies[3]`)."""
+        body = specs.validate_body(spec, path)
+        self.check_inside(body["position"], f"{path}.position")
+        solid = shapes.solid(body["shape"], body, path)  # a hull may still be refused: before any change
         name = body.get("name")
         if name is None:
             name = self._generate_name("box")
         elif name in self._slots:
-            raise ValueError(f"body.name: a body named {name!r} already exists")
+            raise ValueError(f"{path}.name: a body named {name!r} already exists")
         if not self._free:
             self._grow(2 * len(self._names))
         slot = heapq.heappop(self._free)
@@ -160,21 +161,22 @@ class World(WorldQueries):
         self._check_root(slot)
         return name
 
-    def add_vehicle(self, spec):
+    def add_vehicle(self, spec, path="vehicle"):
         """Adds a vehicle from a SPEC 3 `vehicles` entry; returns its unique name. Its chassis is
         an ordinary body of that name (it collides, can be pushed, edited, removed) that weighs
-        as much as the chassis and wheels together; the wheels are data of the vehicle."""
-        vehicle = specs.validate_vehicle(spec)
+        as much as the chassis and wheels together; the wheels are data of the vehicle. Errors
+        name the key from `path` (a scene's `vehicles[0]`)."""
+        vehicle = specs.validate_vehicle(spec, path)
         name = vehicle.get("name") or self._generate_name("car")
         if name in self._slots:
-            raise ValueError(f"vehicle.name: a body named {name!r} already exists")
+            raise ValueError(f"{path}.name: a body named {name!r} already exists")
         wheels = vehicle["wheels"]
         chassis = {**vehicle["chassis"], "name": name, "position": vehicle["position"],
                    "mass": vehicle["chassis"]["mass"] + sum(w["mass"] for w in wheels)}
         for key in ("rpy", "quaternion", "linear_velocity", "angular_velocity"):
             if key in vehicle:
                 chassis[key] = vehicle[key]
-        self._vehicles.add(name, vehicle, self._slots[self.add_body(chassis)])
+        self._vehicles.add(name, vehicle, self._slots[self.add_body(chassis, path)])
         self.layout_version += 1
         return name
 
