@@ -66,3 +66,11 @@ def test_encoded_bytes_match_rclpy_where_it_is_installed():
     assert (decoded.header.stamp.sec, decoded.header.frame_id, decoded.child_frame_id) == (3, "odom", "base_link")
     assert (decoded.pose.pose.position.x, decoded.pose.pose.orientation.w) == (1.5, 1.0)
 
+
+
+def test_schemas_are_complete_down_to_the_time_types():
+    """SPEC 7: every dependency's definition, builtin_interfaces/Time and Duration too, as
+    rosbag2 writes them (a reader that does not know them as time types still decodes)."""
+    header = interfaces.schema("std_msgs/msg/Header")
+    assert "\nMSG: builtin_interfaces/Time\n" in header and "int32 sec" in header and "uint32 nanosec" in header
+    assert "\nMSG: builtin_interfaces/Duration\n" in interfaces.schema("visualization_msgs/msg/Marker")

@@ -9,8 +9,8 @@ where no interface package is installed; a test checks they equal the installed 
 
 A schema (`ros2msg`) is the type's definition followed by every type it depends on, each after
 a line of 80 '=' and `MSG: package/Type`, spelled as the .msg fields spell it (Foxglove's parser
-rejects `package/msg/Type`). builtin_interfaces/Time and Duration are ROS 2 primitives: not
-listed. A service's request and response are the parts of its .srv before and after `---`,
+rejects `package/msg/Type`); builtin_interfaces/Time and Duration too, as rosbag2 writes them
+(SPEC 7: complete definitions; readers take them as the time types either way). A service's request and response are the parts of its .srv before and after `---`,
 named `package/srv/Type_Request` and `package/srv/Type_Response` (as rosidl names them).
 """
 import os
@@ -24,7 +24,6 @@ from mcap_ros2._dynamic import generate_dynamic, serialize_dynamic
 OWN_DEFINITIONS = Path(__file__).resolve().parent / "msg_definitions"
 PRIMITIVES = {"bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16",
               "int32", "uint32", "int64", "uint64", "string", "wstring"}
-BUILTIN = {"builtin_interfaces/Time", "builtin_interfaces/Duration"}
 SEPARATOR = "=" * 80
 
 
@@ -81,7 +80,7 @@ def schema(type_name):
 
     def visit(pkg, body):
         for dep in field_types(pkg, body):
-            if dep in seen or dep in BUILTIN:
+            if dep in seen:
                 continue
             seen.add(dep)
             dep_pkg, dep_name = dep.split("/")
