@@ -360,3 +360,20 @@ def test_tf_carries_every_vehicles_wheels(running):
     assert all(parent_of[f"car_b/wheel_{p}"] == "car_b" for p in positions)
     assert parent_of["car_b"] == "world" and parent_of["base_link"] == "odom"
     assert len(parent_of) == len(tf.transforms)  # no frame twice
+
+
+def test_odometry_covariances_are_small_not_zero_and_joints_have_rates(running):
+    """The odometry is exact, but all-zero covariances read as 'unknown' to robot_localization:
+    a small diagonal. Joint states carry the suspension's rate as the car lands and sways
+    (always 0 before) and the steering's (test_vehicle)."""
+    runtime, sink = running(SCENE, "--real-time-factor", "0", "--duration", "2.0")
+    runtime.sim.call(lambda world: world.drive(world.vehicle_names()[0], 2.0, 0.8, timeout=100))
+    runtime.sim.wait(60)
+    runtime.stop()
+    odometry = sink.of("odom", decoder("nav_msgs/msg/Odometry"))[-1][1]
+    for covariance in (odometry.pose.covariance, odometry.twist.covariance):
+        matrix = np.array(covariance).reshape(6, 6)
+        assert np.all(np.diag(matrix) > 0.0) and np.all(matrix == np.diag(np.diag(matrix)))
+    states = [message for _, message in sink.of("joint_states", decoder("sensor_msgs/msg/JointState"))]
+    suspension = [k for k, name in enumerate(states[0].name) if name.endswith("_suspension")]
+    assert max(abs(m.velocity[k]) for m in states for k in suspension) > 0.01

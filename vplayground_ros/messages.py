@@ -3,8 +3,8 @@ clouds and transforms straight from numpy (cdr.py), the small messages as dicts 
 interfaces.encode. Every stamp is simulation time; frames follow REP-105: `world` -> `odom` ->
 `base_link` (the car), wheels under base_link, bodies under `world`.
 
-The odom frame is where the car started: odometry here is perfect (a simulator knows), so
-world -> odom is fixed at the car's pose when the scene was loaded.
+Odometry here is perfect (a simulator knows), so odom is the world: world -> odom is the
+identity.
 """
 import math
 from collections import namedtuple
@@ -254,6 +254,12 @@ def contact_markers(snapshot, frame, max_points):
         marker("contact_normals", 1, LINE_LIST, scale=(0.01, 0.01, 0.01), rgba=COLOURS["contact"], points=segments)])
 
 
+# The odometry is the car's true motion: its covariances are this small diagonal (as the IMU's
+# exact parts), not zero, which robot_localization and others take for "unknown".
+EXACT_VARIANCE = 1e-12
+EXACT_COVARIANCE = [EXACT_VARIANCE if row == column else 0.0 for row in range(6) for column in range(6)]
+
+
 def car_odometry(snapshot, name, frame, child):
     """Odometry of the car: pose in `frame` (world and odom coincide), twist in base_link."""
     row = snapshot.names.index(name)
@@ -262,20 +268,22 @@ def car_odometry(snapshot, name, frame, child):
     to_body = quaternions_to_matrices(q[None])[0].T
     return encode("nav_msgs/msg/Odometry", {
         "header": header(snapshot.time, frame), "child_frame_id": child,
-        "pose": {"pose": {"position": xyz(s["positions"][row]), "orientation": xyzw(q)}},
+        "pose": {"pose": {"position": xyz(s["positions"][row]), "orientation": xyzw(q)},
+                 "covariance": EXACT_COVARIANCE},
         "twist": {"twist": {"linear": xyz(to_body @ s["linear_velocities"][row]),
-                            "angular": xyz(to_body @ s["angular_velocities"][row])}}})
+                            "angular": xyz(to_body @ s["angular_velocities"][row])},
+                  "covariance": EXACT_COVARIANCE}})
 
 
 def joint_states(snapshot, name):
-    """Per wheel: <wheel>_steer (angle), <wheel>_spin (angle, rate), <wheel>_suspension
-    (compression, m)."""
+    """Per wheel: <wheel>_steer (angle, rad/s over the last step), <wheel>_spin (angle, rate),
+    <wheel>_suspension (compression m, its rate m/s)."""
     v = snapshot.vehicles[name]
     names, position, velocity = [], [], []
     for w, wheel in enumerate(WHEEL_NAMES):
         names += [f"{wheel}_steer", f"{wheel}_spin", f"{wheel}_suspension"]
         position += [float(v["steer_angle"][w]), float(v["spin_angle"][w]), float(v["compression"][w])]
-        velocity += [0.0, float(v["spin_rate"][w]), 0.0]
+        velocity += [float(v["steer_rate"][w]), float(v["spin_rate"][w]), float(v["compression_rate"][w])]
     return encode("sensor_msgs/msg/JointState", {"header": header(snapshot.time, ""), "name": names,
                                                  "position": position, "velocity": velocity})
 

@@ -8,16 +8,20 @@ perpendicular to the spring, goes straight to the chassis at the contact point:
 - drive engine_power x power_gain x throttle along the wheel's heading, brake up to brake_power
   against the rolling direction, and whatever stops sideways slip;
 - limited by a friction circle: up to static_friction x load the tyre grips; asked for more, it
-  slides with dynamic_friction x load.
+  slides with dynamic_friction x load, each the geometric mean of the tyre's and the surface's
+  (the ground's and playground's material, or the body's it stands on), as for any pair.
 The tyre's slip is the wheel's speed over the ground, from the chassis' translation and yaw;
 its pitch and roll on the springs sway the body over the wheels (tyre_velocity).
 What is hit (a box) gets the opposite force. Wheels roll at v / r and keep a spin angle.
 
 The car's mass is the chassis' plus its wheels' (one rigid body); every force above acts on it.
 The Twist controller turns a wanted forward speed and yaw rate into throttle, brake and steering:
-a PI loop on speed (braking when the wanted direction reverses or the car is to stop), the
-bicycle model tan(steer) = yaw_rate x wheelbase / speed plus yaw-rate feedback, Ackermann angles
-per steered wheel from the mounts; a command older than its timeout means stop.
+a PI loop on speed with the throttle that holds the car against gravity along its heading fed
+forward (braking as well while it moves against the wanted direction, and to stop), the bicycle
+model tan(steer) = yaw_rate x wheelbase / speed plus yaw-rate feedback, `max_steer` limiting
+that centre-line angle, and Ackermann angles per steered wheel from the mounts (the inner wheel
+turns further, towards the same centre); a command older than its timeout means stop. A car
+with a command to follow is kept from freezing.
 """
 from collections import namedtuple
 
@@ -40,8 +44,8 @@ VehicleArrays = namedtuple("VehicleArrays", [
     "command_speed", "command_yaw_rate", "command_age", "command_timeout", "speed_integral",
     "throttle", "brake", "steer",  # (V,) applied: throttle -1..1, brake 0..1, steer rad
     # Wheel state (V, 4), for the node's joint states and markers.
-    "steer_angle", "spin_angle", "spin_rate", "compression", "in_contact",
-    "contact_point", "contact_normal",  # (V, 4, 3)
+    "steer_angle", "steer_rate", "spin_angle", "spin_rate", "compression", "compression_rate",
+    "in_contact", "contact_point", "contact_normal",  # (V, 4, 3)
 ])
 
 SPEED_GAIN = 1.0          # throttle per m/s of speed error
@@ -62,8 +66,8 @@ def allocate_vehicles(capacity):
         spring_length=f(WHEELS), static_friction=f(WHEELS), dynamic_friction=f(WHEELS),
         command_speed=f(), command_yaw_rate=f(), command_age=f(), command_timeout=f(),
         speed_integral=f(), throttle=f(), brake=f(), steer=f(), steer_angle=f(WHEELS),
-        spin_angle=f(WHEELS), spin_rate=f(WHEELS), compression=f(WHEELS),
-        in_contact=np.zeros((capacity, WHEELS), np.bool_), contact_point=f(WHEELS, 3),
+        steer_rate=f(WHEELS), spin_angle=f(WHEELS), spin_rate=f(WHEELS), compression=f(WHEELS),
+        compression_rate=f(WHEELS), in_contact=np.zeros((capacity, WHEELS), np.bool_), contact_point=f(WHEELS, 3),
         contact_normal=f(WHEELS, 3))
 
 
@@ -76,24 +80,30 @@ def grow_vehicles(vehicles, capacity):
 
 
 @njit(cache=True, nogil=True)
-def control(vehicles, v, speed, yaw_rate, dt):
-    """The Twist controller of vehicle v: sets throttle, brake and steer from its command."""
+def control(vehicles, v, speed, yaw_rate, hold, dt):
+    """The Twist controller of vehicle v: sets throttle, brake and steer from its command.
+    `hold` is the throttle that balances gravity along the car's heading (fed forward: on a
+    1:4 ramp half the engine, which a PI loop alone found only after the car rolled back)."""
     vehicles.command_age[v] += dt
     if vehicles.command_age[v] > vehicles.command_timeout[v]:
         vehicles.command_speed[v] = 0.0
         vehicles.command_yaw_rate[v] = 0.0
     target = vehicles.command_speed[v]
     throttle, brake = 0.0, 0.0
-    if target == 0.0 or (target * speed < 0.0 and abs(speed) > STOP_SPEED):
-        # Told to stop, or going the wrong way: full brakes (limited by the tyres' grip).
+    if target == 0.0:  # told to stop: full brakes (limited by the tyres' grip)
         brake = 1.0
         vehicles.speed_integral[v] = 0.0
     else:
         error = target - speed
-        wanted = SPEED_GAIN * error + SPEED_INTEGRAL_GAIN * vehicles.speed_integral[v]
+        wanted = hold + SPEED_GAIN * error + SPEED_INTEGRAL_GAIN * vehicles.speed_integral[v]
         throttle = min(max(wanted, -1.0), 1.0)  # negative: the engine holds the car back
         if throttle == wanted:  # integrate only while not saturated (no wind-up)
             vehicles.speed_integral[v] += error * dt
+        if target * speed < 0.0 and abs(speed) > STOP_SPEED:
+            # Going the wrong way (a reversed command, rolling back down a slope): brakes too,
+            # with the throttle already pulling towards the target (braking alone, the car
+            # stopped, let go and rolled back again, and a slow command never climbed a ramp).
+            brake = 1.0
     wanted_yaw = vehicles.command_yaw_rate[v]
     reference = speed
     if abs(speed) < MIN_STEER_SPEED:
@@ -116,10 +126,11 @@ def ackermann(vehicles, v, w):
         return 0.0
     if abs(steer) < 1e-6:
         return steer
+    # max_steer limits the centre-line angle (control): the turning radius a planner takes,
+    # wheelbase / tan(max_steer). Clamping the inner wheel as well pointed the two front wheels
+    # at different centres and turned 13 % short of a command within reach.
     centre = vehicles.wheelbase[v] / np.tan(steer)
-    angle = np.arctan((vehicles.mount[v, w, 0] - vehicles.rear_axle[v]) / (centre - vehicles.mount[v, w, 1]))
-    limit = vehicles.max_steer[v]
-    return min(max(angle, -limit), limit)  # the inner wheel too stays within max_steer
+    return np.arctan((vehicles.mount[v, w, 0] - vehicles.rear_axle[v]) / (centre - vehicles.mount[v, w, 1]))
 
 
 @njit(cache=True, nogil=True)
@@ -148,11 +159,19 @@ def drive_vehicles(ctx):
         down = (-up[0], -up[1], -up[2])
         speed = velocity[c, 0] * forward[0] + velocity[c, 1] * forward[1] + velocity[c, 2] * forward[2]
         yaw_rate = velocity[c, 3] * up[0] + velocity[c, 4] * up[1] + velocity[c, 5] * up[2]
-        control(vehicles, v, speed, yaw_rate, dt)
+        downhill = fall[0] * forward[0] + fall[1] * forward[1] + fall[2] * forward[2]  # m/s this step
+        hold = 0.0
+        if vehicles.engine_power[v] > 0.0:
+            hold = -bodies.mass[c] * downhill / (dt * vehicles.engine_power[v])
+        control(vehicles, v, speed, yaw_rate, hold, dt)
+        if vehicles.command_speed[v] != 0.0 or vehicles.command_yaw_rate[v] != 0.0:
+            bodies.freeze_timer[c] = 0.0  # a car with a command to follow does not freeze
         loads = np.zeros(WHEELS)
         hits = np.zeros(WHEELS, np.int64)  # what each wheel stands on (slot, GROUND, PLAYGROUND)
         for w in range(WHEELS):  # suspension: ray casts and spring loads on the step's state
-            vehicles.steer_angle[v, w] = ackermann(vehicles, v, w)
+            angle = ackermann(vehicles, v, w)
+            vehicles.steer_rate[v, w] = (angle - vehicles.steer_angle[v, w]) / dt
+            vehicles.steer_angle[v, w] = angle
             m = vehicles.mount[v, w]
             mount = (position[c, 0] + r[0, 0] * m[0] + r[0, 1] * m[1] + r[0, 2] * m[2],
                      position[c, 1] + r[1, 0] * m[0] + r[1, 1] * m[1] + r[1, 2] * m[2],
@@ -161,7 +180,7 @@ def drive_vehicles(ctx):
             t, hit, normal = cast_ray(mount, down, reach, c, wheel_query(v, w, WHEELS), ctx)
             vehicles.in_contact[v, w] = t != NO_HIT
             if t == NO_HIT:
-                vehicles.compression[v, w] = 0.0
+                vehicles.compression[v, w] = vehicles.compression_rate[v, w] = 0.0
                 continue
             hits[w] = hit
             for e in range(3):
@@ -171,6 +190,7 @@ def drive_vehicles(ctx):
             vehicles.compression[v, w] = compression
             rel = contact_velocity(bodies, c, hit, vehicles.contact_point[v, w])
             compression_rate = -(rel[0] * up[0] + rel[1] * up[1] + rel[2] * up[2])
+            vehicles.compression_rate[v, w] = compression_rate
             loads[w] = max(vehicles.stiffness[v, w] * compression
                            + vehicles.damper[v, w] * compression_rate, 0.0)
         for w in range(WHEELS):  # the springs push the chassis at the mounts, what is hit back
@@ -188,6 +208,13 @@ def drive_vehicles(ctx):
         # TYRE_SWEEPS sweeps over the four, each cancelling the slip the others left (a single
         # sweep left a fifth of a slope's pull: a braked car crept at 0.0026 m/s on 0.15 rad).
         applied = np.zeros((WHEELS, 2))  # (along the heading, sideways) so far
+        grip = np.zeros((WHEELS, 2))  # static and dynamic friction of tyre and surface
+        for w in range(WHEELS):
+            surface_static, surface_dynamic = ctx.settings.ground_material[1], ctx.settings.ground_material[2]
+            if hits[w] >= 0:
+                surface_static, surface_dynamic = bodies.static_friction[hits[w]], bodies.dynamic_friction[hits[w]]
+            grip[w, 0] = np.sqrt(vehicles.static_friction[v, w] * surface_static)
+            grip[w, 1] = np.sqrt(vehicles.dynamic_friction[v, w] * surface_dynamic)
         frame = np.zeros((WHEELS, 2, 3))  # heading, side
         response = np.zeros((WHEELS, 2))
         for w in range(WHEELS):
@@ -224,10 +251,11 @@ def drive_vehicles(ctx):
                 impulse_long = drive + min(max(applied[w, 0] - drive - v_long / k_long, -brake), brake)
                 impulse_side = applied[w, 1] - v_side / k_side
                 # Friction circle: the tyre grips up to static friction x load, and slides with
-                # dynamic friction x load when more is asked of it.
+                # dynamic friction x load when more is asked of it; the tyre's and the surface's
+                # coefficients combine as any pair's (SPEC 4: the geometric mean), so ice is ice.
                 magnitude = np.sqrt(impulse_long ** 2 + impulse_side ** 2)
-                if magnitude > vehicles.static_friction[v, w] * loads[w] * dt:
-                    scale = vehicles.dynamic_friction[v, w] * loads[w] * dt / magnitude
+                if magnitude > grip[w, 0] * loads[w] * dt:
+                    scale = grip[w, 1] * loads[w] * dt / magnitude
                     impulse_long *= scale
                     impulse_side *= scale
                 d_long, d_side = impulse_long - applied[w, 0], impulse_side - applied[w, 1]

@@ -86,8 +86,9 @@ class VehicleRegistry:
             "command_age": float(v.command_age[row]),
             "throttle": float(v.throttle[row]), "brake": float(v.brake[row]),
             "steer": float(v.steer[row]),
-            "steer_angle": v.steer_angle[row].copy(), "spin_angle": v.spin_angle[row].copy(),
-            "spin_rate": v.spin_rate[row].copy(), "compression": v.compression[row].copy(),
+            "steer_angle": v.steer_angle[row].copy(), "steer_rate": v.steer_rate[row].copy(),
+            "spin_angle": v.spin_angle[row].copy(), "spin_rate": v.spin_rate[row].copy(),
+            "compression": v.compression[row].copy(), "compression_rate": v.compression_rate[row].copy(),
             "in_contact": v.in_contact[row].copy(), "contact_point": v.contact_point[row].copy(),
         }
 
