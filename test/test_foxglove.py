@@ -395,3 +395,54 @@ def test_hostile_client_changes_nothing_and_the_server_keeps_serving(client):
     assert client.wait(lambda: client.times)  # /clock goes out as time advances: none while paused
     stamp = client.times[-1]
     assert client.wait(lambda: client.times[-1] > stamp)  # still stepping
+
+
+def test_a_viewer_joining_a_paused_simulation_gets_the_world_and_its_time(server, client):
+    """While paused nothing new goes out, so a viewer that connected then (a page reload, a
+    second viewer) got the scenery and nothing on it, and no time (its timeline at 0)."""
+    assert client.call(f"{NS}/pause", {"data": True}).success
+    try:
+        time.sleep(0.5)  # what was on its way is out
+        late = FoxgloveClient(server[0])
+        try:
+            assert late.wait(lambda: len(late.channels) >= len(TOPICS))
+            late.subscribe(f"{NS}/bodies/poses", f"{NS}/bodies/markers", "/tf", "/odom")
+            _, poses = late.latest(f"{NS}/bodies/poses")
+            _, markers = late.latest(f"{NS}/bodies/markers")
+            assert len(poses.poses) > 40 and len(markers.markers) > 40
+            assert late.latest("/tf") and late.latest("/odom")
+            assert late.wait(lambda: len(late.times) >= 1) and late.times[-1] > 0
+        finally:
+            late.close()
+    finally:
+        assert client.call(f"{NS}/pause", {"data": False}).success
+
+
+def test_a_subscription_to_a_latched_topic_resends_that_topic_alone(server, client):
+    """Each subscription to a latched topic re-sent all three latched topics, to every client."""
+    client.subscribe("/tf_static")
+    client.latest("/tf_static")
+    time.sleep(0.5)
+    before = len(client.frames["/tf_static"])
+    other = FoxgloveClient(server[0])
+    try:
+        assert other.wait(lambda: len(other.channels) >= len(TOPICS))
+        other.subscribe(f"{NS}/state")
+        other.latest(f"{NS}/state")
+        time.sleep(0.5)
+        assert len(client.frames["/tf_static"]) == before
+    finally:
+        other.close()
+
+
+def test_what_a_client_does_wrong_is_not_an_error_in_the_log(caplog):
+    """The sdk logs a dropped connection or a garbage frame as ERROR, a line each: anyone on the
+    network could fill the log. Such lines are debug; the sdk's own failures stay errors."""
+    import logging
+
+    import vplayground_ros.foxglove_server  # noqa: F401 (installs the filters)
+    with caplog.at_level(logging.WARNING):
+        logging.getLogger("foxglove.websocket.connected_client").error("Invalid message from 127.0.0.1:1: Buffer too short")
+        logging.getLogger("foxglove.websocket.server").error("Dropping client 127.0.0.1:2: handshake failed")
+        logging.getLogger("foxglove.websocket.server").error("the listener failed")
+    assert [record.getMessage() for record in caplog.records] == ["the listener failed"]

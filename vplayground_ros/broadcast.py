@@ -52,6 +52,7 @@ HAND_OVER_TIMEOUT = 1.0
 MAX_CLOCK_FILL = 16
 PAUSED_JOBS = ("state", "markers", "diagnostics")  # what goes out while paused, by the wall clock
 PAUSED_ON_CHANGE = ("state", "markers")            # ... and only when the snapshot changed
+WELCOME_GATHER = 0.05  # s: a new client's subscriptions gather this long before it gets the world
 SENSOR_QOS = "reliable_10"  # a reliable publisher serves best-effort (sensor data) subscribers too
 
 
@@ -164,6 +165,9 @@ class Broadcaster:
         self._scheduled_world = None     # and its world
         self._pending = deque()  # (snapshot, due jobs, octree cells or None for no scenery)
         self._in_round = 0       # rounds taken from _pending and not yet published
+        self._newcomers = []     # sinks with a new subscriber while paused: the world is sent to them
+        self._welcome_due = 0.0  # time.monotonic() after which they get it (a client's subscriptions come in a burst)
+        self._only = threading.local()  # .sink: a sink the publisher thread sends to alone
         self._ready = threading.Condition()
         self.skipped = 0  # snapshots the publisher fell too far behind to publish
         parameters.listen(self._on_parameters)
@@ -175,16 +179,33 @@ class Broadcaster:
 
     def send(self, key, data, seconds):
         topic = self.topics[key]
+        only = getattr(self._only, "sink", None)
+        if only is not None:
+            only.publish(topic, data, seconds)
+            return
         if topic.qos == "latched":
             self._latched[key] = (data, seconds)
         for sink in self.sinks:
             sink.publish(topic, data, seconds)
 
-    def resend_latched(self, sink):
-        """The latched topics (scenery, state, /tf_static) as last sent, to a newcomer (a new
-        sink, a client subscribing) only: the others, the bag above all, have them."""
-        for key, (data, seconds) in list(self._latched.items()):
-            sink.publish(self.topics[key], data, seconds)
+    def resend_latched(self, sink, key=None):
+        """The latched topics (scenery, state, /tf_static) as last sent, or the one of `key`,
+        to a newcomer (a new sink, a client subscribing) only: the others, the bag above all,
+        have them."""
+        for latched_key, (data, seconds) in list(self._latched.items()):
+            if key is None or key == latched_key:
+                sink.publish(self.topics[latched_key], data, seconds)
+
+    def welcome(self, sink):
+        """A client of `sink` subscribed: while paused nothing new goes out until something
+        changes, so the world as it stands (poses, markers, transforms, the car) is sent to
+        that sink alone, on the publisher thread (a viewer joining a paused simulation saw the
+        ground and nothing on it)."""
+        with self._ready:
+            if sink not in self._newcomers:
+                self._newcomers.append(sink)
+            self._welcome_due = time.monotonic() + WELCOME_GATHER
+            self._ready.notify_all()
 
     def sensor_topic(self, spec, suffix):
         """The key of a sensor's topic (`<name>/<suffix>`), added to the table on first use:
@@ -331,10 +352,15 @@ class Broadcaster:
             if not self._pending:
                 self._ready.wait(self._paused_wait(timeout))
             item = self._take_round()
+            newcomers = []
+            if self._newcomers and time.monotonic() >= self._welcome_due:
+                newcomers, self._newcomers = self._newcomers, []
         if item is not None:
             self._publish_round(item)
         elif self.sim.paused:
             self._publish_paused()
+        if newcomers and self.sim.paused:  # running, the next round comes within 1/marker_rate
+            self._welcome(newcomers)
 
     def _take_round(self):
         """The next round handed over, or None (with the lock held)."""
@@ -377,7 +403,24 @@ class Broadcaster:
     def _paused_wait(self, timeout):
         if not self.sim.paused:
             return timeout
-        return max(0.0, min(timeout, *(self._jobs[name].wall_due - time.monotonic() for name in PAUSED_JOBS)))
+        now = time.monotonic()
+        due = [self._jobs[name].wall_due - now for name in PAUSED_JOBS]
+        if self._newcomers:
+            due.append(self._welcome_due - now)
+        return max(0.0, min(timeout, *due))
+
+    def _welcome(self, sinks):
+        snapshot = self.sim.snapshot
+        for sink in sinks:
+            self._only.sink = sink
+            try:
+                for name in PAUSED_ON_CHANGE:
+                    job = self._jobs[name]
+                    published = job.published
+                    self._run(job, snapshot)
+                    job.published = published  # the other sinks' schedule is theirs
+            finally:
+                self._only.sink = None
 
     def _publish_paused(self):
         now, snapshot = time.monotonic(), self.sim.snapshot

@@ -42,6 +42,24 @@ NAVIGATION_GOALS = {"/goal_pose", "/move_base_simple/goal"}
 CLOCK_BATCH = 8
 # The sdk logs its own loopback port and the relay's connections: the relay logs the viewers.
 logging.getLogger("foxglove.websocket").setLevel(logging.WARNING)
+# What a client does wrong (drops its connection, sends garbage, fails its handshake) the sdk
+# logs as ERROR, a line each: anyone on the network could fill the log. Such lines are debug.
+CLIENT_FAULTS = ("Error receiving from client", "Connection reset without closing handshake", "Invalid message from",
+                 "attempted to subscribe to unknown channel", "handshake failed")
+
+
+class ClientFaultsAreDebug(logging.Filter):
+    def filter(self, record):
+        if record.levelno >= logging.ERROR and any(text in record.getMessage() for text in CLIENT_FAULTS):
+            record.levelno, record.levelname = logging.DEBUG, "DEBUG"
+            return logging.getLogger(record.name).isEnabledFor(logging.DEBUG)
+        return True
+
+
+# A logger's filters see only its own records, not its children's: each of the sdk's that log them.
+for name in ("foxglove.websocket.server", "foxglove.websocket.connected_client",
+             "foxglove.websocket.connected_client.poller"):
+    logging.getLogger(name).addFilter(ClientFaultsAreDebug())
 
 
 def ros2msg(type_name):
@@ -161,9 +179,18 @@ class FoxgloveServer:
 
     # ------------------------------------------------------------- ServerListener
     def on_subscribe(self, client, channel):
+        """A newcomer gets the server time (a viewer without one shows time 0), the latched
+        message of the channel it subscribed to (only that one: each subscription re-sent all
+        three, to every client), and, while paused, the world as it stands."""
         self.subscriptions += 1
-        if any(self.channels[key].id() == channel.id for key in self.latched):
-            self.runtime.broadcaster.resend_latched(self)
+        if self._time_sent >= 0:
+            with self._time_lock:
+                self.server.broadcast_time(self._time_sent)
+        key = next((key for key, known in self.channels.items() if known.id() == channel.id), None)
+        if key in self.latched:
+            self.runtime.broadcaster.resend_latched(self, key)
+        elif key is not None:
+            self.runtime.broadcaster.welcome(self)
 
     def on_unsubscribe(self, client, channel):
         self.subscriptions -= 1
