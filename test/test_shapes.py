@@ -494,3 +494,20 @@ def test_a_mixed_pile_with_convex_bodies_comes_to_rest():
     assert s["positions"][others, 2].min() > 0.1  # nothing sank through the ground
     for k in convex:
         assert world_points(world, k, world.body(f"b{k}")["points"])[:, 2].min() > -0.01
+
+
+@pytest.mark.parametrize("gap", [0.5, 0.49, 0.51])
+def test_a_head_on_elastic_hit_is_square_whatever_the_gap(gap):
+    """A cylinder flying cap-first into a standing one, e = 1, no gravity: they swap velocities
+    with no spin. At a gap of exactly 0.5 m the two points of the contact had equal depth, v dt,
+    rounding let one bounce and not the other, and the hitter left at 0.33 m/s, spinning."""
+    world = World({"gravity": [0, 0, 0], "freezing": {"enabled": False}}, ground=None)
+    world.add_body({"shape": "cylinder", "radius": 0.25, "length": 0.5, "rpy": [0, math.pi / 2, 0], "name": "a",
+                    "position": [-gap, 0, 0], "mass": 1.0, "elasticity": 1.0, "linear_velocity": [2, 0, 0]})
+    world.add_body({"shape": "cylinder", "radius": 0.25, "length": 0.5, "name": "b", "position": [0.5, 0, 0],
+                    "mass": 1.0, "elasticity": 1.0})
+    world.step(128)
+    s = world.state()
+    assert s["linear_velocities"][0] == pytest.approx([0, 0, 0], abs=0.02)
+    assert s["linear_velocities"][1] == pytest.approx([2, 0, 0], abs=0.02)
+    assert np.abs(s["angular_velocities"]).max() < 0.02

@@ -183,6 +183,20 @@ def prepare_contacts(contacts, bodies, ground_material, gravity, dt):
         contacts.friction[c, 1] = fw[0] * t2[0] + fw[1] * t2[1] + fw[2] * t2[2]
         contacts.support_friction[c, 0] = sw[0] * t1[0] + sw[1] * t1[1] + sw[2] * t1[2]
         contacts.support_friction[c, 1] = sw[0] * t2[0] + sw[1] * t2[1] + sw[2] * t2[2]
+    # A manifold that this step's motion closes bounces at each of its points approaching fast
+    # enough, not only at those whose own gap closes: two symmetric points of one flat contact
+    # (equal depth, exactly v dt) were split by rounding, one bounced, and the body spun away.
+    for m in range(contacts.manifold_count[0]):
+        start, end = contacts.manifold_start[m], contacts.manifold_start[m] + contacts.manifold_size[m]
+        closing = False
+        for c in range(start, end):
+            closing = closing or contacts.collision_target[c] > INACTIVE
+        if not closing:
+            continue
+        for c in range(start, end):
+            vn = contacts.approach_speed[c]
+            if contacts.collision_target[c] == INACTIVE and vn < -RESTITUTION_THRESHOLD:
+                contacts.collision_target[c] = -contacts.restitution[c] * vn
     # Sweep order of the points: bottom to top along gravity, ties in detection order.
     count = contacts.count[0]
     heights = np.empty(count)
