@@ -347,67 +347,62 @@ class Broadcaster:
 
     def publish_next(self, timeout=0.1):
         """The publisher thread's round: publishes the next snapshot handed over, waiting up
-        to `timeout` s for one; while paused, what the wall clock makes due."""
+        to `timeout` s for one; while paused, what the wall clock makes due, and the world to
+        the sinks that gained a client (welcome)."""
         with self._ready:
             if not self._pending:
                 self._ready.wait(self._paused_wait(timeout))
-            item = self._take_round()
+            item = self._pending.popleft() if self._pending else None
             newcomers = []
             if self._newcomers and time.monotonic() >= self._welcome_due:
                 newcomers, self._newcomers = self._newcomers, []
-        if item is not None:
-            self._publish_round(item)
-        elif self.sim.paused:
-            self._publish_paused()
-        if newcomers and self.sim.paused:  # running, the next round comes within 1/marker_rate
-            self._welcome(newcomers)
+            self._in_round += 1
+            self._ready.notify_all()
+        try:
+            if item is not None:
+                self._publish_round(item)
+            elif self.sim.paused:
+                self._publish_paused()
+            if newcomers and self.sim.paused:  # running, the next round comes within 1/marker_rate
+                self._welcome(newcomers)
+        finally:
+            self._round_done()
 
-    def _take_round(self):
-        """The next round handed over, or None (with the lock held)."""
-        item = self._pending.popleft() if self._pending else None
-        self._in_round += item is not None
-        self._ready.notify_all()
-        return item
+    def _round_done(self):
+        with self._ready:
+            self._in_round -= 1
+            self._ready.notify_all()
 
     def _publish_round(self, item):
-        try:
-            snapshot, jobs, cells = item
-            for job in jobs:
-                self._run(job, snapshot)
-            if cells is not None:
-                self._scenery_pending = False
-                self._run(self._scenery, snapshot, cells)
-            if snapshot.readings:
-                self._run(self._sensor_job, snapshot)
-        finally:
-            with self._ready:
-                self._in_round -= 1
-                self._ready.notify_all()
+        snapshot, jobs, cells = item
+        for job in jobs:
+            self._run(job, snapshot)
+        if cells is not None:
+            self._scenery_pending = False
+            self._run(self._scenery, snapshot, cells)
+        if snapshot.readings:
+            self._run(self._sensor_job, snapshot)
 
     def _end_timeline(self):
         """Time went back (a reset, another scene): the rounds of the time before are sent
-        first, here on the simulation thread or by the publisher thread, and then the sinks
-        that keep a timeline (the bag) are told: a bag holds one run of time a file, so seeking
-        in it never mixes two worlds."""
+        first (here on the simulation thread, or by the publisher thread, which is waited for),
+        and then the sinks that keep a timeline (the bag) are told: a bag holds one run of time
+        a file, so seeking in it never mixes two worlds."""
         while True:
             with self._ready:
-                item = self._take_round()
+                item = self._pending.popleft() if self._pending else None
                 if item is None:
                     self._ready.wait_for(lambda: self._in_round == 0, HAND_OVER_TIMEOUT)
                     break
-            self._publish_round(item)
+                self._in_round += 1
+                self._ready.notify_all()
+            try:
+                self._publish_round(item)
+            finally:
+                self._round_done()
         for sink in self.sinks:
             if hasattr(sink, "new_timeline"):
                 sink.new_timeline()
-
-    def _paused_wait(self, timeout):
-        if not self.sim.paused:
-            return timeout
-        now = time.monotonic()
-        due = [self._jobs[name].wall_due - now for name in PAUSED_JOBS]
-        if self._newcomers:
-            due.append(self._welcome_due - now)
-        return max(0.0, min(timeout, *due))
 
     def _welcome(self, sinks):
         snapshot = self.sim.snapshot
@@ -421,6 +416,15 @@ class Broadcaster:
                     job.published = published  # the other sinks' schedule is theirs
             finally:
                 self._only.sink = None
+
+    def _paused_wait(self, timeout):
+        if not self.sim.paused:
+            return timeout
+        now = time.monotonic()
+        due = [self._jobs[name].wall_due - now for name in PAUSED_JOBS]
+        if self._newcomers:
+            due.append(self._welcome_due - now)
+        return max(0.0, min(timeout, *due))
 
     def _publish_paused(self):
         now, snapshot = time.monotonic(), self.sim.snapshot
