@@ -446,3 +446,37 @@ def test_what_a_client_does_wrong_is_not_an_error_in_the_log(caplog):
         logging.getLogger("foxglove.websocket.server").error("Dropping client 127.0.0.1:2: handshake failed")
         logging.getLogger("foxglove.websocket.server").error("the listener failed")
     assert [record.getMessage() for record in caplog.records] == ["the listener failed"]
+
+
+def ipv6_loopback():
+    try:
+        with socket.create_server(("::1", 0), family=socket.AF_INET6):
+            return True
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(not ipv6_loopback(), reason="no IPv6 loopback here")
+def test_the_server_listens_on_an_ipv6_address():
+    """--foxglove-host ::1 failed: 'Address family for hostname not supported'."""
+    process = subprocess.Popen([sys.executable, "-c", WITHOUT_ROS, "--foxglove", "0", "--foxglove-host", "::1",
+                                "--no-record"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        url, output = None, []
+        deadline = time.monotonic() + 120
+        while url is None and time.monotonic() < deadline:
+            line = process.stdout.readline()
+            if not line:
+                break
+            output.append(line)
+            found = URL_IN_LOG.search(line)
+            url = found.group(1) if found else None
+        assert url and url.startswith("ws://[::1]:"), "".join(output)
+        viewer = FoxgloveClient(url)
+        try:
+            assert viewer.wait(lambda: viewer.server_info is not None and len(viewer.channels) >= len(TOPICS))
+        finally:
+            viewer.close()
+    finally:
+        process.terminate()
+        process.wait(30)

@@ -175,7 +175,8 @@ class ProtocolFront:
         self.upstream = ("127.0.0.1", upstream_port)
         self.metadata = dict(metadata)
         self.log = log
-        self.listener = socket.create_server((host, port))
+        family = socket.AF_INET6 if ":" in host else socket.AF_INET  # ::1, ::, fe80::...
+        self.listener = socket.create_server((host, port), family=family)
         self.port = self.listener.getsockname()[1]
         self.connections = set()
         self.serving = 0       # viewers with a thread of their own, at most MAX_VIEWERS

@@ -99,7 +99,7 @@ class FoxgloveServer:
             self.server.stop()
             raise OSError(f"the Foxglove server cannot listen on {host}:{port}: {error}") from None
         self.port = self.front.port
-        self.url = f"ws://{host}:{self.port}"
+        self.url = f"ws://[{host}]:{self.port}" if ":" in host else f"ws://{host}:{self.port}"
         runtime.parameters.set_read_only({"foxglove.port": self.port})  # the port bound (0 asks for any)
         runtime.parameters.listen(self._parameters_changed)
         runtime.broadcaster.add_sink(self)
