@@ -109,6 +109,21 @@ def test_a_viewer_asking_for_another_protocol_is_refused(server):
     assert refused.value.response.status_code == 400
 
 
+def test_an_oversized_request_gets_its_answer_not_a_reset(server):
+    """An HTTP head past the relay's 64 KiB limit is answered 400; the bytes still unread made
+    the close a reset, and the client lost the answer."""
+    host, port = server[0].removeprefix("ws://").rsplit(":", 1)
+    with socket.create_connection((host, int(port)), timeout=10) as sock:
+        sock.sendall(b"GET / HTTP/1.1\r\nHost: x\r\nX-Filler: " + b"a" * 100_000 + b"\r\n\r\n")
+        answer = b""
+        while True:
+            chunk = sock.recv(65536)
+            if not chunk:
+                break
+            answer += chunk
+    assert answer.startswith(b"HTTP/1.1 400") and b"HTTP head too large" in answer
+
+
 def test_viewers_past_the_cap_are_refused_and_served_again_once_slots_free(server):
     """Connections that never finish their handshake (a slow or hostile client) hold their slot
     up to the handshake timeout; past MAX_VIEWERS the relay answers 503 instead of starting

@@ -21,6 +21,7 @@ SDK_SUBPROTOCOL = b"foxglove.sdk.v1"
 SUBPROTOCOLS = [SDK_SUBPROTOCOL, b"foxglove.websocket.v1"]
 HANDSHAKE_LIMIT = 64 * 1024  # bytes: an HTTP head larger than this is not a viewer's
 HANDSHAKE_TIMEOUT = 10.0  # s for a viewer (or the sdk) to send its handshake
+DRAIN_LIMIT, DRAIN_TIMEOUT = 1024 * 1024, 1.0  # what a refused viewer may still send, read and dropped
 CHUNK = 256 * 1024  # bytes per copy: a scenery mesh message is megabytes
 # Towards the viewer: bytes per copy (a round of 10,000 bodies is ~4 MB), and how long the relay
 # lets the sdk's frames gather after a read that did not fill its buffer (s). The sdk writes a
@@ -135,12 +136,24 @@ def with_metadata(payload, metadata):
     return json.dumps(info, separators=(",", ":")).encode()
 
 
-def refuse(sock, status, text):
-    """An HTTP error answer with `text` as its body; a peer already gone is ignored."""
+def refuse(sock, status, text, drain=False):
+    """An HTTP error answer with `text` as its body; a peer already gone is ignored. With
+    `drain` (on the viewer's own thread), what the peer still sends is read and dropped, up to
+    DRAIN_LIMIT bytes or DRAIN_TIMEOUT: closing a socket with unread bytes resets the
+    connection, and the peer lost the answer (an HTTP head over HANDSHAKE_LIMIT got a reset)."""
     body = f"{text}\n".encode()
     try:
         sock.sendall(b"HTTP/1.1 %s\r\nContent-Type: text/plain\r\nConnection: close\r\n"
                      b"Content-Length: %d\r\n\r\n" % (status, len(body)) + body)
+        if drain:
+            sock.shutdown(socket.SHUT_WR)
+            sock.settimeout(DRAIN_TIMEOUT)
+            drained = 0
+            while drained < DRAIN_LIMIT:
+                chunk = sock.recv(65536)
+                if not chunk:
+                    break
+                drained += len(chunk)
     except OSError:
         pass
 
@@ -273,7 +286,7 @@ class ProtocolFront:
             if upgraded:
                 self.log.info(f"foxglove: viewer {peer} left")
         except HandshakeError as error:
-            refuse(viewer, b"400 Bad Request", error)
+            refuse(viewer, b"400 Bad Request", error, drain=True)
         except (OSError, ValueError) as error:  # a peer gone or silent mid-handshake, serverInfo not JSON
             self.log.warning(f"foxglove: viewer {peer}: {error}")
         finally:
