@@ -491,3 +491,76 @@ def test_a_reset_or_another_scene_continues_the_bag_in_a_new_file(tmp_path):
             last[topic] = log_time
         assert LATCHED <= set(last) and last["/clock"] > 10**9, f
         assert min(log_time for topic, log_time, *_ in messages if topic == "/clock") < 10**8, f
+
+
+def test_each_new_file_opens_with_the_latched_topics_as_they_were_then(tmp_path):
+    """A reset, then a pause 30 ms later: the new file opened at 0 s with state 'paused' and a
+    /tf_static stamped at the pause (the recorder re-wrote the latched messages as last
+    queued, not as they stood where the file began)."""
+    import logging
+
+    from vplayground_ros.cli import parse_args
+    from vplayground_ros.runtime import Runtime
+    from vplayground_ros.scene import load_world
+    from vplayground_ros.simulation import Simulation
+
+    path = tmp_path / "run.mcap"
+    options = parse_args(["--record", str(path)])
+    recorder = Recorder(path)
+    sim = Simulation(load_world(options.scene), real_time_factor=1.0)
+    runtime = Runtime(sim, options, logging.getLogger("test_bag"), recorder)
+    runtime.start()
+    try:
+        assert wait_for(lambda: sim.snapshot.time > 0.5)
+        for _ in range(3):
+            assert runtime.requests.reset(255)[0]
+            time.sleep(0.03)
+            runtime.requests.pause(True)
+            time.sleep(0.2)
+            runtime.requests.pause(False)
+            time.sleep(0.3)
+    finally:
+        runtime.stop()
+        recorder.close()
+    for index in (1, 2, 3):
+        _, _, messages = read_all(tmp_path / f"run_{index}.mcap")
+        start = min(log_time for _, log_time, *_ in messages)
+        opening = {topic: msg for topic, log_time, _, msg in messages if log_time == start and topic in LATCHED}
+        assert opening["/vplayground/state"].data == 1, index  # playing: the pause came later
+        assert all(stamp_ns(t) <= start for t in opening["/tf_static"].transforms), index
+
+
+def test_a_reset_under_load_keeps_each_files_channels_in_order(tmp_path):
+    """As fast as possible with 600 boxes and a reset every 0.15 s: the simulation thread sent
+    the pending rounds while the publisher thread was inside one, so a file's markers went
+    back in time."""
+    import logging
+
+    from vplayground_ros.cli import parse_args
+    from vplayground_ros.runtime import Runtime
+    from vplayground_ros.scene import load_world
+    from vplayground_ros.simulation import Simulation
+
+    scene = {"version": 1, "bodies": [{"position": [float(x), float(y), 0.5 + z]} for x in range(-10, 10)
+                                      for y in range(-5, 5) for z in range(3)]}
+    path = tmp_path / "run.mcap"
+    options = parse_args(["--record", str(path), "--real-time-factor", "0"])
+    recorder = Recorder(path)
+    sim = Simulation(load_world(scene), real_time_factor=0.0)
+    runtime = Runtime(sim, options, logging.getLogger("test_bag"), recorder)
+    runtime.start()
+    try:
+        for _ in range(8):
+            time.sleep(0.15)
+            assert runtime.requests.reset(255)[0]
+    finally:
+        runtime.stop()
+        recorder.close()
+    files = sorted(tmp_path.glob("run*.mcap"))
+    assert len(files) >= 8
+    for f in files:
+        _, _, messages = read_all(f)
+        last = {}
+        for topic, log_time, *_ in messages:
+            assert log_time >= last.get(topic, 0), (f.name, topic)
+            last[topic] = log_time

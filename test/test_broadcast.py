@@ -377,3 +377,21 @@ def test_odometry_covariances_are_small_not_zero_and_joints_have_rates(running):
     states = [message for _, message in sink.of("joint_states", decoder("sensor_msgs/msg/JointState"))]
     suspension = [k for k, name in enumerate(states[0].name) if name.endswith("_suspension")]
     assert max(abs(m.velocity[k]) for m in states for k in suspension) > 0.01
+
+
+def test_a_newcomer_is_welcomed_while_another_keeps_subscribing(running):
+    """Paused, a client re-subscribing every 20 ms pushed the welcome back each time: nobody got
+    the world. A burst of re-subscriptions to a latched topic re-sends it once, not each time."""
+    runtime, sink = running(SCENE, "--start-paused")
+    newcomer = Collector()
+    runtime.broadcaster.sinks.append(newcomer)
+    started = time.monotonic()
+    while time.monotonic() - started < 0.6:
+        runtime.broadcaster.welcome(newcomer, "poses")
+        time.sleep(0.02)
+    assert newcomer.of("poses", POSES)
+    before = len(newcomer.of("scene_markers", MARKERS))
+    for _ in range(300):
+        runtime.broadcaster.welcome(newcomer, "scene_markers")
+    time.sleep(0.3)
+    assert 1 <= len(newcomer.of("scene_markers", MARKERS)) - before <= 2

@@ -165,8 +165,9 @@ class Broadcaster:
         self._scheduled_world = None     # and its world
         self._pending = deque()  # (snapshot, due jobs, octree cells or None for no scenery)
         self._in_round = 0       # rounds taken from _pending and not yet published
-        self._newcomers = []     # sinks with a new subscriber while paused: the world is sent to them
+        self._newcomers = {}     # sink -> latched keys to re-send: sinks with new subscribers (welcome)
         self._welcome_due = 0.0  # time.monotonic() after which they get it (a client's subscriptions come in a burst)
+        self._draining = False   # the simulation thread publishes the pending rounds (_end_timeline)
         self._only = threading.local()  # .sink: a sink the publisher thread sends to alone
         self._ready = threading.Condition()
         self.skipped = 0  # snapshots the publisher fell too far behind to publish
@@ -196,15 +197,19 @@ class Broadcaster:
             if key is None or key == latched_key:
                 sink.publish(self.topics[latched_key], data, seconds)
 
-    def welcome(self, sink):
-        """A client of `sink` subscribed: while paused nothing new goes out until something
-        changes, so the world as it stands (poses, markers, transforms, the car) is sent to
-        that sink alone, on the publisher thread (a viewer joining a paused simulation saw the
-        ground and nothing on it)."""
+    def welcome(self, sink, key=None):
+        """A client of `sink` subscribed (to the topic `key`): a latched topic's last message is
+        sent again, and while paused, when nothing new goes out until something changes, the
+        world as it stands (poses, markers, transforms, the car), to that sink alone (a viewer
+        joining a paused simulation saw the ground and nothing on it). On the publisher thread,
+        WELCOME_GATHER after the first of a burst of subscriptions, once for all of them: a
+        client subscribing again and again flooded every other with the scenery."""
         with self._ready:
-            if sink not in self._newcomers:
-                self._newcomers.append(sink)
-            self._welcome_due = time.monotonic() + WELCOME_GATHER
+            if not self._newcomers:
+                self._welcome_due = time.monotonic() + WELCOME_GATHER
+            keys = self._newcomers.setdefault(sink, set())
+            if key is not None and self.topics[key].qos == "latched":
+                keys.add(key)
             self._ready.notify_all()
 
     def sensor_topic(self, spec, suffix):
@@ -352,10 +357,12 @@ class Broadcaster:
         with self._ready:
             if not self._pending:
                 self._ready.wait(self._paused_wait(timeout))
+            if self._draining:
+                return  # the simulation thread sends what is pending (_end_timeline)
             item = self._pending.popleft() if self._pending else None
-            newcomers = []
+            newcomers = {}
             if self._newcomers and time.monotonic() >= self._welcome_due:
-                newcomers, self._newcomers = self._newcomers, []
+                newcomers, self._newcomers = self._newcomers, {}
             self._in_round += 1
             self._ready.notify_all()
         try:
@@ -363,8 +370,7 @@ class Broadcaster:
                 self._publish_round(item)
             elif self.sim.paused:
                 self._publish_paused()
-            if newcomers and self.sim.paused:  # running, the next round comes within 1/marker_rate
-                self._welcome(newcomers)
+            self._welcome(newcomers)
         finally:
             self._round_done()
 
@@ -388,25 +394,30 @@ class Broadcaster:
         first (here on the simulation thread, or by the publisher thread, which is waited for),
         and then the sinks that keep a timeline (the bag) are told: a bag holds one run of time
         a file, so seeking in it never mixes two worlds."""
-        while True:
-            with self._ready:
-                item = self._pending.popleft() if self._pending else None
-                if item is None:
-                    self._ready.wait_for(lambda: self._in_round == 0, HAND_OVER_TIMEOUT)
-                    break
-                self._in_round += 1
-                self._ready.notify_all()
-            try:
+        with self._ready:
+            self._draining = True  # the publisher thread takes no more rounds
+            self._ready.wait_for(lambda: self._in_round == 0, HAND_OVER_TIMEOUT)  # nor is in one
+            items = list(self._pending)
+            self._pending.clear()
+        try:
+            for item in items:  # in order, on this thread alone
                 self._publish_round(item)
-            finally:
-                self._round_done()
+        finally:
+            with self._ready:
+                self._draining = False
+                self._ready.notify_all()
         for sink in self.sinks:
             if hasattr(sink, "new_timeline"):
                 sink.new_timeline()
 
-    def _welcome(self, sinks):
-        snapshot = self.sim.snapshot
-        for sink in sinks:
+    def _welcome(self, newcomers):
+        """What welcome() gathered: {sink: latched keys}."""
+        for sink, keys in newcomers.items():
+            for key in keys:
+                self.resend_latched(sink, key)
+            if not self.sim.paused:
+                continue  # running, the next round comes within 1/marker_rate
+            snapshot = self.sim.snapshot
             self._only.sink = sink
             try:
                 for name in PAUSED_ON_CHANGE:

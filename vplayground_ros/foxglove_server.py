@@ -73,7 +73,6 @@ class FoxgloveServer:
         self.channels = {key: Channel(topic.name, schema=ros2msg(topic.type), message_encoding="cdr",
                                       context=self.context)
                          for key, topic in runtime.broadcaster.topics.items()}
-        self.latched = {key for key, topic in runtime.broadcaster.topics.items() if topic.qos == "latched"}
         self.inputs = {runtime.resolve_name(sub.name): sub
                        for sub in subscriptions(runtime.parameters["cmd_vel_stamped"])}
         self.client_channels = {}  # (client id, channel id) -> (subscription key, decode)
@@ -181,16 +180,13 @@ class FoxgloveServer:
     def on_subscribe(self, client, channel):
         """A newcomer gets the server time (a viewer without one shows time 0), the latched
         message of the channel it subscribed to (only that one: each subscription re-sent all
-        three, to every client), and, while paused, the world as it stands."""
+        three) and, while paused, the world as it stands (Broadcaster.welcome)."""
         self.subscriptions += 1
         if self._time_sent >= 0:
             with self._time_lock:
                 self.server.broadcast_time(self._time_sent)
         key = next((key for key, known in self.channels.items() if known.id() == channel.id), None)
-        if key in self.latched:
-            self.runtime.broadcaster.resend_latched(self, key)
-        elif key is not None:
-            self.runtime.broadcaster.welcome(self)
+        self.runtime.broadcaster.welcome(self, key)
 
     def on_unsubscribe(self, client, channel):
         self.subscriptions -= 1

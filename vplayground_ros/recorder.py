@@ -299,7 +299,7 @@ class Recorder:
         self.dropped = 0
         self.error = None        # the first failure (disk full, unwritable path); then nothing is written
         self.files = []
-        self._latched = {}       # topic -> (type, data, qos): re-written into every split
+        self._latched = {}       # topic -> (type, data, qos) as far as the writer got: re-written into a new file
         # Appended by any thread, taken by the writer (deque operations are atomic): a
         # queue.Queue's lock and condition per message cost more than the rest of write().
         self._queue = deque()
@@ -320,8 +320,6 @@ class Recorder:
             self.dropped += 1
             return
         stamp = int(round(seconds * 1e9))
-        if qos == "latched":
-            self._latched[topic] = (type_name, data, qos)
         if len(self._queue) >= QUEUE_MESSAGES:
             self.dropped += 1
             return
@@ -401,6 +399,8 @@ class Recorder:
                         self._split(item[3])
                     new_timeline = False
                     self._add(*item)
+                    if item[4] == "latched":  # as of this point in the stream, not as last queued
+                        self._latched[item[0]] = (item[1], item[2], item[4])
                 except Exception as error:  # anything must not kill the thread
                     self._failed(error)
             opened = self._writer.chunk_opened if self.error is None else None
