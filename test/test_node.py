@@ -403,6 +403,17 @@ def test_a_ros_override_of_what_only_the_command_line_sets_is_refused():
     assert "cannot start: scene: give it on the command line (--scene)" in output
 
 
+@pytest.mark.parametrize("override, reason", [("duration:=1", "(a decimal parameter: duration:=1.0, not 1)"),
+                                              ("publish_rate:=-5.0", "out of range")])
+def test_a_ros_override_of_the_wrong_type_or_range_is_refused_in_a_line(override, reason):
+    """rclpy refused it with a traceback and exit 1."""
+    refused = run_console("--no-record", "--duration", "1", "--ros-args", "-p", override)
+    output, _ = refused.communicate(timeout=120)
+    assert refused.returncode == 2, output
+    assert f"cannot start: --ros-args -p {override.split(':=')[0]}:" in output and reason in output, output
+    assert "Traceback" not in output
+
+
 def test_marker_and_contact_topics_carry_the_bodies(ros):
     from sensor_msgs.msg import JointState, PointCloud2
     from visualization_msgs.msg import MarkerArray

@@ -12,6 +12,7 @@ import importlib
 import threading
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -143,7 +144,12 @@ class SimulatorNode(Node):
     def _declare_parameters(self):
         store = self.runtime.parameters
         for spec in store.specs.values():
-            self.declare_parameter(spec.name, store[spec.name], descriptor(spec))
+            try:
+                self.declare_parameter(spec.name, store[spec.name], descriptor(spec))
+            except ParameterException as error:  # an override of the wrong type or out of range
+                hint = (f" (a decimal parameter: {spec.name}:=1.0, not 1)"
+                        if "'INTEGER', expecting type 'DOUBLE'" in str(error) else "")
+                raise ValueError(f"--ros-args -p {spec.name}: {error}{hint}") from None
         # Overrides given with --ros-args -p: validated and applied like any other set, before
         # the simulation starts. What was opened from the command line before the node existed
         # (the scene, the bag, the Foxglove port) cannot follow one: refused, naming the option.
