@@ -94,6 +94,10 @@ class RosSink:
             try:
                 kind = interface_class(topic.type)
             except ImportError:
+                self.node.get_logger().warning(
+                    f"{topic.name}: {topic.type} is not installed, so the node does not publish it "
+                    f"(the bag and the Foxglove server still have it; a ROS install has it: "
+                    f"apt install ros-jazzy-{topic.type.split('/')[0].replace('_', '-')})")
                 self.publishers[topic.key] = None
                 return None
             self.publishers[topic.key] = self.node.create_publisher(kind, topic.name, QOS[topic.qos])
