@@ -1,5 +1,6 @@
 """The Python API of SPEC 4: names, slots, bad input, scene files."""
 import math
+import os
 
 import numpy as np
 import pytest
@@ -320,3 +321,17 @@ def test_a_world_at_rest_steps_alike_with_and_without_the_resting_shortcut():
     assert [k for k in a if not np.array_equal(a[k], b[k])] == []
     assert (shortcut.time, shortcut.step_count, shortcut.stats) == (compiled.time, compiled.step_count, compiled.stats)
     assert not shortcut.state()["frozen"][1]
+
+
+def test_shared_files_are_found_under_the_user_base_of_pip_install_user(tmp_path):
+    """pip install --user puts config/ and meshes/ under the user base's share/, which was not
+    searched: the default scene 'is not installed'."""
+    import subprocess
+    import sys
+    shared = tmp_path / "share" / "vplayground_ros" / "config" / "only_here.yaml"
+    shared.parent.mkdir(parents=True)
+    shared.write_text("version: 1\n")
+    found = subprocess.run([sys.executable, "-c", "from vplayground_ros.resources import find_shared; "
+                            "print(find_shared('config/only_here.yaml'))"],
+                           env={**os.environ, "PYTHONUSERBASE": str(tmp_path)}, capture_output=True, text=True)
+    assert found.stdout.strip() == str(shared), found.stderr

@@ -1,5 +1,7 @@
 """Finding the package's shared files (config/, meshes/) wherever it was installed from."""
+import os
 import sys
+import sysconfig
 from pathlib import Path
 
 PACKAGE = "vplayground_ros"
@@ -7,7 +9,8 @@ PACKAGE = "vplayground_ros"
 
 def share_directories():
     """Candidate share roots, most specific first: a ROS install (ament_index), a source tree
-    (editable install, tests), then pip's data_files under the interpreter's prefix."""
+    (editable install, tests), then pip's data_files under the interpreter's prefix or the
+    user base (pip install --user)."""
     roots = []
     try:
         from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
@@ -19,6 +22,8 @@ def share_directories():
         pass
     roots.append(Path(__file__).resolve().parent.parent)
     roots.append(Path(sys.prefix) / "share" / PACKAGE)
+    # pip install --user puts data_files under the user base (its scheme's "data" path).
+    roots.append(Path(sysconfig.get_path("data", f"{os.name}_user")) / "share" / PACKAGE)
     return roots
 
 
