@@ -23,6 +23,14 @@ def test_a_non_finite_duration_or_speed_is_refused(capsys, option, value):
     assert f"argument {option}: must be a finite number" in capsys.readouterr().err
 
 
+def test_a_value_that_is_no_number_is_refused_in_words(capsys):
+    """argparse named the internal function: 'invalid finite_float value'."""
+    with pytest.raises(SystemExit) as refused:
+        cli.parse_args(["--real-time-factor", "abc", "--no-record"])
+    assert refused.value.code == 2
+    assert "argument --real-time-factor: expected a number, got 'abc'" in capsys.readouterr().err
+
+
 def test_finite_values_still_pass():
     options = cli.parse_args(["--duration", "2.5", "--real-time-factor", "0", "--no-record"])
     assert (options.duration, options.real_time_factor) == (2.5, 0.0)

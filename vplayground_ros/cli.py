@@ -26,7 +26,10 @@ STARTING = "starting: Numba loads the engine from its cache, or compiles it (abo
 def finite_float(text):
     """A float option's value: NaN passes every `<= 0` check and inf no step count can hold, so
     both are refused here rather than ending the physics thread later."""
-    value = float(text)
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
     if not math.isfinite(value):
         raise argparse.ArgumentTypeError(f"must be a finite number, not {text!r}")
     return value
