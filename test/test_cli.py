@@ -135,3 +135,17 @@ def test_a_real_node_answers_after_a_callback_failed():
         client.destroy_node()
         rclpy.try_shutdown(context=context)
     assert not spinner.is_alive() and stop.is_set()
+
+
+def test_ros_arguments_without_a_node_are_said_to_be_ignored(tmp_path):
+    """--ros-args with --no-ros (or without rclpy) did nothing and said nothing: an override of
+    the duration left the run going on."""
+    import subprocess
+    import sys
+    scene = tmp_path / "scene.yaml"
+    scene.write_text("version: 1\n")
+    done = subprocess.run([sys.executable, "-m", "vplayground_ros.cli", "--no-ros", "--no-record", "--scene",
+                           str(scene), "--duration", "0.1", "--ros-args", "-p", "duration:=5.0"],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert "--ros-args -p duration:=5.0: ignored, no ROS node runs here (--no-ros)" in done.stderr

@@ -119,6 +119,9 @@ def main(argv=None):
         import rclpy  # noqa: F401
     except ImportError:
         rclpy = None
+    if ros_args and (rclpy is None or options.no_ros):
+        print(f"vplayground: {' '.join(ros_args)}: ignored, no ROS node runs here "
+              f"({'--no-ros' if options.no_ros else 'rclpy is not installed'})", file=sys.stderr)
     return run(sim, options, recorder, ros_args if rclpy is not None and not options.no_ros else None, stop)
 
 
