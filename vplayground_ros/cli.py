@@ -236,13 +236,14 @@ def run_until_stopped(sim, options, recorder, ros_args, stop, deaths):
             executor.add_node(node)
             spinner = threading.Thread(target=spin, args=(executor, stop, sim.fault), name="vplayground-ros",
                                        daemon=True)
+        speed, duration = runtime.parameters["real_time_factor"], runtime.parameters["duration"]  # overrides too
         log.info(f"{options.scene}: {len(sim.world.body_names())} bodies; real-time factor "
-                 f"{options.real_time_factor:g}{'' if options.duration is None else f', {options.duration:g} s'}; "
+                 f"{speed:g}{f', {duration:g} s' if duration > 0 else ''}; "
                  f"{'ROS node' if node else 'no ROS node'}; "
                  f"{'recording to ' + str(options.record) if recorder else 'not recording'}")
         if server is not None:
             log.info(f"Foxglove: open connection to {server.url} (Foxglove WebSocket), then load "
-                     f"config/foxglove_layout.json")
+                     f"{find_shared('config/foxglove_layout.json') or 'config/foxglove_layout.json'}")
         runtime.start()
         if spinner is not None:
             spinner.start()
