@@ -71,6 +71,8 @@ def test_a_saved_scene_keeps_the_packages_mesh_beside_another_of_its_name(tmp_pa
     assert np.array_equal(again.playground_triangles, world.playground_triangles)
     with pytest.raises(SceneError, match="the package has no mesh 'nothing.obj'"):
         load_world({"version": 1, "playground": {"mesh": "package://vplayground_ros/meshes/nothing.obj"}})
+    with pytest.raises(SceneError, match="package:// names only this package's meshes"):
+        load_world({"version": 1, "playground": {"mesh": "package://other_pkg/meshes/playground.obj"}})
     with pytest.raises(SceneError, match="the package has no mesh '../config/default_scene.yaml'"):
         load_world({"version": 1, "playground": {"mesh": "package://vplayground_ros/meshes/../config/default_scene.yaml"}})
 

@@ -90,6 +90,9 @@ def resolve_mesh(name, base, directories=None, key="playground.mesh"):
     `directories` (scenes loaded for a service call), a mesh outside them and the package's
     meshes/ is refused, symbolic links resolved. Returns the path or raises SpecError listing
     where it looked."""
+    if name.startswith("package://") and not name.startswith(PACKAGE_MESHES):
+        raise specs.SpecError(key, f"mesh file {specs.quote(name)}: package:// names only this package's "
+                                   f"meshes ({PACKAGE_MESHES}<file>); give another file by its path")
     if name.startswith(PACKAGE_MESHES):
         file_name = name[len(PACKAGE_MESHES):]
         shared = find_shared(f"meshes/{file_name}") if file_name and Path(file_name).name == file_name else None
