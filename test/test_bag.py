@@ -1,6 +1,8 @@
 """MCAP bags (SPEC 7), read back with independent readers: the `mcap` library with
 mcap_ros2's decoder, and Foxglove's own JavaScript stack where node and npm are installed."""
+import contextlib
 import json
+import logging
 import signal
 import subprocess
 import sys
@@ -20,8 +22,12 @@ from mcap_ros2.decoder import DecoderFactory
 from foxglove_js import needs_node, run_script
 from helpers import wait_for
 from vplayground_ros import cdr
+from vplayground_ros.cli import parse_args
 from vplayground_ros import recorder as recorder_module
 from vplayground_ros.recorder import Recorder, recover
+from vplayground_ros.runtime import Runtime
+from vplayground_ros.scene import load_world
+from vplayground_ros.simulation import Simulation
 
 LATCHED = {"/vplayground/scene/markers", "/tf_static", "/vplayground/state"}
 
@@ -453,24 +459,38 @@ def test_foxglove_layout_names_only_what_the_node_offers():
     assert sorted(leaves(layout["layout"])) == sorted(panels)
 
 
+@contextlib.contextmanager
+def recording(path, speed, scene=None):
+    """A running Runtime recording to `path` (ROS-free) at real-time factor `speed`, on `scene`
+    (the default scene when None); stopped and the bag finished on leaving."""
+    options = parse_args(["--record", str(path), "--real-time-factor", str(speed)])
+    recorder = Recorder(path)
+    runtime = Runtime(Simulation(load_world(scene or options.scene), real_time_factor=speed), options,
+                      logging.getLogger("test_bag"), recorder)
+    runtime.start()
+    try:
+        yield runtime
+    finally:
+        runtime.stop()
+        recorder.close()
+
+
+def assert_channels_go_forward(name, messages):
+    """Within one file, no channel's log time goes back; returns each channel's last."""
+    last = {}
+    for topic, log_time, *_ in messages:
+        assert log_time >= last.get(topic, 0), (name, topic)
+        last[topic] = log_time
+    return last
+
+
 def test_a_reset_or_another_scene_continues_the_bag_in_a_new_file(tmp_path):
     """Time starts again at 0 after ~/reset and ~/load_scene: in one file, a seek showed both
     worlds (every channel went back in time). Each run of time gets its own file, which opens
     on its own (the latched topics) and whose channels only go forward."""
-    import logging
-
-    from vplayground_ros.cli import parse_args
-    from vplayground_ros.runtime import Runtime
-    from vplayground_ros.scene import load_world
-    from vplayground_ros.simulation import Simulation
-
     path = tmp_path / "run.mcap"
-    options = parse_args(["--record", str(path), "--real-time-factor", "4"])
-    recorder = Recorder(path)
-    sim = Simulation(load_world(options.scene), real_time_factor=4.0)
-    runtime = Runtime(sim, options, logging.getLogger("test_bag"), recorder)
-    runtime.start()
-    try:
+    with recording(path, 4.0) as runtime:
+        sim = runtime.sim
         assert wait_for(lambda: sim.snapshot.time > 1.0)
         assert runtime.requests.reset(255)[0]
         assert wait_for(lambda: sim.snapshot.time > 1.0)
@@ -478,17 +498,11 @@ def test_a_reset_or_another_scene_continues_the_bag_in_a_new_file(tmp_path):
         other.write_text("version: 1\nbodies: [{name: crate, position: [0, 0, 2]}]\n")
         assert runtime.requests.load_scene(str(other))[0] == 0
         assert wait_for(lambda: sim.snapshot.time > 1.0)
-    finally:
-        runtime.stop()
-        recorder.close()
     files = [path, tmp_path / "run_1.mcap", tmp_path / "run_2.mcap"]
     assert sorted(tmp_path.glob("*.mcap")) == sorted(files)
     for f in files:
         _, _, messages = read_all(f)
-        last = {}
-        for topic, log_time, *_ in messages:
-            assert log_time >= last.get(topic, 0), (f, topic)
-            last[topic] = log_time
+        last = assert_channels_go_forward(f, messages)
         assert LATCHED <= set(last) and last["/clock"] > 10**9, f
         assert min(log_time for topic, log_time, *_ in messages if topic == "/clock") < 10**8, f
 
@@ -497,21 +511,8 @@ def test_each_new_file_opens_with_the_latched_topics_as_they_were_then(tmp_path)
     """A reset, then a pause 30 ms later: the new file opened at 0 s with state 'paused' and a
     /tf_static stamped at the pause (the recorder re-wrote the latched messages as last
     queued, not as they stood where the file began)."""
-    import logging
-
-    from vplayground_ros.cli import parse_args
-    from vplayground_ros.runtime import Runtime
-    from vplayground_ros.scene import load_world
-    from vplayground_ros.simulation import Simulation
-
-    path = tmp_path / "run.mcap"
-    options = parse_args(["--record", str(path)])
-    recorder = Recorder(path)
-    sim = Simulation(load_world(options.scene), real_time_factor=1.0)
-    runtime = Runtime(sim, options, logging.getLogger("test_bag"), recorder)
-    runtime.start()
-    try:
-        assert wait_for(lambda: sim.snapshot.time > 0.5)
+    with recording(tmp_path / "run.mcap", 1.0) as runtime:
+        assert wait_for(lambda: runtime.sim.snapshot.time > 0.5)
         for _ in range(3):
             assert runtime.requests.reset(255)[0]
             time.sleep(0.03)
@@ -519,9 +520,6 @@ def test_each_new_file_opens_with_the_latched_topics_as_they_were_then(tmp_path)
             time.sleep(0.2)
             runtime.requests.pause(False)
             time.sleep(0.3)
-    finally:
-        runtime.stop()
-        recorder.close()
     for index in (1, 2, 3):
         _, _, messages = read_all(tmp_path / f"run_{index}.mcap")
         start = min(log_time for _, log_time, *_ in messages)
@@ -534,33 +532,13 @@ def test_a_reset_under_load_keeps_each_files_channels_in_order(tmp_path):
     """As fast as possible with 600 boxes and a reset every 0.15 s: the simulation thread sent
     the pending rounds while the publisher thread was inside one, so a file's markers went
     back in time."""
-    import logging
-
-    from vplayground_ros.cli import parse_args
-    from vplayground_ros.runtime import Runtime
-    from vplayground_ros.scene import load_world
-    from vplayground_ros.simulation import Simulation
-
     scene = {"version": 1, "bodies": [{"position": [float(x), float(y), 0.5 + z]} for x in range(-10, 10)
                                       for y in range(-5, 5) for z in range(3)]}
-    path = tmp_path / "run.mcap"
-    options = parse_args(["--record", str(path), "--real-time-factor", "0"])
-    recorder = Recorder(path)
-    sim = Simulation(load_world(scene), real_time_factor=0.0)
-    runtime = Runtime(sim, options, logging.getLogger("test_bag"), recorder)
-    runtime.start()
-    try:
+    with recording(tmp_path / "run.mcap", 0.0, scene) as runtime:
         for _ in range(8):
             time.sleep(0.15)
             assert runtime.requests.reset(255)[0]
-    finally:
-        runtime.stop()
-        recorder.close()
     files = sorted(tmp_path.glob("run*.mcap"))
     assert len(files) >= 8
     for f in files:
-        _, _, messages = read_all(f)
-        last = {}
-        for topic, log_time, *_ in messages:
-            assert log_time >= last.get(topic, 0), (f.name, topic)
-            last[topic] = log_time
+        assert_channels_go_forward(f.name, read_all(f)[2])

@@ -44,9 +44,10 @@ WITHOUT_ROS = (f"import sys; sys.modules.update(dict.fromkeys({ROS_MODULES!r}));
                "from vplayground_ros.cli import main; sys.exit(main())")
 
 
-@pytest.fixture(scope="module")
-def server():
-    process = subprocess.Popen([sys.executable, "-c", WITHOUT_ROS, "--foxglove", "0", "--no-record"],
+def start_simulator(*options):
+    """The simulator without ROS serving Foxglove (`--foxglove 0`, any free port): (process, the
+    URL it logged or None, its output so far)."""
+    process = subprocess.Popen([sys.executable, "-c", WITHOUT_ROS, "--foxglove", "0", "--no-record", *options],
                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     output, url = [], None
     deadline = time.monotonic() + 120
@@ -57,6 +58,12 @@ def server():
         output.append(line)
         found = URL_IN_LOG.search(line)
         url = found.group(1) if found else None
+    return process, url, output
+
+
+@pytest.fixture(scope="module")
+def server():
+    process, url, output = start_simulator()
     assert url, "".join(output)
     threading.Thread(target=lambda: output.extend(process.stdout), daemon=True).start()  # keep the pipe drained
     yield url, output
@@ -474,18 +481,8 @@ def ipv6_loopback():
 @pytest.mark.skipif(not ipv6_loopback(), reason="no IPv6 loopback here")
 def test_the_server_listens_on_an_ipv6_address():
     """--foxglove-host ::1 failed: 'Address family for hostname not supported'."""
-    process = subprocess.Popen([sys.executable, "-c", WITHOUT_ROS, "--foxglove", "0", "--foxglove-host", "::1",
-                                "--no-record"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    process, url, output = start_simulator("--foxglove-host", "::1")
     try:
-        url, output = None, []
-        deadline = time.monotonic() + 120
-        while url is None and time.monotonic() < deadline:
-            line = process.stdout.readline()
-            if not line:
-                break
-            output.append(line)
-            found = URL_IN_LOG.search(line)
-            url = found.group(1) if found else None
         assert url and url.startswith("ws://[::1]:"), "".join(output)
         viewer = FoxgloveClient(url)
         try:

@@ -18,6 +18,11 @@ def node_frames(frames=DEFAULT_FRAMES):
             world_frame: "the world_frame", odom_frame: "the odom_frame", base_frame: "the base_frame (the car)"}
 
 
+def sensor_frames(spec):
+    """The frames a sensor takes: its name, and a camera's optical frame under it."""
+    return [spec["name"]] + ([optical_frame(spec["name"])] if spec["type"] in CAMERAS else [])
+
+
 def optical_frames(sensor_specs):
     """{frame: what it is} of the cameras' optical frames."""
     return {optical_frame(s["name"]): f"the optical frame of {s['name']}" for s in sensor_specs if s["type"] in CAMERAS}

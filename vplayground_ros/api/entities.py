@@ -8,12 +8,11 @@ from pathlib import Path
 
 import yaml
 
-from ..frame_names import node_frames, optical_frames
+from ..frame_names import node_frames, optical_frames, sensor_frames
 from ..physics import specs
 from ..physics.shapes import solid
 from ..scene import body_mesh_points
-from ..sensor_messages import optical_frame
-from ..sensors import CAMERAS, TYPES as SENSOR_TYPES, validate_sensor
+from ..sensors import TYPES as SENSOR_TYPES, validate_sensor
 from .descriptions import describe, describe_sensor
 from .frames import frame_pose, pose_in_world
 from .name_filter import MAX_FILTER, match_names
@@ -144,7 +143,7 @@ class EntityRequests:
             sensor = validate_sensor(spec, path, parents)
             wanted = sensor["name"]
             while True:
-                frame_names = [sensor["name"]] + ([optical_frame(sensor["name"])] if sensor["type"] in CAMERAS else [])
+                frame_names = sensor_frames(sensor)
                 clash = next((n for n in frame_names if n in names), None)
                 if clash is None:
                     break
