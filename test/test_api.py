@@ -10,14 +10,16 @@ from vplayground_ros.scene import SceneError, load_world, save_world
 
 
 def snapshot(world):
-    return world.body_names(), {k: v.copy() for k, v in world.state().items()}
+    return (world.body_names(), {k: v.copy() for k, v in world.state().items()}, world.layout_version,
+            [world.body(name) for name in world.body_names()])
 
 
 def assert_unchanged(world, before):
-    names, state = snapshot(world)
-    assert names == before[0]
+    names, state, layout, bodies = snapshot(world)
+    assert names == before[0] and layout == before[2]
     for key in state:
         assert np.array_equal(state[key], before[1][key]), key
+    assert repr(bodies) == repr(before[3])
 
 
 @pytest.fixture
@@ -31,10 +33,17 @@ def world():
 
 @pytest.mark.parametrize("spec, fragment", [
     ({"colour": "red"}, "body.colour: unknown key"),
-    ({"size": [1, 0, 1]}, "body.size[1]: must be > 0"),
+    ({"size": [1, 0, 1]}, "body.size[1]: must be >= 0.001"),
+    ({"size": [1e-300, 1e-300, 1e-300]}, "body.size[0]: must be >= 0.001"),
     ({"size": [1, 1]}, "body.size: expected 3 numbers"),
-    ({"mass": -2}, "body.mass: must be > 0"),
+    ({"mass": -2}, "body.mass: must be >= 1e-09"),
+    ({"mass": 5e-324}, "body.mass: must be >= 1e-09"),
     ({"density": 0}, "body.density: must be > 0"),
+    ({"density": 1e-300}, "body.density: the body's mass 1e-300 kg is below 1e-09 kg"),
+    ({"shape": "sphere", "radius": 1e-300}, "body.radius: must be >= 0.0005"),
+    ({"shape": "cylinder", "length": 1e-30}, "body.length: must be >= 0.001 for a cylinder"),
+    ({"shape": "convex", "points": [[0, 0, 0], [1e-30, 0, 0], [0, 1e-30, 0], [0, 0, 1e-30]]},
+     "body.points: the points span 1e-30 m, less than the smallest body size 0.001 m"),
     ({"position": [0, math.nan, 1]}, "body.position[1]: must be finite"),
     ({"linear_velocity": [math.inf, 0, 0]}, "body.linear_velocity[0]: must be finite"),
     ({"elasticity": 1.5}, "body.elasticity: must be <= 1"),
@@ -54,8 +63,9 @@ def test_bad_spawn_raises_and_changes_nothing(world, spec, fragment):
 
 
 @pytest.mark.parametrize("fields, fragment", [
-    ({"size": [1, -1, 1]}, "a.size[1]: must be > 0"),
-    ({"mass": 0}, "a.mass: must be > 0"),
+    ({"size": [1, -1, 1]}, "a.size[1]: must be >= 0.001"),
+    ({"mass": 0}, "a.mass: must be >= 1e-09"),
+    ({"density": 1e-300}, "a.density: the body's mass 1e-300 kg is below 1e-09 kg"),
     ({"name": "c"}, "a.name: unknown key"),
     ({"position": [0, 0, float("nan")]}, "a.position[2]: must be finite"),
 ])
@@ -65,6 +75,28 @@ def test_bad_edit_raises_and_changes_nothing(world, fields, fragment):
         world.edit_body("a", **fields)
     assert fragment in str(error.value)
     assert_unchanged(world, before)
+
+
+def test_a_refused_body_takes_no_slot_and_no_name(world):
+    """Issue 35: a body refused after its slot was taken stayed there, nameless, and every later
+    layout held None. The next body gets the slot and the name it would have had anyway."""
+    with pytest.raises(ValueError, match="density: the body's mass"):
+        world.add_body({"density": 1e-300})
+    fresh = World()
+    for name in ("a", "b"):
+        fresh.add_body({"name": name})
+    assert world.add_body({}) == fresh.add_body({})
+    assert world._slots == fresh._slots and world._free == fresh._free  # the layout, reached past the API
+    assert None not in world.body_names()
+
+
+def test_a_refused_wheel_edit_changes_nothing():
+    world = load_world("config/default_scene.yaml")
+    before = snapshot(world)
+    with pytest.raises(ValueError, match=r"car.wheels\[1\].mass: must be >= 1e-09"):
+        world.edit_vehicle("car", wheels={1: {"mass": 1e-300}})
+    assert_unchanged(world, before)
+    assert world.vehicle("car")["wheels"][1]["mass"] == 20.0
 
 
 def test_unknown_names_raise_key_error(world):
@@ -160,7 +192,7 @@ def test_scene_round_trip(tmp_path):
     (lambda s: s["settings"].update(steps_per_second=0), "settings.steps_per_second: must be between"),
     (lambda s: s["settings"]["freezing"].update(time="long"), "settings.freezing.time: expected a number"),
     (lambda s: s["ground"].update(static_friction=-1), "ground.static_friction: must be >= 0"),
-    (lambda s: s["bodies"][0].update(size=[1, 2, 0]), "bodies[0].size[2]: must be > 0"),
+    (lambda s: s["bodies"][0].update(size=[1, 2, 0]), "bodies[0].size[2]: must be >= 0.001"),
     (lambda s: s["bodies"][1].update(name="crate"), "bodies[1].name: duplicate name 'crate'"),
     (lambda s: s["bodies"][2].update(mass=float("inf")), "bodies[2].mass: must be finite"),
     (lambda s: s.update(bodies={"a": 1}), "bodies: expected a list"),

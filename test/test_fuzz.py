@@ -61,7 +61,7 @@ class Harness:
             return (names, world.vehicle_names(), state, [world.body(n) for n in names],
                     [world.vehicle(n) for n in world.vehicle_names()], repr(world.settings),
                     repr(world.ground), repr(world.playground_spec), world.time, world.step_count,
-                    id(world))
+                    world.layout_version, world.sensor_specs, id(world))
         return self.sim.call(take)
 
     def steps_on(self):
@@ -74,6 +74,15 @@ class Harness:
         while world.step_count <= before:
             assert time.monotonic() < deadline, "the simulation stopped stepping"
             time.sleep(0.0005)
+
+    def answers(self):
+        """Every entity service still answers: the list whole (a nameless half-made body once
+        made it raise for good), and each entity by name."""
+        entities = self.requests.entities()
+        assert all(isinstance(name, str) for name, _ in entities), [name for name, _ in entities]
+        for name, _ in entities[:3] + entities[-3:]:
+            ok, message = self.requests.get_entity(json.dumps({"entity": name}))
+            assert ok, message
 
     def check(self, handler, call, must_fail=True):
         """Runs one request; checks the reply and, when refused, that nothing changed."""
@@ -92,6 +101,7 @@ class Harness:
             assert text.strip() and len(message) <= MAX_MESSAGE, message[:300]
             assert self.fingerprint() == before, f"{handler} changed the world: {message[:300]}"
         self.steps_on()
+        self.answers()
         return ok, message
 
 
@@ -113,6 +123,9 @@ def harness(tmp_path_factory, pytestconfig):
 
 # ------------------------------------------------------------------------------ strategies
 BAD_FLOATS = st.sampled_from([math.nan, math.inf, -math.inf, 1e308 * 10, 10 ** 400, -10 ** 400])
+# Sizes and masses at the edges of floating point: subnormals, values whose volume or inertia
+# underflows to 0 (1e-300 m: mass 0 kg, once a half-made body) or overflows, and the largest.
+EDGE_FLOATS = [5e-324, 1e-320, 2.2250738585072014e-308 / 4, 1e-300, 1e-30, 1e-12, 1e30, 1e300, 1.7976931348623157e308]
 NOT_NUMBERS = st.one_of(st.none(), st.booleans(), st.text(max_size=20),
                         # Lists no vector (3) or quaternion (4) takes:
                         st.lists(st.integers(), max_size=2), st.lists(st.integers(), min_size=5, max_size=6),
@@ -137,7 +150,8 @@ def bad_number(low, high, low_open=False):
         outside.append(st.floats(max_value=low, allow_infinity=False))
     else:
         outside.append(st.floats(max_value=low, exclude_max=True, allow_infinity=False))
-    return st.one_of(BAD_FLOATS, NOT_NUMBERS, *outside)
+    edges = [v for v in EDGE_FLOATS + [-v for v in EDGE_FLOATS] if v > high or v < low or (low_open and v == low)]
+    return st.one_of(BAD_FLOATS, NOT_NUMBERS, st.sampled_from(edges), *outside)
 
 
 def bad_vector(length, low, high, low_open=False):
@@ -156,8 +170,8 @@ def bad_vector(length, low, high, low_open=False):
 BODY_BAD = {
     "name": BAD_NAMES,
     "shape": st.one_of(st.text(max_size=20).filter(lambda s: s not in SHAPES), NOT_NUMBERS),
-    "size": bad_vector(3, 0.0, specs.MAX_SIZE, low_open=True),
-    "radius": bad_number(0.0, 0.5 * specs.MAX_SIZE, low_open=True),
+    "size": bad_vector(3, specs.MIN_SIZE, specs.MAX_SIZE),
+    "radius": bad_number(0.5 * specs.MIN_SIZE, 0.5 * specs.MAX_SIZE),
     "length": bad_number(0.0, specs.MAX_SIZE),
     "position": st.one_of(bad_vector(3, -specs.MAX_COORDINATE, specs.MAX_COORDINATE),
                           st.tuples(st.floats(5e3, 1e6), st.floats(-1e3, 1e3), st.floats(0, 10)).map(list)),
@@ -166,7 +180,7 @@ BODY_BAD = {
     "linear_velocity": bad_vector(3, -specs.MAX_SPEED, specs.MAX_SPEED),
     "angular_velocity": bad_vector(3, -specs.MAX_SPEED, specs.MAX_SPEED),
     "density": bad_number(0.0, 1e12, low_open=True),
-    "mass": bad_number(0.0, 1e12, low_open=True),
+    "mass": bad_number(specs.MIN_MASS, specs.MAX_MASS),
     "elasticity": bad_number(0.0, 1.0),
     "static_friction": bad_number(0.0, specs.MAX_FRICTION),
     "dynamic_friction": bad_number(0.0, specs.MAX_FRICTION),
@@ -231,8 +245,8 @@ def bad_vehicle(draw):
         vehicle["wheels"][draw(st.integers(0, 3))][key] = value
     elif fault == "chassis":
         vehicle["chassis"] = draw(st.one_of(
-            st.fixed_dictionaries({"size": bad_vector(3, 0.0, specs.MAX_SIZE, True), "mass": st.just(1.0)}),
-            st.fixed_dictionaries({"size": st.just([1, 1, 1]), "mass": bad_number(0.0, 1e12, True)}),
+            st.fixed_dictionaries({"size": bad_vector(3, specs.MIN_SIZE, specs.MAX_SIZE), "mass": st.just(1.0)}),
+            st.fixed_dictionaries({"size": st.just([1, 1, 1]), "mass": bad_number(specs.MIN_MASS, specs.MAX_MASS)}),
             st.just({"size": [1, 1, 1]}), NOT_NUMBERS))
     elif fault == "power":
         vehicle[draw(st.sampled_from(["engine_power", "brake_power"]))] = draw(bad_number(0.0, 1e9))
@@ -404,6 +418,62 @@ def edit_request(draw):
 def test_edit_refuses_malformed_requests(harness, payload):
     ok, message = harness.check("edit", lambda r: r.edit(payload))
     assert not ok
+
+
+# ------------------------------------------------- sizes and masses at the edges of floating point
+# Every shape, every key that sizes it or weighs it, each edge value: spawned, and edited onto a
+# body of that shape. Each is refused naming its key with a coded reply, the world untouched and
+# every service answering after (Harness.check), or, where the value is a fine one (a mass of
+# 1e-9 kg is the least allowed), taken.
+CUBE = [[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)]
+SHAPE_KEYS = {"box": {"size": lambda v: [v, v, v]}, "sphere": {"radius": lambda v: v},
+              "capsule": {"radius": lambda v: v, "length": lambda v: v},
+              "cylinder": {"radius": lambda v: v, "length": lambda v: v},
+              "convex": {"points": lambda v: [[v * c for c in p] for p in CUBE]}}
+EDGE_CASES = [(shape, key, value) for shape, keys in SHAPE_KEYS.items()
+              for key in [*keys, "mass", "density"] for value in EDGE_FLOATS]
+
+
+def edge_fields(shape, key, value):
+    if key in SHAPE_KEYS[shape]:
+        return {key: SHAPE_KEYS[shape][key](value)}
+    return {key: value, **({"points": CUBE} if shape == "convex" else {})}
+
+
+def check_edge_reply(ok, message, key):
+    assert ok or key in message, message  # the key is named
+    assert "Singular" not in message and "division" not in message, message  # never a library's words
+
+
+@pytest.mark.parametrize("shape,key,value", EDGE_CASES)
+def test_spawn_at_the_edges_of_floating_point(harness, shape, key, value):
+    body = {"name": "edge", "shape": shape, "position": [30.0, 30.0, 5.0], **edge_fields(shape, key, value)}
+    ok, message = harness.check("spawn", lambda r: r.spawn(json.dumps(body)), must_fail=False)
+    check_edge_reply(ok, message, key)
+
+
+@pytest.mark.parametrize("shape,key,value", EDGE_CASES)
+def test_edit_at_the_edges_of_floating_point(harness, shape, key, value):
+    name = f"edge_{shape}"
+    if not harness.sim.call(lambda world: name in world.body_names()):  # an accepted edit resets the scene
+        shape_keys = {"points": CUBE} if shape == "convex" else {}
+        ok, message = harness.requests.spawn(json.dumps({"name": name, "shape": shape, **shape_keys,
+                                                         "position": [30.0, -30.0 + 6 * len(name), 1.0]}))
+        assert ok, message
+    request = {"entity": name, **edge_fields(shape, key, value)}
+    ok, message = harness.check("edit", lambda r: r.edit(json.dumps(request)), must_fail=False)
+    check_edge_reply(ok, message, key)
+
+
+@pytest.mark.parametrize("key,value", [(key, value) for key in ("radius", "mass") for value in EDGE_FLOATS])
+def test_wheels_at_the_edges_of_floating_point(harness, key, value):
+    vehicle = json.loads(json.dumps(GOOD_VEHICLE))
+    vehicle["wheels"][1][key] = value
+    ok, message = harness.check("spawn", lambda r: r.spawn(json.dumps(vehicle)), must_fail=False)
+    check_edge_reply(ok, message, key)
+    edit = {"entity": "car", "vehicle": {"wheels": {1: {key: value}}}}
+    ok, message = harness.check("edit", lambda r: r.edit(yaml.safe_dump(edit)), must_fail=False)
+    check_edge_reply(ok, message, key)
 
 
 # -------------------------------------------------------------------------------- remove

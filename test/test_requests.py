@@ -38,7 +38,7 @@ def test_spawn_one_and_a_list_all_or_nothing(requests):
     assert ok and message == "RESULT_OK: c"
     before = snapshot(requests.sim.world)
     ok, message = requests.spawn("[{name: d}, {name: e, size: [1, -1, 1]}]")
-    assert not ok and message.startswith("RESULT_OPERATION_FAILED: [1].size[1]: must be > 0")
+    assert not ok and message.startswith("RESULT_OPERATION_FAILED: [1].size[1]: must be >= 0.001")
     assert unchanged(requests, before)
     ok, message = requests.spawn("[{name: d}, {name: e, initial_pose: {position: {x: 1, y: 2, z: 3}}}]")
     assert ok and message == "RESULT_OK: d, e"

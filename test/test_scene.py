@@ -122,9 +122,9 @@ def broken(mutate):
     (lambda s: s["playground"].update(rpy=[0, "x", 0]), "playground.rpy[1]: expected a number"),
     (lambda s: s["playground"].update(colour="red"), "playground.colour: unknown key"),
     (lambda s: s["vehicles"][0].pop("chassis"), "vehicles[0].chassis: missing"),
-    (lambda s: s["vehicles"][0]["chassis"].update(mass=-5), "vehicles[0].chassis.mass: must be > 0"),
+    (lambda s: s["vehicles"][0]["chassis"].update(mass=-5), "vehicles[0].chassis.mass: must be >= 1e-09"),
     (lambda s: s["vehicles"][0]["wheels"].pop(), "vehicles[0].wheels: expected 4 wheels"),
-    (lambda s: s["vehicles"][0]["wheels"][2].update(radius=0), "vehicles[0].wheels[2].radius: must be > 0"),
+    (lambda s: s["vehicles"][0]["wheels"][2].update(radius=0), "vehicles[0].wheels[2].radius: must be >= 0.0005"),
     (lambda s: s["vehicles"][0]["wheels"][1].update(steered="yes"), "vehicles[0].wheels[1].steered: expected true or false"),
     (lambda s: s["vehicles"][0]["wheels"][3].pop("mount"), "vehicles[0].wheels[3].mount: missing"),
     (lambda s: s["vehicles"][0]["wheels"][0].update(static_friction=50), "vehicles[0].wheels[0].static_friction: must be <= 10"),
@@ -189,3 +189,12 @@ def test_errors_found_while_building_the_world_name_the_scenes_key(scene, messag
     with pytest.raises(SceneError) as error:
         load_world({"version": 1, **scene})
     assert str(error.value).startswith(message), str(error.value)
+
+
+def test_numbers_in_exponent_form_are_numbers(tmp_path):
+    """`mass: 1e4` is a number in YAML 1.2 and JSON; PyYAML's 1.1 made it the string '1e4', and
+    the scene was refused with "expected a number, got str"."""
+    path = tmp_path / "exponents.yaml"
+    path.write_text("version: 1\nbodies:\n  - {name: heavy, mass: 1e4, size: [2E0, 1e0, 5e-1], position: [0, 0, 1]}\n")
+    world = load_world(path)
+    assert world.body("heavy")["mass"] == 1e4 and world.body("heavy")["size"] == [2.0, 1.0, 0.5]

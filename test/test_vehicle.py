@@ -231,7 +231,7 @@ def test_edit_vehicle_changes_only_given_keys_and_acts():
     assert [w["power_gain"] for w in after["wheels"]] == [0.0, 0.0, 1.0, 1.0]
     assert after["wheels"][0] == before["wheels"][0]
     for bad, fragment in (({"wheels": {7: {}}}, "wheel index must be 0-3"),
-                          ({"wheels": {0: {"radius": -1}}}, "car.wheels[0].radius: must be > 0"),
+                          ({"wheels": {0: {"radius": -1}}}, "car.wheels[0].radius: must be >= 0.0005"),
                           ({"turbo": 1}, "car.turbo: unknown key")):
         with pytest.raises(ValueError, match=None) as error:
             world.edit_vehicle("car", **bad)

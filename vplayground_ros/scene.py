@@ -32,9 +32,17 @@ MAX_SCENE_BYTES = 16 << 20
 MAX_MESH_BYTES = 64 << 20
 # Self-contained formats only: glTF, COLLADA and others can make trimesh open further files.
 MESH_TYPES = {".obj": "obj", ".stl": "stl", ".ply": "ply", ".off": "off"}
-# libyaml when it is there: ~5x faster than the pure-Python loader, and it refuses nesting
-# deeper than 1,000 levels itself.
-YAML_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
+class YamlLoader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):
+    """The safe loader (libyaml when it is there: ~5x faster than the pure-Python one, and it
+    refuses nesting deeper than 1,000 levels itself) reading `1e-3` and `2E6` as numbers, as
+    YAML 1.2 and JSON do: YAML 1.1 wants a dot (`1.0e-3`) and made them strings, which a
+    `mass: 1e4` was then refused as."""
+
+
+YamlLoader.add_implicit_resolver("tag:yaml.org,2002:float",
+                                 re.compile(r"^[-+]?[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"), list("-+0123456789"))
 
 log = logging.getLogger(__name__)
 
@@ -71,7 +79,7 @@ def read_scene(path_or_dict):
     except ValueError as error:  # UnicodeDecodeError is a ValueError too
         raise SceneError(f"{path}: {str(error)[:200]}") from None
     try:
-        data = yaml.load(text, Loader=YAML_LOADER)
+        data = yaml.load(text, Loader=YamlLoader)
     except yaml.YAMLError as error:
         raise SceneError(f"{path}: not valid YAML: {error}") from None
     except (ValueError, RecursionError) as error:  # e.g. an integer of more than 4,300 digits

@@ -10,7 +10,7 @@ import yaml
 
 from ..frame_names import node_frames, optical_frames, sensor_frames
 from ..physics import specs
-from ..physics.shapes import solid
+from ..physics.world import prepare_body
 from ..scene import body_mesh_points
 from ..sensors import TYPES as SENSOR_TYPES, validate_sensor
 from .descriptions import describe, describe_sensor
@@ -29,13 +29,16 @@ def sensor_named(world, name):
 
 
 def drop_sensors_of(world, removed):
-    """The sensors whose parent was just removed go with it, with a warning."""
+    """The sensors whose parent was just removed go with it, with a warning naming both."""
     removed = set(removed)
-    orphans = [s["name"] for s in world.sensor_specs if s["parent"] in removed]
+    orphans = [s for s in world.sensor_specs if s["parent"] in removed]
+    for parent in dict.fromkeys(s["parent"] for s in orphans):
+        names = [s["name"] for s in orphans if s["parent"] == parent]
+        log.warning(f"{'sensors' if len(names) > 1 else 'sensor'} {', '.join(names)} removed with "
+                    f"{parent}, {'their' if len(names) > 1 else 'its'} parent")
     if orphans:
-        log.warning(f"sensors {', '.join(orphans)} removed with their parent")
         world.sensor_specs = [s for s in world.sensor_specs if s["parent"] not in removed]
-    return orphans
+    return [s["name"] for s in orphans]
 
 
 def in_world(world, frame, fields, path, frames):
@@ -99,9 +102,9 @@ class EntityRequests:
             if "quaternion" in item:
                 item.pop("rpy", None)  # the pose's orientation wins over the spec's
         vehicle = "wheels" in item or "chassis" in item
-        spec = specs.validate_vehicle(item, path) if vehicle else specs.validate_body(item, path)
-        if not vehicle and spec["shape"] == "convex":
-            solid("convex", spec, path)  # a hull it cannot have is refused before the world is asked
+        # A body's hull and mass are checked here too: a list is refused before the world is
+        # asked, not rolled back (which would wake what the bodies touched).
+        spec = specs.validate_vehicle(item, path) if vehicle else prepare_body(item, path)[0]
         return path, vehicle, spec, rename, frame
 
     def _spawn(self, world, prepared, cap, frames):

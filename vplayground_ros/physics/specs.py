@@ -30,6 +30,11 @@ BODY_DEFAULTS = {
 }
 MAX_FRICTION = 10.0
 MAX_SIZE = 1.0e4       # m: larger boxes break the octree's and the solver's scales
+# m: the smallest edge, diameter or cylinder length. Far below the contact margin (2 cm) a body
+# is not resolved anyway, and its inertia (mass x size^2) nears the floating-point floor.
+MIN_SIZE = 1.0e-3
+MIN_MASS = 1.0e-9      # kg: a body's least mass, given or density x volume (1/m must stay finite)
+MAX_MASS = 1.0e12      # kg: the most a `mass` key may give
 MAX_COORDINATE = 1.0e6  # m
 MAX_SPEED = 1.0e4      # m/s, rad/s
 MAX_POINTS = 100_000   # of a convex body's `points`, before its hull is taken
@@ -223,17 +228,19 @@ def validate_body_fields(raw, path, allowed=BODY_KEYS):
                 raise SpecError(p, f"unsupported shape {quote(value)} (supported: {', '.join(SHAPES)})")
             out[key] = value
         elif key == "size":
-            out[key] = vector(value, p, 3, 0.0, MAX_SIZE, low_open=True)
+            out[key] = vector(value, p, 3, MIN_SIZE, MAX_SIZE)
         elif key == "radius":
-            out[key] = number(value, p, 0.0, 0.5 * MAX_SIZE, low_open=True)
+            out[key] = number(value, p, 0.5 * MIN_SIZE, 0.5 * MAX_SIZE)
         elif key == "length":
             out[key] = number(value, p, 0.0, MAX_SIZE)
         elif key == "points":
             if not isinstance(value, (list, tuple)) or not 4 <= len(value) <= MAX_POINTS:
                 raise SpecError(p, f"expected a list of 4 to {MAX_POINTS} points [x, y, z], got {quote(value)}")
             out[key] = [vector(point, child(p, k), 3, -MAX_SIZE, MAX_SIZE) for k, point in enumerate(value)]
-        elif key in ("density", "mass"):
-            out[key] = number(value, p, 0.0, 1.0e12, low_open=True)
+        elif key == "mass":
+            out[key] = number(value, p, MIN_MASS, MAX_MASS)
+        elif key == "density":
+            out[key] = number(value, p, 0.0, 1.0e12, low_open=True)  # the mass it gives is checked
         elif key == "elasticity":
             out[key] = number(value, p, 0.0, 1.0)
         elif key in ("static_friction", "dynamic_friction"):
@@ -252,8 +259,8 @@ def check_dimension_keys(shape, body, path):
     for key in sorted(DIMENSION_KEYS & set(body)):
         if key not in own:
             raise SpecError(child(path, key), f"a {shape} has no {key} (its keys: {', '.join(own)})")
-    if shape == "cylinder" and body.get("length", 1.0) <= 0.0:
-        raise SpecError(child(path, "length"), f"must be > 0 for a cylinder, got {body['length']:g}")
+    if shape == "cylinder" and body.get("length", 1.0) < MIN_SIZE:
+        raise SpecError(child(path, "length"), f"must be >= {MIN_SIZE:g} for a cylinder, got {body['length']:g}")
     if shape == "convex" and "points" not in body:
         raise SpecError(child(path, "points"), "missing (a convex body's vertices; in a scene file "
                                                "`mesh:` names a file to take them from)")
@@ -295,7 +302,11 @@ def validate_wheel(raw, path):
         p = child(path, key)
         if key == "steered":
             out[key] = boolean(raw[key], p)
-        elif key in ("radius", "mass", "spring_stiffness", "spring_length"):
+        elif key == "radius":
+            out[key] = number(raw[key], p, 0.5 * MIN_SIZE, 1.0e9)
+        elif key == "mass":
+            out[key] = number(raw[key], p, MIN_MASS, 1.0e9)
+        elif key in ("spring_stiffness", "spring_length"):
             out[key] = number(raw[key], p, 0.0, 1.0e9, low_open=True)
         elif key in ("static_friction", "dynamic_friction"):
             out[key] = number(raw[key], p, 0.0, MAX_FRICTION)
@@ -350,8 +361,8 @@ def validate_vehicle(raw, path="vehicle"):
             for required in ("size", "mass"):
                 if required not in value:
                     raise SpecError(child(p, required), "missing")
-            out[key] = {"size": vector(value["size"], child(p, "size"), 3, 0.0, MAX_SIZE, low_open=True),
-                        "mass": number(value["mass"], child(p, "mass"), 0.0, 1.0e12, low_open=True),
+            out[key] = {"size": vector(value["size"], child(p, "size"), 3, MIN_SIZE, MAX_SIZE),
+                        "mass": number(value["mass"], child(p, "mass"), MIN_MASS, MAX_MASS),
                         **validate_body_fields({k: v for k, v in value.items() if k in CHASSIS_BODY_KEYS}, p)}
         elif key in ("engine_power", "brake_power"):
             out[key] = number(value, p, 0.0, 1.0e9)

@@ -53,6 +53,21 @@ def body_bounds(b, slots):
     return shapes.bounds(b.shape[slots], b.dimensions[slots], b.position[slots], b.orientation[slots])
 
 
+def prepare_body(spec, path="body"):
+    """A SPEC 3 body spec checked whole before any world is touched: (validated spec, its
+    shapes.Solid, its shapes.MassProperties). Errors name the key from `path`."""
+    body = specs.validate_body(spec, path)
+    solid = shapes.solid(body["shape"], body, path)
+    mass = body["mass"] if "mass" in body else body.get("density", specs.DEFAULT_DENSITY) * solid.volume
+    return body, solid, shapes.mass_properties(solid, mass, mass_key(body, path))
+
+
+def mass_key(body, path):
+    """The key a body's mass comes from, for messages: `mass`, `density`, else its size."""
+    key = next((key for key in ("mass", "density") if key in body), None)
+    return specs.child(path, key or shapes.SHAPES[body["shape"]].module.SPEC_KEYS[0])
+
+
 def default_solver_threads():
     """2 where the process may run on two cores and Numba has two threads, else 1."""
     try:
@@ -136,9 +151,8 @@ class World(WorldQueries):
     def add_body(self, spec, path="body"):
         """Adds a box from a SPEC 3 body spec; returns its (given or generated) unique name.
         Errors name the key from `path` (a scene's `bodies[3]`)."""
-        body = specs.validate_body(spec, path)
+        body, solid, mass = prepare_body(spec, path)  # everything refusable, before any change
         self.check_inside(body["position"], f"{path}.position")
-        solid = shapes.solid(body["shape"], body, path)  # a hull may still be refused: before any change
         name = body.get("name")
         if name is None:
             name = self._generate_name("box")
@@ -153,8 +167,7 @@ class World(WorldQueries):
         b.orientation[slot] = body["quaternion"] if "quaternion" in body else rpy_to_quat(body.get("rpy", (0, 0, 0)))
         b.shape[slot] = shapes.SHAPES[body["shape"]].code
         self._set_solid(slot, body["shape"], solid)
-        b.mass[slot] = body["mass"] if "mass" in body else body.get("density", specs.DEFAULT_DENSITY) * solid.volume
-        self._set_fields(slot, body)
+        self._set_fields(slot, body, mass)
         self._names[slot] = name
         self._slots[name] = slot
         self.layout_version += 1
@@ -184,12 +197,15 @@ class World(WorldQueries):
         """Changes only the given vehicle keys: engine_power, brake_power, max_steer, and wheels
         as {index: {wheel keys}} (0-3: front-left, front-right, rear-left, rear-right). The
         chassis is edited as a body (edit_body)."""
-        wheels_before = self._wheels_mass(name)
-        self._vehicles.edit(name, fields)
+        edit = specs.validate_vehicle_edit(fields, name)
+        wheels = self._vehicles.spec(name)["wheels"]
+        wheels_after = sum(edit.get("wheels", {}).get(k, {}).get("mass", wheel["mass"]) for k, wheel in enumerate(wheels))
         # The chassis body weighs the chassis and its wheels (add_vehicle).
         slot = self._slots[name]
-        self._bodies.mass[slot] += self._wheels_mass(name) - wheels_before
-        self._set_fields(slot, {})
+        mass = shapes.mass_properties(self._solids[slot][1], self._bodies.mass[slot] + wheels_after
+                                      - self._wheels_mass(name), f"{name}.vehicle.wheels")
+        self._vehicles.edit(name, edit)
+        self._set_fields(slot, {}, mass)
         self.layout_version += 1  # its wheels
         self._wake(self._slots[name])
 
@@ -232,16 +248,19 @@ class World(WorldQueries):
         specs.check_dimension_keys(shape.name, {**shape.fields, **body}, name)
         if "position" in body:
             self.check_inside(body["position"], f"{name}.position")
-        resized = shape.fields.keys() & body.keys()
-        solid = shapes.solid(shape.name, {**shape.fields, **body}, name) if resized else None
-        if name in self._vehicles and ("mass" in body or "density" in body):
-            mass = body["mass"] if "mass" in body else body["density"] * (solid or self._solids[slot][1]).volume
-            if mass <= self._wheels_mass(name):
+        resized = sorted(shape.fields.keys() & body.keys())
+        solid = shapes.solid(shape.name, {**shape.fields, **body}, name) if resized else self._solids[slot][1]
+        b = self._bodies
+        if "mass" in body or "density" in body:
+            mass = body["mass"] if "mass" in body else body["density"] * solid.volume
+            if name in self._vehicles and mass <= self._wheels_mass(name):
                 raise ValueError(f"{name}.mass: a car weighs its chassis and its wheels "
                                  f"({self._wheels_mass(name):g} kg): {mass:g} kg is not more")
+            mass = shapes.mass_properties(solid, mass, mass_key(body, name))
+        else:  # the mass stays; a new size changes the inertia
+            mass = shapes.mass_properties(solid, float(b.mass[slot]), specs.child(name, (resized or ["mass"])[0]))
         self._wake_touching([slot])
         self._forget_contacts([slot])
-        b = self._bodies
         if "position" in body:
             b.position[slot] = body["position"]
         if "rpy" in body:
@@ -250,11 +269,7 @@ class World(WorldQueries):
             b.orientation[slot] = body["quaternion"]
         if resized:
             self._set_solid(slot, shape.name, solid)
-        if "mass" in body:
-            b.mass[slot] = body["mass"]
-        elif "density" in body:
-            b.mass[slot] = body["density"] * self._solids[slot][1].volume
-        self._set_fields(slot, body)
+        self._set_fields(slot, body, mass)
         self.layout_version += 1  # sizes, masses, flags
         if not body.get("frozen", False):
             self._wake(slot)
@@ -462,9 +477,9 @@ class World(WorldQueries):
             if name not in self._slots:
                 return name
 
-    def _set_fields(self, slot, body):
-        """Material, flags and velocities from a validated (partial) spec, and the mass-derived
-        arrays from the current mass and size."""
+    def _set_fields(self, slot, body, mass):
+        """Material, flags and velocities from a validated (partial) spec, and the mass arrays
+        from `mass` (shapes.MassProperties, computed for the body's current solid)."""
         b = self._bodies
         for key in ("elasticity", "static_friction", "dynamic_friction", "immovable",
                     "allow_freezing"):
@@ -474,8 +489,7 @@ class World(WorldQueries):
             b.velocity[slot, :3] = body["linear_velocity"]
         if "angular_velocity" in body:
             b.velocity[slot, 3:] = body["angular_velocity"]
-        b.inv_mass[slot] = 1.0 / b.mass[slot]
-        b.inv_inertia[slot] = np.linalg.inv(b.mass[slot] * self._solids[slot][1].unit_inertia)
+        b.mass[slot], b.inv_mass[slot], b.inv_inertia[slot] = mass
         if b.immovable[slot]:
             b.velocity[slot] = 0.0
         if body.get("frozen", False) and not b.immovable[slot]:

@@ -47,10 +47,13 @@ def build_hull(points, path="points"):
     vertices."""
     from scipy.spatial import ConvexHull, QhullError
 
-    from ..specs import SpecError
+    from ..specs import MIN_SIZE, SpecError
     points = np.asarray(points, dtype=np.float64)
     if points.ndim != 2 or points.shape[1] != 3 or len(points) < 4:
         raise SpecError(path, f"a convex shape needs at least 4 points [x, y, z], got {len(points)}")
+    size = float(np.max(np.ptp(points, axis=0)))
+    if not size >= MIN_SIZE:
+        raise SpecError(path, f"the points span {size:g} m, less than the smallest body size {MIN_SIZE:g} m")
     try:
         hull = ConvexHull(points)
     except QhullError:
@@ -58,7 +61,6 @@ def build_hull(points, path="points"):
     if len(hull.vertices) > MAX_HULL_POINTS:
         raise SpecError(path, f"the convex hull has {len(hull.vertices)} vertices, more than the "
                               f"{MAX_HULL_POINTS} allowed (simplify the mesh)")
-    size = float(np.max(np.ptp(points, axis=0)))
     triangles = []
     for simplex, equation in zip(hull.simplices, hull.equations):
         a, b, c = points[simplex]
@@ -66,7 +68,8 @@ def build_hull(points, path="points"):
             b, c = c, b
         triangles.append((a, b, c))
     triangles = np.array(triangles)
-    volume, centre, second_moment = solid_moments(triangles)
+    with np.errstate(divide="ignore", invalid="ignore"):  # no volume: refused just below
+        volume, centre, second_moment = solid_moments(triangles)
     if not volume > 1e-12 * size ** 3:
         raise SpecError(path, "the points are flat or degenerate: a convex shape needs volume")
     # Inertia per kg about the centre of mass: (trace(S) I - S) / V, S the second moment there.
