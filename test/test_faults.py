@@ -3,19 +3,24 @@ leave the world are removed and named in Simulation.removed while the loop steps
 listener or step does not end the loop; the recorder survives a full disk and an unwritable
 path with `error` set (the node puts it on /diagnostics) while the simulation goes on.
 (A kill -9 leaving a recoverable bag is test_bag.test_a_killed_run_recovers.)"""
+import logging
 import os
 import signal
 import subprocess
 import sys
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
+from vplayground_ros import api
 from vplayground_ros.api import Requests
+from vplayground_ros.cli import parse_args
 from vplayground_ros.physics.world import WORLD_RADIUS
 from vplayground_ros.recorder import Recorder
+from vplayground_ros.runtime import Runtime
 from vplayground_ros.scene import load_world
 from vplayground_ros.simulation import Simulation
 from helpers import wait_for
@@ -337,3 +342,33 @@ def test_the_node_refuses_a_hostile_corpus_keeps_stepping_and_finishes_its_bag(t
     assert "Traceback" not in output, output[-3000:]
     counts = summary(bag)  # a summary: the bag was finished
     assert counts["/clock"] > 10 and not Path(f"/tmp/escape_{os.getpid()}.yaml").exists()
+
+
+SERVICE_REQUEST = SimpleNamespace(load_namespace="{entity: victim}", data=True, map_url="scene.yaml")
+
+
+def test_every_service_answers_a_handler_that_raises(sim, monkeypatch, caplog):
+    """A bug in any handler (here: every Requests method raising) still gets an answer, the
+    type's failure with RESULT_OPERATION_FAILED: internal error (...), logged once with its
+    traceback and counted (/diagnostics shows Simulation.fault_count): unanswered, the caller
+    waited out its own timeout."""
+    def broken(*_args, **_kwargs):
+        raise ZeroDivisionError("a bug")
+    for method in ("spawn", "edit", "remove", "get_entity", "save_scene", "entities", "pause", "set_freezing",
+                   "step", "reset", "wake_all", "features", "load_scene"):
+        monkeypatch.setattr(Requests, method, broken)
+    runtime = Runtime(sim, parse_args(["--no-record"]), logging.getLogger("test_faults"))
+    failure = {"success": False, "message": "RESULT_OPERATION_FAILED: internal error (ZeroDivisionError: a bug)"}
+    expected = {"diagnostic_msgs/srv/AddDiagnostics": failure, "std_srvs/srv/SetBool": failure,
+                "std_srvs/srv/Trigger": failure, "nav_msgs/srv/LoadMap": {"result": api.UNDEFINED_FAILURE},
+                "visualization_msgs/srv/GetInteractiveMarkers": {"markers": []}}
+    assert {service.type for service in runtime.services} == set(expected)
+    faults = sim.fault_count
+    with caplog.at_level(logging.ERROR, logger="vplayground_ros.simulation"):
+        for service in runtime.services:
+            for _ in range(2):
+                assert service.handler(SERVICE_REQUEST) == expected[service.type], service.name
+    assert sim.fault_count == faults + 2 * len(runtime.services)  # each call counted
+    logged = [r for r in caplog.records if r.exc_info and r.exc_info[0] is ZeroDivisionError]
+    assert len(logged) == len(runtime.services)  # each service's once, with its traceback
+    assert all(f"service {service.name}: ZeroDivisionError: a bug" in sim.faults for service in runtime.services)

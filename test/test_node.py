@@ -196,6 +196,41 @@ def test_a_reply_repeating_what_utf8_cannot_carry_still_arrives(ros):
     assert ros.text("get_entity", "{entity: car}")[0]  # still serving
 
 
+def test_a_handler_that_raises_still_answers_and_is_counted(ros, monkeypatch):
+    """Issue 35: a bug inside a handler (here the payload parser raising) answers the type's
+    failure at once, instead of no reply and a caller waiting out its timeout."""
+    import vplayground_ros.api.entities
+    import vplayground_ros.services
+
+    def broken(*_args, **_kwargs):
+        raise ZeroDivisionError("injected")
+    monkeypatch.setattr(vplayground_ros.api.entities, "parse", broken)
+    monkeypatch.setattr(vplayground_ros.services, "entity_marker", broken)
+    faults = ros.sim.fault_count
+    ok, message = ros.text("spawn", "{name: never}")
+    assert not ok and message == "RESULT_OPERATION_FAILED: internal error (ZeroDivisionError: injected)"
+    entities = ros.call(GetInteractiveMarkers, f"{NS}/get_entities", GetInteractiveMarkers.Request())
+    assert list(entities.markers) == []
+    assert ros.sim.fault_count == faults + 2
+    assert "service ~/spawn: ZeroDivisionError: injected" in ros.sim.faults
+    monkeypatch.undo()
+    assert ros.text("get_entity", "{entity: car}")[0]  # still serving
+
+
+def test_removing_a_sensors_parent_warns_on_rosout(ros):
+    """The sensors that go with their parent are named in a warning the ROS tools see."""
+    from rcl_interfaces.msg import Log
+    logs = []
+    ros.client.create_subscription(Log, "/rosout", logs.append, 100)
+    assert ros.text("spawn", "{name: holder, position: [6, 6, 1]}")[0]
+    ok, message = ros.text("spawn", "{name: holder_scan, type: lidar_2d, parent: holder, pose: [0, 0, 0.5, 0, 0, 0]}")
+    assert ok, message
+    reply = ros.text("remove", "{entity: holder}")
+    assert reply == (True, "RESULT_OK: holder, holder_scan"), reply
+    assert wait_for(lambda: any(log.level == Log.WARN and "holder_scan" in log.msg and "holder, its parent" in log.msg
+                                for log in logs)), [log.msg for log in logs]
+
+
 def test_scene_services(ros):
     tmp_path = ros.scene_directory
     assert ros.node.get_parameter("scene_directories").value == [str(tmp_path)]

@@ -58,13 +58,17 @@ class Inputs:
                          "initial_pose": self.initial_pose, "push": self.push}
 
     def handle(self, key, msg):
-        """Runs the handler of subscription `key`; a message missing a field is logged, not raised."""
+        """Runs the handler of subscription `key`; a message missing a field is logged, not
+        raised, and a bug is logged once and counted (Simulation.fault), whichever transport
+        delivered the message."""
         try:
             self.handlers[key](msg)
         except (AttributeError, TypeError, ValueError) as error:
             self.log.warning(f"{key}: malformed message ignored ({error})")
         except TimeoutError as error:
             self.log.warning(f"{key} ignored: {error}")
+        except Exception as error:
+            self.sim.fault(f"input {key}", error)
 
     def submit(self, key, fn):
         """sim.submit(fn) with what goes wrong there logged: nobody waits for an input's Future,

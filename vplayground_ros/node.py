@@ -9,6 +9,7 @@ validation) and keeps rclpy's copy of them in step.
 """
 import array
 import importlib
+import logging
 import threading
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
@@ -116,11 +117,47 @@ class RosSink:
         return []
 
 
+class RosLogHandler(logging.Handler):
+    """The package's Python logging (its modules' warnings, the faults it survived with their
+    tracebacks) into the node's logger: the ROS console and /rosout, where a ROS user looks.
+    Without it they went to Python's last-resort stderr line, seen by no ROS tool."""
+
+    def __init__(self, logger):
+        super().__init__(logging.INFO)
+        self.logger = logger
+
+    def emit(self, record):
+        try:
+            text = f"{record.name}: {self.format(record)}"
+            # One call per severity: rclpy refuses a call site whose severity changes.
+            if record.levelno >= logging.ERROR:
+                self.logger.error(text)
+            elif record.levelno >= logging.WARNING:
+                self.logger.warning(text)
+            else:
+                self.logger.info(text)
+        except Exception:  # a log line must never fail what logged it
+            self.handleError(record)
+
+
+PACKAGE_LOGGER = logging.getLogger(__package__)
+
+
 class SimulatorNode(Node):
     def __init__(self):
         super().__init__(NODE_NAME)
         if self.has_parameter("use_sim_time") and self.get_parameter("use_sim_time").value:
             self.get_logger().warning("use_sim_time is set: ignored, this node is the time source")
+        self._log_handler = RosLogHandler(self.get_logger())
+        self._logging_before = PACKAGE_LOGGER.level, PACKAGE_LOGGER.propagate
+        PACKAGE_LOGGER.addHandler(self._log_handler)
+        PACKAGE_LOGGER.setLevel(logging.INFO)
+        PACKAGE_LOGGER.propagate = False  # once is enough: not again on stderr
+
+    def destroy_node(self):
+        PACKAGE_LOGGER.removeHandler(self._log_handler)
+        PACKAGE_LOGGER.level, PACKAGE_LOGGER.propagate = self._logging_before
+        return super().destroy_node()
 
     def attach(self, runtime):
         """Declares the runtime's parameters and serves its topics, subscriptions and services."""

@@ -8,11 +8,22 @@ import numpy as np
 import yaml
 
 from . import messages
-from .api import MAP_SUCCESS
+from .api import MAP_SUCCESS, UNDEFINED_FAILURE
+from .api.results import internal_error
 from .messages import header
 from .physics.shapes import SHAPES, solid
 
 Service = namedtuple("Service", "name type handler")
+
+# What each service type answers when its handler raises (a bug, never a refused request): the
+# type's own failure. GetInteractiveMarkers has none: no markers, and the log says why.
+FAILURES = {
+    "diagnostic_msgs/srv/AddDiagnostics": lambda text: {"success": False, "message": text},
+    "std_srvs/srv/SetBool": lambda text: {"success": False, "message": text},
+    "std_srvs/srv/Trigger": lambda text: {"success": False, "message": text},
+    "nav_msgs/srv/LoadMap": lambda text: {"result": UNDEFINED_FAILURE},
+    "visualization_msgs/srv/GetInteractiveMarkers": lambda text: {"markers": []},
+}
 
 
 def carriable(message):
@@ -57,7 +68,7 @@ def service_table(runtime):
         return {"markers": [entity_marker(runtime, name, description)
                             for name, description in requests.entities()]}
 
-    return [
+    return [guarded(runtime, service) for service in [
         Service("~/spawn", "diagnostic_msgs/srv/AddDiagnostics", text(requests.spawn)),
         Service("~/edit", "diagnostic_msgs/srv/AddDiagnostics", text(requests.edit)),
         Service("~/remove", "diagnostic_msgs/srv/AddDiagnostics", text(requests.remove)),
@@ -72,7 +83,23 @@ def service_table(runtime):
         Service("~/wake_all", "std_srvs/srv/Trigger", trigger(requests.wake_all)),
         Service("~/get_simulator_features", "std_srvs/srv/Trigger", trigger(requests.features)),
         Service("~/load_scene", "nav_msgs/srv/LoadMap", load_scene),
-    ]
+    ]]
+
+
+def guarded(runtime, service):
+    """The service, answering whatever happens: an exception of its handler (a bug) answers the
+    type's failure with `RESULT_OPERATION_FAILED: internal error (...)`, and is logged with its
+    traceback once and counted on /diagnostics (Simulation.fault). Unanswered, the caller waited
+    out its own timeout."""
+    failure = FAILURES[service.type]
+
+    def serve(request):
+        try:
+            return service.handler(request)
+        except Exception as error:
+            runtime.sim.fault(f"service {service.name}", error)
+            return failure(carriable(internal_error(error)))
+    return service._replace(handler=serve)
 
 
 def entity_marker(runtime, name, description):

@@ -5,7 +5,6 @@ errors from validation carry their code in their type (specs.InvalidName: NAME_I
 in their text.
 """
 import functools
-import logging
 
 from ..physics import specs
 
@@ -21,8 +20,6 @@ ALREADY = "ALREADY_IN_TARGET_STATE"
 # nav_msgs/srv/LoadMap result codes.
 MAP_SUCCESS, MAP_DOES_NOT_EXIST, INVALID_MAP_DATA, UNDEFINED_FAILURE = 0, 1, 2, 255
 
-log = logging.getLogger(__name__)
-
 
 class RequestError(Exception):
     def __init__(self, code, message):
@@ -35,8 +32,9 @@ def reply(code, message):
 
 
 def handled(fn):
-    """Turns every failure into a coded reply: the callers are services, whose node must not
-    fall over whatever it is sent."""
+    """Turns every refusal into a coded reply. What no request should cause (a bug) is left to
+    the caller: the service table answers it as an internal error, logged and counted
+    (services.guarded)."""
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
         try:
@@ -52,8 +50,10 @@ def handled(fn):
             return False, f"{FAILED}: {error}"
         except ValueError as error:
             return False, f"{FAILED}: {str(error)[:500]}"
-        except Exception as error:  # a bug: answered and logged, never a dead service
-            log.exception("%s failed", fn.__name__)
-            return False, f"{FAILED}: internal error: {type(error).__name__}: {str(error)[:300]}"
     return wrapper
+
+
+def internal_error(error):
+    """The reply text of an exception no request should cause."""
+    return f"{FAILED}: internal error ({type(error).__name__}: {str(error)[:300]})"
 

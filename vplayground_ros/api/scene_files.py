@@ -1,7 +1,6 @@
 """The scene-file services: ~/load_scene (LoadMap) and ~/save_scene, within the scene
 directories (file_access.py)."""
 import copy
-import logging
 
 import yaml
 
@@ -11,8 +10,6 @@ from .file_access import allowed_directories, confine, write_file
 from .payload import YAML_DUMPER, as_mapping, parse
 from .results import (FAILED, INVALID_MAP_DATA, MAP_DOES_NOT_EXIST, MAP_SUCCESS, NOT_FOUND, OK,
                       UNDEFINED_FAILURE, RequestError, handled, reply)
-
-log = logging.getLogger(__name__)
 
 
 class SceneRequests:
@@ -32,9 +29,6 @@ class SceneRequests:
             initial = copy.deepcopy(world_to_scene(world))
         except SceneError as error:
             return INVALID_MAP_DATA, f"{FAILED}: {str(error)[:1000]}"
-        except Exception as error:  # an unexpected failure must not take the node down
-            log.exception("load_scene %s", target)
-            return UNDEFINED_FAILURE, f"{FAILED}: {type(error).__name__}: {str(error)[:300]}"
 
         def install(_):
             self.sim.world = world
