@@ -228,8 +228,8 @@ def test_shapes_save_and_reload(tmp_path):
 @pytest.mark.parametrize("spec, problem", [
     ({"shape": "sphere", "size": [1, 1, 1]}, "body.size: a sphere has no size (its keys: radius)"),
     ({"shape": "box", "radius": 1.0}, "body.radius: a box has no radius (its keys: size)"),
-    ({"shape": "cylinder", "radius": 1.0, "length": 0.0}, "body.length: must be > 0 for a cylinder, got 0"),
-    ({"shape": "sphere", "radius": -1.0}, "body.radius: must be > 0, got -1"),
+    ({"shape": "cylinder", "radius": 1.0, "length": 0.0}, "body.length: must be >= 0.001 for a cylinder, got 0"),
+    ({"shape": "sphere", "radius": -1.0}, "body.radius: must be >= 0.0005, got -1"),
     ({"shape": "cone"}, "body.shape: unsupported shape 'cone' (supported: box, sphere, capsule, cylinder, convex)"),
 ])
 def test_bad_shape_keys_are_refused_naming_the_key(spec, problem):
