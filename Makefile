@@ -5,7 +5,7 @@
 # make fuzz : the hostile-input tests with FUZZ_EXAMPLES (default 5000) per property, randomised
 # make soak : the node under steady traffic for DURATION seconds (default 1200), a Foxglove client
 #             subscribed to everything (SOAK_ARGS= drops it); memory, RTF, late ticks
-PYTHON ?= python3.11
+PYTHON ?=
 VENV   ?= .venv
 PY      = $(VENV)/bin/python
 STAMP   = $(VENV)/.installed
@@ -14,16 +14,29 @@ FUZZ_EXAMPLES ?= 5000
 DURATION      ?= 1200
 SOAK_ARGS     ?= --foxglove
 
-.PHONY: run test bench bench-peers fuzz soak setup clean
+.PHONY: run test bench bench-peers fuzz soak setup clean FORCE
 
 setup: $(STAMP)
 
-# A sourced ROS install's rclpy is reused (the venv sees its site packages); without one the
-# Jazzy wheels come from PyPI.
-$(STAMP): setup.py setup.cfg package.xml
-	@command -v $(PYTHON) >/dev/null || { echo "$(PYTHON) not found (Python 3.11 needed)"; exit 1; }
-	test -x $(PY) || if $(PYTHON) -c "import rclpy" 2>/dev/null; then \
-		$(PYTHON) -m venv --system-site-packages $(VENV); else $(PYTHON) -m venv $(VENV); fi
+# The venv's Python, chosen at every make (tools/choose_python: PYTHON= if given, else the one
+# that imports a sourced ROS install's rclpy, else python3.11 for the Jazzy wheels; one line
+# says which). A venv another Python made (ROS sourced after the first make, or no longer) is
+# made again: its rclpy would not import. pyvenv.cfg changes only then, so an unchanged make
+# installs nothing.
+$(VENV)/pyvenv.cfg: FORCE
+	@choice=$$(PYTHON='$(PYTHON)' sh tools/choose_python) || exit 1; \
+	exe=$${choice#* }; \
+	if [ $${choice%% *} = ros ]; then site=true; else site=false; fi; \
+	grep -qxF "executable = $$exe" $@ 2>/dev/null && grep -qx "include-system-site-packages = $$site" $@ \
+		&& exit 0; \
+	if [ -f $@ ]; then \
+		was="the PyPI wheels"; grep -qx "include-system-site-packages = true" $@ && was="a sourced rclpy"; \
+		echo "make: $(VENV) was made by $$(sed -n 's/^executable = //p' $@) for $$was: making it again"; \
+		rm -rf $(VENV); fi; \
+	set -- $(VENV); if [ $$site = true ]; then set -- --system-site-packages $(VENV); fi; \
+	echo "$$exe -m venv $$*"; "$$exe" -m venv "$$@"
+
+$(STAMP): setup.py setup.cfg package.xml $(VENV)/pyvenv.cfg
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e ".[test]"
 	$(PY) -c "import rclpy" 2>/dev/null || $(PY) -m pip install --quiet -e ".[ros]"
