@@ -15,7 +15,7 @@ import yaml
 import zstandard
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
-from mcap.records import Chunk
+from mcap.records import Chunk, Schema
 from mcap.stream_reader import StreamReader
 from mcap_ros2.decoder import DecoderFactory
 
@@ -167,22 +167,71 @@ def test_tf_has_a_transform_for_every_body(bag):
     assert mounts["camera_optical"] == "camera" and mounts["depth_camera_optical"] == "depth_camera"
 
 
-def test_split_files_each_open_on_their_own(tmp_path):
+@pytest.fixture(scope="module")
+def split_files(tmp_path_factory):
+    """The default scene for 4 s split at 150 kB: its files in order."""
+    directory = tmp_path_factory.mktemp("split")
+    output = run("--duration", "4", "--real-time-factor", "2", "--record", str(directory / "split.mcap"),
+                 "--record-split-size", "150000")
+    files = sorted(directory.glob("split*.mcap"), key=lambda f: (len(f.name), f.name))
+    assert len(files) >= 3, output
+    return files
+
+
+def test_split_files_each_open_on_their_own(split_files):
     """Every file has the latched topics, logged when it starts: they kept their first stamps
     (0 s), so each file claimed the run from its start."""
-    path = tmp_path / "split.mcap"
-    output = run("--duration", "4", "--real-time-factor", "2", "--record", str(path),
-                 "--record-split-size", "150000")
-    files = sorted(tmp_path.glob("split*.mcap"), key=lambda f: (len(f.name), f.name))
-    assert len(files) >= 3, output
     end = None
-    for f in files:
+    for f in split_files:
         _, _, messages = read_all(f)
         assert LATCHED - {"/vplayground/state"} <= {topic for topic, *_ in messages}, f
         times = [log_time for _, log_time, *_ in messages]
         if end is not None:
             assert min(times) >= end - 10**9, f  # near where the file before ended (a 1 Hz topic may lag)
         end = max(times)
+
+
+def assert_one_schema_per_type(path):
+    """One Schema record per message type, shared by every channel of that type, as rosbag2's
+    MCAP storage writes them: every Schema record of the file (the chunks' and the summary's)
+    read. Returns the summary."""
+    ids = {}
+    with open(path, "rb") as stream:
+        for record in StreamReader(stream, skip_magic=False).records:
+            if isinstance(record, Schema):
+                ids.setdefault(record.name, set()).add(record.id)
+        stream.seek(0)
+        summary = make_reader(stream).get_summary()
+    assert ids == {s.name: {s.id} for s in summary.schemas.values()}, (path, ids)  # one id a name
+    types = {summary.schemas[channel.schema_id].name for channel in summary.channels.values()}
+    assert summary.statistics.schema_count == len(summary.schemas) == len(types), path
+    return summary
+
+
+def test_a_bag_has_one_schema_per_message_type(bag):
+    """A bag held 24 Schema records for 24 channels: PointCloud2 twice, MarkerArray four times."""
+    summary = assert_one_schema_per_type(bag)
+    channels = {}
+    for channel in summary.channels.values():
+        channels.setdefault(summary.schemas[channel.schema_id].name, []).append(channel.topic)
+    assert len(channels["sensor_msgs/msg/PointCloud2"]) >= 2
+    assert len(channels["visualization_msgs/msg/MarkerArray"]) >= 3
+
+
+def test_every_split_file_has_one_schema_per_message_type(split_files):
+    """Each file opens on its own: its own schemas, one per type."""
+    for f in split_files:
+        assert_one_schema_per_type(f)
+
+
+def test_a_point_cloud_reader_finds_every_point_cloud_topic(bag):
+    """What KISS-ICP's MCAP loader does: the PointCloud2 schema is the first of that name, its
+    topics the channels with that schema id; it never saw /lidar/points."""
+    with open(bag, "rb") as stream:
+        summary = make_reader(stream).get_summary()
+    schema_id = [s.id for s in summary.schemas.values() if s.name == "sensor_msgs/msg/PointCloud2"][0]
+    topics = {c.topic for c in summary.channels.values() if c.schema_id == schema_id}
+    assert {"/lidar/points", "/vplayground/contacts/points"} <= topics
 
 
 def test_every_channel_offers_its_qos_as_rosbag2_records_it(bag):
@@ -396,6 +445,24 @@ def test_a_finished_bag_recovers_as_it_was(tmp_path):
     assert recovered.statistics.channel_message_counts == original.statistics.channel_message_counts
 
 
+def test_a_schema_per_channel_recovers_as_one_per_type(tmp_path):
+    """A file with a Schema record per channel (as the recorder wrote them before) is salvaged
+    with one per type; a schema of the same name but other bytes stays apart."""
+    path, fixed = tmp_path / "repeated.mcap", tmp_path / "fixed.mcap"
+    with open(path, "wb") as out:
+        writer = recorder_module.BagWriter(out, 500, recorder_module.PROFILE, "vplayground_ros")
+        for topic, definition in (("/a", b"int32 x"), ("/b", b"int32 x"), ("/c", b"int64 x")):
+            schema_id = writer.register_schema("pkg/msg/T", "ros2msg", definition)
+            writer.add_message(writer.register_channel(topic, "cdr", schema_id), 0, b"")
+        writer.finish()
+    assert recover(path, fixed) == 3
+    with open(fixed, "rb") as stream:
+        summary = make_reader(stream).get_summary()
+    schemas = {c.topic: summary.schemas[c.schema_id] for c in summary.channels.values()}
+    assert len(summary.schemas) == summary.statistics.schema_count == 2
+    assert schemas["/a"].id == schemas["/b"].id != schemas["/c"].id and schemas["/c"].data == b"int64 x"
+
+
 @pytest.mark.parametrize("source", ["missing.mcap", "not_mcap.txt"])
 def test_recover_names_a_source_it_cannot_read_in_one_line(tmp_path, source):
     (tmp_path / "not_mcap.txt").write_text("hello, this is no bag\n")
@@ -493,10 +560,14 @@ def test_a_reset_or_another_scene_continues_the_bag_in_a_new_file(tmp_path):
         sim = runtime.sim
         assert wait_for(lambda: sim.snapshot.time > 1.0)
         assert runtime.requests.reset(255)[0]
+        # The reply can come before the new world's first snapshot: the old one's time passed
+        # the wait, the scene was loaded at 0 s still, and time never went back for a third file.
+        assert wait_for(lambda: len(runtime.recorder.files) == 2)
         assert wait_for(lambda: sim.snapshot.time > 1.0)
         other = tmp_path / "other.yaml"  # the bag's folder is a scene directory
         other.write_text("version: 1\nbodies: [{name: crate, position: [0, 0, 2]}]\n")
         assert runtime.requests.load_scene(str(other))[0] == 0
+        assert wait_for(lambda: len(runtime.recorder.files) == 3)
         assert wait_for(lambda: sim.snapshot.time > 1.0)
     files = [path, tmp_path / "run_1.mcap", tmp_path / "run_2.mcap"]
     assert sorted(tmp_path.glob("*.mcap")) == sorted(files)
@@ -504,6 +575,7 @@ def test_a_reset_or_another_scene_continues_the_bag_in_a_new_file(tmp_path):
         _, _, messages = read_all(f)
         last = assert_channels_go_forward(f, messages)
         assert LATCHED <= set(last) and last["/clock"] > 10**9, f
+        assert_one_schema_per_type(f)
         assert min(log_time for topic, log_time, *_ in messages if topic == "/clock") < 10**8, f
 
 

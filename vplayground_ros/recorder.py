@@ -8,6 +8,9 @@ the package free of a native extension wherever it is built (colcon, pip); zstd 
 
 - ROS 2 profile, `ros2msg` schemas with full definitions (interfaces.schema), `cdr` messages,
   zstd chunks, message indexes and a summary.
+- One Schema record per message type in each file, shared by every channel of that type, as
+  rosbag2's MCAP storage writes them: readers find a type's channels by its first schema of
+  that name (KISS-ICP's MCAP loader saw one PointCloud2 topic of two).
 - log time = publish time = simulation time (ns).
 - Each channel carries the ROS 2 profile's `offered_qos_profiles` (rosbag2's YAML, Jazzy's
   spelling): `ros2 bag play` offers the publishers' QoS again, so the latched topics (the
@@ -305,7 +308,7 @@ class Recorder:
         self._queue = deque()
         self._thread = threading.Thread(target=self._run, name="vplayground-recorder", daemon=True)
         self._file = self._writer = None
-        self._channels = {}
+        self._channels, self._schemas = {}, {}
         try:
             self._open(self.path)
         except OSError as error:  # the simulation runs on without a bag; `error` says why
@@ -339,7 +342,7 @@ class Recorder:
         path.parent.mkdir(parents=True, exist_ok=True)
         self._file = open(path, "wb")
         self._writer = BagWriter(self._file, self.chunk_size, PROFILE, "vplayground_ros")
-        self._channels = {}
+        self._channels, self._schemas = {}, {}  # ids of this file: each file opens on its own
         self.files.append(path)
 
     def _finish(self):
@@ -353,10 +356,11 @@ class Recorder:
     def _channel(self, topic, type_name, qos):
         key = (topic, type_name)
         if key not in self._channels:
-            schema_id = self._writer.register_schema(name=type_name, encoding="ros2msg",
-                                                     data=schema(type_name).encode("utf-8"))
+            if type_name not in self._schemas:
+                self._schemas[type_name] = self._writer.register_schema(name=type_name, encoding="ros2msg",
+                                                                        data=schema(type_name).encode("utf-8"))
             self._channels[key] = self._writer.register_channel(topic=topic, message_encoding="cdr",
-                                                                schema_id=schema_id,
+                                                                schema_id=self._schemas[type_name],
                                                                 metadata=offered_qos_profiles(qos))
         return self._channels[key]
 
@@ -470,12 +474,16 @@ def recover(source, target):
         with open(target, "wb") as out:
             writer = Writer(out, chunk_size=CHUNK_SIZE, compression=CompressionType.ZSTD)
             writer.start(profile=PROFILE, library="vplayground_ros recover")
-            schemas, channels = {}, {}
+            schemas, channels, copied = {}, {}, {}  # copied: (name, encoding, data) -> id in the target
             for record in whole_records(stream):
                 # A finished bag's summary repeats its schemas and channels (and other writers
-                # repeat them in every chunk): each is the one its id first named.
+                # repeat them in every chunk): each is the one its id first named. Schemas the
+                # same in all but id (a schema per channel, as the recorder once wrote) become one.
                 if isinstance(record, Schema) and record.id not in schemas:
-                    schemas[record.id] = writer.register_schema(record.name, record.encoding, record.data)
+                    key = (record.name, record.encoding, record.data)
+                    if key not in copied:
+                        copied[key] = writer.register_schema(*key)
+                    schemas[record.id] = copied[key]
                 elif isinstance(record, Channel) and record.id not in channels:
                     channels[record.id] = writer.register_channel(
                         record.topic, record.message_encoding, schemas.get(record.schema_id, 0), record.metadata)
