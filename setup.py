@@ -28,7 +28,7 @@ setup(
                       "zstandard>=0.22", "regex>=2022.1", "mcap-ros2-support>=0.5",
                       "foxglove-sdk>=0.30,<0.31", "zlib-ng>=0.4", "scipy>=1.10"],
     extras_require={
-        "test": ["pytest>=7", "hypothesis>=6.80", "websockets>=13"],
+        "test": ["pytest>=7", "hypothesis>=6.80", "websockets>=13", "yourdfpy>=0.0.60"],
         # The ROS 2 Jazzy Python wheels, for machines without a ROS install (make does this).
         "ros": ["ros-jazzy-rclpy[fastrtps]", "ros-jazzy-common-interfaces"],
         # Peers and plots for bench/compare.py only; never needed to run the simulator.

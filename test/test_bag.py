@@ -29,7 +29,7 @@ from vplayground_ros.runtime import Runtime
 from vplayground_ros.scene import load_world
 from vplayground_ros.simulation import Simulation
 
-LATCHED = {"/vplayground/scene/markers", "/tf_static", "/vplayground/state"}
+LATCHED = {"/vplayground/scene/markers", "/tf_static", "/vplayground/state", "/robot_description"}
 
 
 def run(*args, wait=True):
@@ -153,15 +153,16 @@ def test_no_topic_repeats_a_log_time(bags_at_two_speeds):
             assert len(times) == len(set(times)), (speed, topic, sorted(times)[:5])
 
 
-def test_tf_has_a_transform_for_every_body(bag):
+def test_tf_has_the_robots_frames_and_tf_static_the_sensors(bag):
+    """Issue 39: /tf carries the robot's REP 105 chain and wheels (the bodies only with
+    publish_body_frames, or when they carry a sensor); /tf_static the sensors' mounts, once."""
     _, _, messages = read_all(bag)
     tf = [msg for topic, _, _, msg in messages if topic == "/tf"]
-    poses = [msg for topic, _, _, msg in messages if topic == "/vplayground/bodies/poses"]
-    children = {t.child_frame_id for t in tf[-1].transforms}
-    assert len([t for t in tf[-1].transforms if t.header.frame_id == "world"]) == len(poses[-1].poses)
-    assert {"car", "tower_1", "base_link", "wheel_front_left", "wheel_rear_right"} <= children
+    parent_of = {t.child_frame_id: t.header.frame_id for t in tf[-1].transforms}
+    assert (parent_of["odom"], parent_of["base_footprint"], parent_of["base_link"]) == ("world", "odom", "base_footprint")
+    assert parent_of["wheel_front_left"] == "steering_front_left" and "tower_1" not in parent_of
     static = [msg for topic, _, _, msg in messages if topic == "/tf_static"]
-    assert static[0].transforms[0].child_frame_id == "odom"
+    assert len(static) == 1
     mounts = {t.child_frame_id: t.header.frame_id for t in static[-1].transforms}
     assert {mounts[name] for name in ("laser", "lidar", "depth_camera", "camera", "imu")} == {"base_link"}
     assert mounts["camera_optical"] == "camera" and mounts["depth_camera_optical"] == "depth_camera"

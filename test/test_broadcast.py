@@ -2,6 +2,7 @@
 from unittest.mock import MagicMock
 
 from vplayground_ros.broadcast import Broadcaster
+from vplayground_ros.parameters import FRAMES
 
 
 class Parameters(dict):
@@ -11,8 +12,7 @@ class Parameters(dict):
 
 def test_marker_ids_stay_stable_and_bounded():
     parameters = Parameters({"publish_rate": 30.0, "marker_rate": 30.0, "static_republish_period": 5.0,
-                             "show_octree": False, "world_frame": "world", "odom_frame": "odom",
-                             "base_frame": "base_link"})
+                             "show_octree": False, **FRAMES})
     broadcaster = Broadcaster(MagicMock(), parameters, MagicMock())
     keeper = broadcaster.marker_id("keeper")
     for k in range(1000):  # a body spawned and removed every time, under a new name
@@ -103,12 +103,12 @@ def test_the_car_is_drawn_once_and_no_list_marker_is_empty(running):
     runtime, sink = running(SCENE, "--real-time-factor", "0", "--duration", "0.5")
     runtime.sim.wait(60)
     runtime.stop()
-    first_time, first = sink.of("car_markers", MARKERS)[0]
+    first_time, first = sink.of("/vplayground/car/markers", MARKERS)[0]
     assert first_time == 0.0  # in the air: no ray hits, no contacts
     bodies = sink.of("body_markers", MARKERS)
     for _, array in bodies:
         assert array.markers[0].action == 3 and [m.ns for m in array.markers[1:]] == ["box"]  # the crate only
-    for key in ("car_markers", "contact_markers", "scene_markers"):
+    for key in ("/vplayground/car/markers", "contact_markers", "scene_markers"):
         for _, array in sink.of(key, MARKERS):
             assert array.markers[0].action == 3, key  # DELETEALL: a marker left out disappears
             lists = [m for m in array.markers if m.type in (SPHERE_LIST, LINE_LIST, CUBE_LIST)]
@@ -116,7 +116,7 @@ def test_the_car_is_drawn_once_and_no_list_marker_is_empty(running):
     assert "ray_hits" not in {m.ns for m in first.markers}
     assert {"chassis", "wheels", "springs"} <= {m.ns for m in first.markers}
     assert not sink.of("contact_markers", MARKERS)[0][1].markers[1:]  # nothing touches yet
-    landed = sink.of("car_markers", MARKERS)[-1][1]
+    landed = sink.of("/vplayground/car/markers", MARKERS)[-1][1]
     assert "ray_hits" in {m.ns for m in landed.markers}  # on the ground by 0.5 s
 
 
@@ -126,12 +126,12 @@ def test_diagnostics_name_each_status_once_and_summarise_the_figures(running):
     runtime.stop()
     _, last = sink.of("diagnostics", DIAGNOSTICS)[-1]
     status = {s.name: s for s in last.status}
-    assert set(status) == {"simulation", "bodies", "car", "publisher"}
+    assert set(status) == {"simulation", "bodies", "robot car", "publisher"}
     assert {s.hardware_id for s in last.status} == {"vplayground"}  # a viewer shows "vplayground: simulation"
     assert re.fullmatch(r"(playing|stopped), RTF \d+\.\d\d/max, step \d+\.\d\d ms, 0 late ticks",
                         status["simulation"].message), status["simulation"].message
     assert re.fullmatch(r"2 bodies: \d active, \d frozen, 0 removed", status["bodies"].message)
-    assert re.fullmatch(r"car: last command 1\.\d s ago", status["car"].message)
+    assert re.fullmatch(r"car: last command 1\.\d s ago", status["robot car"].message)
     assert status["publisher"].level == 0
 
 
@@ -255,7 +255,7 @@ def test_the_publisher_never_reads_the_world_it_only_reads_snapshots():
         sim.wait(60)
     finally:
         runtime.stop()
-    assert sink.of("scene_markers") and sink.of("car_markers") and sink.of("body_markers")
+    assert sink.of("scene_markers") and sink.of("/vplayground/car/markers") and sink.of("body_markers")
     # MainThread: this test's set-up and the Runtime's construction, before stepping.
     assert world.threads == {"MainThread", "vplayground-physics"}
 
@@ -318,11 +318,14 @@ def test_start_up_overrides_take_effect_like_the_command_line():
         runtime.stop()
     assert sim.world.time == pytest.approx(0.5)
     assert {message.header.frame_id for _, message in sink.of("poses", POSES)} == {"map"}
-    odometry = sink.of("odom", decoder("nav_msgs/msg/Odometry"))[-1][1]
-    assert (odometry.header.frame_id, odometry.child_frame_id) == ("odom2", "chassis")
+    odometry = sink.of("/odom", decoder("nav_msgs/msg/Odometry"))[-1][1]
+    assert (odometry.header.frame_id, odometry.child_frame_id) == ("odom2", "base_footprint")
 
     tf_static = sink.of("tf_static", decoder("tf2_msgs/msg/TFMessage"))[-1][1]
-    assert {(t.header.frame_id, t.child_frame_id) for t in tf_static.transforms} == {("map", "odom2"), ("map", "post")}
+    assert {(t.header.frame_id, t.child_frame_id) for t in tf_static.transforms} == {("map", "post")}
+    tf = sink.of("tf", decoder("tf2_msgs/msg/TFMessage"))[-1][1]
+    edges = {(t.header.frame_id, t.child_frame_id) for t in tf.transforms}
+    assert {("map", "odom2"), ("odom2", "base_footprint"), ("base_footprint", "chassis")} <= edges
 
     paused = Runtime(Simulation(load_world(SCENE), real_time_factor=0.0), options, logging.getLogger("test_broadcast"))
     paused.parameters.override({"start_paused": True})
@@ -346,9 +349,8 @@ def test_clock_goes_out_for_every_step_as_fast_as_possible(running):
 
 
 def test_tf_carries_every_vehicles_wheels(running):
-    """SPEC 7: /tf has each body and each wheel. The driven car's wheels hang from base_link;
-    every other vehicle's from its body's frame, as <name>/wheel_<position> (only the driven
-    car's were sent)."""
+    """SPEC 7, issue 39: /tf has each robot's wheels, the first robot's under base_link, every
+    other's under its namespace's (<name>/base_link: only the driven car's were sent once)."""
     other = {**CAR, "name": "car_b", "position": [0, 8, 1.6]}
     runtime, sink = running({**SCENE, "vehicles": [CAR, other]}, "--real-time-factor", "0", "--duration", "0.2")
     runtime.sim.wait(60)
@@ -356,9 +358,11 @@ def test_tf_carries_every_vehicles_wheels(running):
     _, tf = sink.of("tf", decoder("tf2_msgs/msg/TFMessage"))[-1]
     parent_of = {t.child_frame_id: t.header.frame_id for t in tf.transforms}
     positions = ("front_left", "front_right", "rear_left", "rear_right")
-    assert all(parent_of[f"wheel_{p}"] == "base_link" for p in positions)
-    assert all(parent_of[f"car_b/wheel_{p}"] == "car_b" for p in positions)
-    assert parent_of["car_b"] == "world" and parent_of["base_link"] == "odom"
+    for prefix in ("", "car_b/"):
+        assert all(parent_of[f"{prefix}wheel_{p}"] == f"{prefix}steering_{p}" for p in positions)
+        assert all(parent_of[f"{prefix}suspension_{p}"] == f"{prefix}base_link" for p in positions)
+        assert parent_of[f"{prefix}base_link"] == f"{prefix}base_footprint"
+        assert parent_of[f"{prefix}odom"] == "world"
     assert len(parent_of) == len(tf.transforms)  # no frame twice
 
 
@@ -370,11 +374,11 @@ def test_odometry_covariances_are_small_not_zero_and_joints_have_rates(running):
     runtime.sim.call(lambda world: world.drive(world.vehicle_names()[0], 2.0, 0.8, timeout=100))
     runtime.sim.wait(60)
     runtime.stop()
-    odometry = sink.of("odom", decoder("nav_msgs/msg/Odometry"))[-1][1]
+    odometry = sink.of("/odom", decoder("nav_msgs/msg/Odometry"))[-1][1]
     for covariance in (odometry.pose.covariance, odometry.twist.covariance):
         matrix = np.array(covariance).reshape(6, 6)
         assert np.all(np.diag(matrix) > 0.0) and np.all(matrix == np.diag(np.diag(matrix)))
-    states = [message for _, message in sink.of("joint_states", decoder("sensor_msgs/msg/JointState"))]
+    states = [message for _, message in sink.of("/joint_states", decoder("sensor_msgs/msg/JointState"))]
     suspension = [k for k, name in enumerate(states[0].name) if name.endswith("_suspension")]
     assert max(abs(m.velocity[k]) for m in states for k in suspension) > 0.01
 

@@ -32,7 +32,7 @@ TOPICS = {
     f"{NS}/car/ground_truth": "nav_msgs/msg/Odometry", "/joint_states": "sensor_msgs/msg/JointState",
     f"{NS}/car/command": "geometry_msgs/msg/TwistStamped", f"{NS}/car/markers": "visualization_msgs/msg/MarkerArray",
     f"{NS}/state": "std_msgs/msg/UInt8", f"{NS}/real_time_factor": "std_msgs/msg/Float64",
-    "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
+    "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray", "/robot_description": "std_msgs/msg/String",
 }
 SERVICES = {"spawn", "edit", "remove", "get_entity", "save_scene", "get_entities", "pause", "set_freezing",
             "step", "reset", "wake_all", "get_simulator_features", "load_scene"}
@@ -173,13 +173,13 @@ def test_subscribed_frames_decode_to_their_types_stamped_with_sim_time(client):
     stamp = poses.header.stamp.sec * 10**9 + poses.header.stamp.nanosec
     assert stamp == log_time and 0 < stamp < 3600 * 10**9  # simulated, not wall-clock, time
     _, odom = client.latest("/odom")
-    assert odom.child_frame_id == "base_link" and math.isfinite(odom.pose.pose.position.x)
+    assert odom.child_frame_id == "base_footprint" and math.isfinite(odom.pose.pose.position.x)
     _, markers = client.latest(f"{NS}/bodies/markers")
     assert markers.markers[0].action == 3 and len(markers.markers) == 44  # DELETEALL + a cube per body but the car
     _, scene = client.latest(f"{NS}/scene/markers")  # latched: re-sent to a new subscriber
     assert any(m.ns == "playground" and len(m.points) > 0 for m in scene.markers)
     _, tf = client.latest("/tf")
-    assert {"car", "base_link", "wheel_front_left"} <= {t.child_frame_id for t in tf.transforms}
+    assert {"odom", "base_link", "wheel_front_left"} <= {t.child_frame_id for t in tf.transforms}
     _, diagnostics = client.latest("/diagnostics")
     assert any(s.name == "foxglove" for s in diagnostics.status)
     # The time capability follows the simulation.

@@ -7,12 +7,14 @@ import pytest
 
 from test_requests import CAR_SCENE
 from vplayground_ros.api import Requests
+from vplayground_ros.broadcast import resolve
 from vplayground_ros.inputs import Inputs, from_json
+from vplayground_ros.parameters import FRAMES, frames
+from vplayground_ros.robots import robot
 from vplayground_ros.scene import load_world
 from vplayground_ros.simulation import Simulation
 
-PARAMETERS = {"world_frame": "world", "odom_frame": "odom", "base_frame": "base_link", "cmd_vel_timeout": 1.2,
-              "click_spawn_size": 0.5, "click_spawn_height": 2.0}
+PARAMETERS = {**FRAMES, "cmd_vel_timeout": 1.2, "click_spawn_size": 0.5, "click_spawn_height": 2.0}
 
 
 class Log:
@@ -32,7 +34,9 @@ class Log:
 @pytest.fixture
 def inputs():
     sim = Simulation(load_world(CAR_SCENE))  # not started: commands run as they are submitted
-    return Inputs(sim, Requests(sim), PARAMETERS, Log(), lambda snapshot: next(iter(snapshot.vehicles), None))
+    def robots(snapshot):
+        return [robot(spec, frames(PARAMETERS)) for spec in snapshot.vehicle_specs.values()]
+    return Inputs(sim, Requests(sim), PARAMETERS, Log(), robots, resolve)
 
 
 def message(**fields):

@@ -8,7 +8,7 @@ from unittest.mock import MagicMock
 import pytest
 
 from vplayground_ros import sensor_messages
-from vplayground_ros.broadcast import TOPICS, resolve
+from vplayground_ros.broadcast import TOPICS, resolve, robot_topics
 from vplayground_ros.foxglove_server import NAVIGATION_GOALS
 from vplayground_ros.inputs import SUBSCRIPTIONS
 from vplayground_ros.services import service_table
@@ -91,8 +91,19 @@ def test_the_detail_panel_shows_the_simulation_figures():
     assert (detail["selectedHardwareId"], detail["selectedName"]) == ("vplayground", "simulation")
 
 
+def default_robot_topics():
+    """{topic: type} of the default scene's robot, as the node names them."""
+    from vplayground_ros.parameters import FRAMES, Frames
+    from vplayground_ros.resources import find_shared
+    from vplayground_ros.robots import robot
+    from vplayground_ros.scene import load_world
+    world = load_world(find_shared("config/default_scene.yaml"))
+    return {t.name: t.type for name in world.vehicle_names()
+            for t in robot_topics(robot(world.vehicle(name), Frames(*FRAMES.values()))).values()}
+
+
 def test_plots_read_published_topics():
-    published = {resolve(t.name) for t in TOPICS}
+    published = {resolve(t.name) for t in TOPICS} | set(default_robot_topics())
     paths = [p["value"] for p in PANELS["Plot!plot"]["paths"]]
     assert paths and all(path.split(".", 1)[0] in published for path in paths), paths
 
@@ -106,7 +117,7 @@ def default_sensor_topics():
 
 
 def test_the_3d_panel_shows_the_default_cars_scan_and_cloud():
-    published = default_sensor_topics()
+    published = {**default_sensor_topics(), **default_robot_topics()}
     published.update({resolve(t.name): t.type for t in TOPICS})
     shown = {topic: published[topic] for topic, config in SCENE["topics"].items() if config["visible"]}
     assert "sensor_msgs/msg/LaserScan" in shown.values() and "sensor_msgs/msg/PointCloud2" in shown.values()

@@ -352,7 +352,7 @@ def test_twist_drives_the_car_and_the_timeout_stops_it(ros):
     speed = lambda: ros.latest["/odom"].twist.twist.linear.x  # noqa: E731
     try:
         assert wait_for(lambda: "/odom" in ros.latest and abs(speed() - 3.0) < 0.3, timeout=20)
-        assert ros.latest["/odom"].child_frame_id == "base_link"
+        assert ros.latest["/odom"].child_frame_id == "base_footprint"
         assert ros.latest["/odom"].header.frame_id == "odom"
         assert wait_for(lambda: ros.latest["/odom"].twist.twist.angular.z > 0.5)  # CCW (REP-103)
     finally:
@@ -360,6 +360,29 @@ def test_twist_drives_the_car_and_the_timeout_stops_it(ros):
     # No more commands: after cmd_vel_timeout (1.2 s simulated) the car brakes to rest.
     assert wait_for(lambda: ros.sim.snapshot.vehicles["car"]["command_speed"] == 0.0, timeout=10)
     assert wait_for(lambda: abs(speed()) < 0.05, timeout=10)
+
+
+def test_a_spawned_car_is_a_robot_of_its_own_namespace(ros):
+    """Issue 39: a vehicle spawned beside the default car stands in its name's namespace: the
+    node subscribes to its cmd_vel as it comes, and it drives on that alone."""
+    car = {"name": "rover", "position": [-20.0, 20.0, 1.2], "chassis": {"size": [2.0, 1.2, 0.4], "mass": 300},
+           "wheels": [{"mount": [x, y, -0.2], "radius": 0.3, "power_gain": 0.5} for x in (0.8, -0.8) for y in (0.6, -0.6)]}
+    ok, message = ros.text("spawn", yaml.safe_dump(car))
+    assert ok, message
+    ros.listen(Odometry, "/rover/odom")
+    publisher = ros.client.create_publisher(Twist, "/rover/cmd_vel", 10)
+    assert wait_for(lambda: publisher.get_subscription_count() > 0)
+    command = Twist()
+    command.linear.x = 2.0
+    try:
+        assert wait_for(lambda: publisher.publish(command) or ("/rover/odom" in ros.latest
+                                                               and ros.latest["/rover/odom"].twist.twist.linear.x > 1.5),
+                        timeout=20)
+        assert ros.latest["/rover/odom"].header.frame_id == "rover/odom"
+        assert ros.sim.snapshot.vehicles["car"]["command_speed"] == 0.0  # the default car heard nothing
+    finally:
+        assert ros.text("remove", "{entity: rover}")[0]
+    assert wait_for(lambda: publisher.get_subscription_count() == 0)  # dropped with the robot
 
 
 def test_the_turning_cars_imu_yaw_rate_agrees_with_odometry(ros):
@@ -494,3 +517,27 @@ def test_the_node_loads_its_fast_dds_profile_unless_the_user_chose_one(tmp_path,
     result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60,
                             env={**os.environ, "FASTRTPS_DEFAULT_PROFILES_FILE": str(profile)}, cwd=tmp_path / "..")
     assert result.returncode == 0 and "XMLPARSER" not in result.stderr + result.stdout, result.stderr
+
+
+def test_remaps_and_a_namespace_name_the_bag_and_foxglove_channels_as_the_graph(ros):
+    """Issue 39: one naming path for every sink. A node started with a namespace and remaps
+    (`--ros-args -r __ns:=/sim -r odom:=/wheel_odom`) has those names on the ROS graph, and the
+    Broadcaster's topics (what the bag's channels and the Foxglove server's take) are the same."""
+    from rclpy.node import Node
+    from test_broadcast import Collector
+    named = Node("vplayground", cli_args=["--ros-args", "-r", "__ns:=/sim", "-r", "odom:=/wheel_odom"])
+    try:
+        options = parse_args(["--no-record", "--real-time-factor", "0", "--duration", "0.3"])
+        runtime = Runtime(Simulation(load_world(options.scene), real_time_factor=0.0, duration=0.3), options,
+                          named.get_logger(), None, named.resolve_topic_name)
+        sink = Collector()
+        runtime.broadcaster.add_sink(sink)
+        runtime.start()
+        runtime.sim.wait(60)
+        runtime.stop()
+        names = {runtime.broadcaster.topics[key].name for key, _, _ in sink.messages}
+    finally:
+        named.destroy_node()
+    assert {"/wheel_odom", "/sim/joint_states", "/sim/vplayground/state", "/sim/vplayground/car/ground_truth",
+            "/clock", "/tf"} <= names, sorted(names)
+    assert "/sim/odom" not in names and "/odom" not in names

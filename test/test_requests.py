@@ -445,8 +445,10 @@ def test_sensors_take_allow_renaming_and_ride_the_bodies_of_their_request(car_re
 
 def test_the_frame_names_are_the_parameters():
     requests = Requests(Simulation(load_world(SCENE)),
-                        settings={"world_frame": "map", "odom_frame": "odom", "base_frame": "chassis"})
-    assert requests.spawn("{name: map}")[1].startswith("NAME_NOT_UNIQUE: spawn.name: 'map' is the world_frame")
+                        settings={"world_frame": "world_map", "odom_frame": "odom", "footprint_frame": "base_footprint",
+                                  "base_frame": "chassis"})
+    assert requests.spawn("{name: world_map}")[1].startswith("NAME_NOT_UNIQUE: spawn.name: 'world_map' is the "
+                                                             "world_frame")
     assert requests.spawn("{name: chassis}")[1].startswith("NAME_NOT_UNIQUE: spawn.name: 'chassis' is the base_frame")
     assert requests.spawn("{name: base_link}") == (True, "RESULT_OK: base_link")
     requests.spawn("{name: cam, type: camera, parent: base_link}")

@@ -410,8 +410,8 @@ CAMERA = {"name": "cam", "type": "camera", "parent": "world"}
 @pytest.mark.parametrize("sensors, bodies, message", [
     ([{"name": "odom", "type": "imu", "parent": "world"}], [], "sensors[0].name: 'odom' is the odom_frame"),
     ([{"name": "wheel_front_left", "type": "imu", "parent": "world"}], [],
-     "sensors[0].name: 'wheel_front_left' is a wheel frame of the car"),
-    ([], [{"name": "base_link"}], "bodies[0].name: 'base_link' is the base_frame (the car)"),
+     "sensors[0].name: 'wheel_front_left' is a wheel link of the robot in the root namespace"),
+    ([], [{"name": "base_link"}], "bodies[0].name: 'base_link' is the base_frame (the robot in the root namespace)"),
     ([CAMERA], [{"name": "cam_optical"}], "bodies[0].name: 'cam_optical' is the optical frame of cam"),
     ([CAMERA, {"name": "cam_optical", "type": "imu", "parent": "world"}], [],
      "sensors[1].name: 'cam_optical' is the optical frame of cam"),

@@ -8,6 +8,7 @@ A sink has `publish(topic, data, seconds)`, `subscribed(topic)` and `statuses()`
 does).
 """
 import math
+import re
 import threading
 import time
 import traceback
@@ -17,6 +18,11 @@ import numpy as np
 
 from . import cdr, messages, sensor_messages
 from .frame_names import mount_frame
+from .parameters import frames as frame_names
+from .odometry import OdometryTracker
+from .physics.math3d import quaternions_to_matrices
+from .robot_description import robot_description
+from .robots import footprint_pose, robot, robot_transforms
 
 Topic = namedtuple("Topic", "key name type qos")
 # qos: "reliable_1", "reliable_10", "reliable_100", "latched" (reliable, transient local, depth 1)
@@ -30,11 +36,6 @@ TOPICS = [
     Topic("transforms", "~/transforms", "geometry_msgs/msg/TransformStamped", "reliable_100"),
     Topic("tf", "/tf", "tf2_msgs/msg/TFMessage", "reliable_100"),
     Topic("tf_static", "/tf_static", "tf2_msgs/msg/TFMessage", "latched"),
-    Topic("odom", "odom", "nav_msgs/msg/Odometry", "reliable_10"),
-    Topic("ground_truth", "~/car/ground_truth", "nav_msgs/msg/Odometry", "reliable_10"),
-    Topic("joint_states", "joint_states", "sensor_msgs/msg/JointState", "reliable_10"),
-    Topic("car_command", "~/car/command", "geometry_msgs/msg/TwistStamped", "reliable_10"),
-    Topic("car_markers", "~/car/markers", "visualization_msgs/msg/MarkerArray", "reliable_1"),
     Topic("state", "~/state", "std_msgs/msg/UInt8", "latched"),
     Topic("rtf", "~/real_time_factor", "std_msgs/msg/Float64", "reliable_10"),
     Topic("diagnostics", "/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", "reliable_10"),
@@ -54,6 +55,20 @@ PAUSED_JOBS = ("state", "markers", "diagnostics")  # what goes out while paused,
 PAUSED_ON_CHANGE = ("state", "markers")            # ... and only when the snapshot changed
 WELCOME_GATHER = 0.05  # s: a new client's subscriptions gather this long before it gets the world
 SENSOR_QOS = "reliable_10"  # a reliable publisher serves best-effort (sensor data) subscribers too
+# A robot whose base moved farther between two rounds than its speed, this acceleration (m/s^2)
+# and this slack (m) allow was put there (a teleport): its odometry starts again where it stands.
+MAX_ACCELERATION = 100.0
+TELEPORT_SLACK = 0.5
+# Each robot's topics (robots.py): under its namespace, what a stack reads; under ~/<its name>,
+# what only the simulator knows. (suffix, type, qos, private)
+ROBOT_TOPICS = {
+    "odom": ("odom", "nav_msgs/msg/Odometry", "reliable_10", False),
+    "joint_states": ("joint_states", "sensor_msgs/msg/JointState", "reliable_10", False),
+    "ground_truth": ("ground_truth", "nav_msgs/msg/Odometry", "reliable_10", True),
+    "command": ("command", "geometry_msgs/msg/TwistStamped", "reliable_10", True),
+    "markers": ("markers", "visualization_msgs/msg/MarkerArray", "reliable_1", True),
+    "robot_description": ("robot_description", "std_msgs/msg/String", "latched", False),
+}
 
 
 def resolve(name, node_name=NODE_NAME):
@@ -135,7 +150,7 @@ class Broadcaster:
         self.resolve_name = resolve_name
         self.topics = {t.key: t._replace(name=resolve_name(t.name)) for t in TOPICS}
         self.sinks = []
-        self.frames = tuple(parameters[p] for p in ("world_frame", "odom_frame", "base_frame"))
+        self.frames = frame_names(parameters)
         self.marker_ids = {}
         self._next_marker_id = 0
         self._ids_of = ([], np.zeros(0, np.int32))  # the last names and their marker ids
@@ -143,14 +158,19 @@ class Broadcaster:
         self.tf_encoder = cdr.TransformEncoder()         # /tf, on the publisher thread
         self.tf_static_encoder = cdr.TransformEncoder()  # /tf_static, on the simulation thread
         self._pose_block = None  # (positions, quaternions, their (N, 7) rows) last made
-        self._tf_frames = None   # (names, car frames, parents, children) last made
+        self._tf_frames = None   # (key, rows of the bodies on /tf, parents, children) last made
+        self._robots = None      # (key, [robots.Robot]) last made
+        self._odometry = {}      # robot name -> (OdometryTracker, its error model)
         self._last_clock = -math.inf
         self._last_clock_step = None  # (world, step) of the last batch's /clock
         self._last_state = None
         self._latched = {}  # key -> (data, seconds) last sent
         self._removed_reported = 0
         self._sensor_frames = []        # [(parent, child, pose)] of the sensors' static frames
-        self._static_key = None         # (world, its sensor specs, the car) they were made for
+        self._static_key = None         # (world, its sensor specs, the robots) they were made for
+        self._robot_topics = {}         # (robot name, namespace, ROBOT_TOPICS key) -> topic key
+        self._carriers = frozenset()    # names of the bodies that carry sensors
+        self._descriptions = {}         # robot_description topic key -> the URDF last sent
         self._sensor_topics = {}        # (sensor name, type, suffix) -> topic key
         self._sensor_job = Job("sensors", math.inf, self.publish_readings)  # errors counted like a job's
         self._jobs = {
@@ -223,6 +243,27 @@ class Broadcaster:
             self.topics[key] = Topic(key, self.resolve_name(topic.name), topic.type, SENSOR_QOS)
             self._sensor_topics[ident] = key
         return key
+
+    def robot_topic(self, robot, which):
+        """The key of one of a robot's topics (ROBOT_TOPICS), its absolute name, added to the
+        table on first use: the sinks make their publishers and channels for it as it comes."""
+        ident = (robot.name, robot.namespace, which)
+        key = self._robot_topics.get(ident)
+        if key is None:
+            topic = robot_topics(robot, self.resolve_name)[which]
+            self.topics[topic.key] = topic
+            self._robot_topics[ident] = key = topic.key
+        return key
+
+    def robots(self, snapshot):
+        """The robots (robots.Robot) of the snapshot's vehicles, in the World's order; made again
+        when the vehicles' specs or the frame parameters change."""
+        key = (snapshot.vehicle_specs, self.frames, self.parameters["localization"], self.parameters["publish_odom_tf"])
+        cached = self._robots
+        if cached is None or cached[0][0] is not key[0] or cached[0][1:] != key[1:]:
+            made = [robot(spec, self.frames, key[2], key[3]) for spec in snapshot.vehicle_specs.values()]
+            self._robots = cached = (key, made)
+        return cached[1]
 
     def wanted(self, key):
         topic = self.topics[key]
@@ -316,27 +357,46 @@ class Broadcaster:
         self._last_clock_step = (world, step)
 
     def _static_frames_changed(self, snapshot):
-        """The sensors' static frames made again when the world, its sensors or the car
-        changed (on the simulation thread, which may read the world): True then."""
-        world, car = self.sim.world, self.car(snapshot)
-        key = (world, world.sensor_specs, car)
+        """The sensors' static frames made again when the world, its sensors or the robots
+        changed (on the simulation thread, which may read the world): True when they differ
+        from those last sent."""
+        world, robots = self.sim.world, self.robots(snapshot)
+        key = (world, world.sensor_specs, robots)
         if self._static_key is not None and all(a is b for a, b in zip(key, self._static_key)):
             return False
         self._static_key = key
-        self._sensor_frames = sensor_messages.static_frames(world.sensor_specs, mount_frame(self.frames, car))
-        return True
+        frames = sensor_messages.static_frames(world.sensor_specs, mount_frame(self.frames, robots))
+        changed = frames != self._sensor_frames
+        # The bodies that carry a sensor, whose frames /tf must have: for the publisher thread,
+        # which reads no World.
+        self._carriers = frozenset(spec["parent"] for spec in world.sensor_specs) - set(snapshot.vehicle_specs)
+        self._sensor_frames = frames
+        self._describe_robots(snapshot, robots, world.sensor_specs)
+        return changed
+
+    def _describe_robots(self, snapshot, robots, sensor_specs):
+        """Each robot's robot_description (URDF, latched), sent when it differs from the last
+        one; a robot that is gone leaves no description for a newcomer."""
+        current = {}
+        for r in robots:
+            key = self.robot_topic(r, "robot_description")
+            current[key] = text = robot_description(snapshot.vehicle_specs[r.name], sensor_specs, r.name, self.frames)
+            if self._descriptions.get(key) != text:
+                self.send(key, messages.string(text), snapshot.time)
+        for key in self._descriptions.keys() - current.keys():
+            self._latched.pop(key, None)
+        self._descriptions = current
 
     def _send_state(self, seconds, frames_changed=False):
-        """~/state and /tf_static, latched: when the state changes (and /tf_static when the
-        sensors' frames do)."""
+        """~/state when the state changes, and /tf_static (latched) when the static frames do:
+        only then, as tf2 expects (a re-sent /tf_static made every listener start its buffer of
+        them again at each pause and play)."""
         state = self.sim.state
         if state != self._last_state:
             self._last_state = state
             self.send("state", messages.uint8(state), seconds)
-            frames_changed = True
-        if frames_changed:
-            world_frame, odom_frame, _ = self.frames
-            frames = [(world_frame, odom_frame, messages.IDENTITY), *self._sensor_frames]
+        if frames_changed or "tf_static" not in self._latched:
+            frames = self._sensor_frames
             self.send("tf_static", self.tf_static_encoder.encode(seconds, [p for p, _, _ in frames], [c for _, c, _ in frames],
                                                           [pose for _, _, pose in frames]), seconds)
 
@@ -472,46 +532,63 @@ class Broadcaster:
         job.published = snapshot
 
     # ------------------------------------------------------------------ topics
-    def car(self, snapshot):
-        """The driven car: the first vehicle of the world, or None."""
-        return next(iter(snapshot.vehicles), None)
-
     def publish_state(self, snap):
-        world_frame, odom_frame, base_frame = self.frames
-        self.send("poses", cdr.pose_array_of(snap.time, world_frame, self.pose_block(snap)), snap.time)
-        car = self.car(snap)
-        wheels = snap.wheels.get(car)
-        car_frames = []
-        if car is not None:
-            self.send("odom", messages.car_odometry(snap, car, odom_frame, base_frame), snap.time)
-            self.send("ground_truth", messages.car_odometry(snap, car, world_frame, base_frame), snap.time)
-            self.send("joint_states", messages.joint_states(snap, car), snap.time)
-            self.send("car_command", messages.car_command(snap, car, base_frame), snap.time)
-            if wheels is not None:
-                car_frames = messages.car_transforms(snap, car, self.frames, wheels)
-                for parent, child, pose in [(world_frame, odom_frame, messages.IDENTITY), *car_frames]:
-                    self.send("transforms", cdr.transform_stamped(snap.time, parent, child, pose), snap.time)
-        for parent, child, pose in self._sensor_frames:  # static: the same on every message
-            self.send("transforms", cdr.transform_stamped(snap.time, parent, child, pose), snap.time)
-        # Every other vehicle's wheels, from its body's frame (its name): <name>/wheel_<position>.
-        other_wheels = [frame for name in snap.vehicles if name != car and name in snap.wheels
-                        for frame in messages.wheel_transforms(snap, name, name, f"{name}/", snap.wheels[name])]
+        frames = self.frames
+        self.send("poses", cdr.pose_array_of(snap.time, frames.world, self.pose_block(snap)), snap.time)
         s = snap.state
+        moving = []  # (parent, child, pose) of every robot: /tf's after the bodies
+        for r in self.robots(snap):
+            row = snap.names.index(r.name)
+            truth = (s["positions"][row], s["quaternions"][row])
+            linear, angular = s["linear_velocities"][row], s["angular_velocities"][row]
+            spec, state = snap.vehicle_specs[r.name], snap.vehicles[r.name]
+            tracker = self.odometry_tracker(r.name, spec, snap, truth, linear)
+            measured = truth if tracker.noiseless else tracker.update(*truth, snap.time)
+            transforms = robot_transforms(r, truth, measured, state, spec["wheels"], frames.world)
+            # base_footprint in odom; its twist in its own axes, which the true heading turns,
+            # with the error the odometry made over its last interval.
+            to_world = quaternions_to_matrices(np.asarray(truth[1], float)[None])[0]
+            self.send(self.robot_topic(r, "odom"), messages.odometry(
+                snap.time, r.frames.odom, r.frames.footprint, footprint_pose(*measured, r.ride_height),
+                footprint_pose(*truth, r.ride_height)[1], linear + to_world @ tracker.twist_error[:3],
+                angular + to_world @ tracker.twist_error[3:], tracker.pose_covariance.ravel(),
+                tracker.twist_covariance.ravel()), snap.time)
+            self.send(self.robot_topic(r, "ground_truth"), messages.odometry(
+                snap.time, frames.world, r.frames.base, truth, truth[1], linear, angular), snap.time)
+            self.send(self.robot_topic(r, "joint_states"), messages.joint_states(snap, r.name), snap.time)
+            self.send(self.robot_topic(r, "command"), messages.car_command(snap, r.name, r.frames.base), snap.time)
+            moving += transforms
+        for parent, child, pose in [*moving, *self._sensor_frames]:  # the sensors': static, the same each time
+            self.send("transforms", cdr.transform_stamped(snap.time, parent, child, pose), snap.time)
+        rows, parents, children = self.tf_frames(snap, moving)
         if self.parameters["publish_body_frames"]:
-            for row, name in enumerate(snap.names):
+            for row in rows.tolist():
                 self.send("transforms", cdr.transform_stamped(
-                    snap.time, world_frame, name, [*s["positions"][row], *s["quaternions"][row]]), snap.time)
-            for parent, child, pose in other_wheels:
-                self.send("transforms", cdr.transform_stamped(snap.time, parent, child, pose), snap.time)
+                    snap.time, frames.world, snap.names[row], [*s["positions"][row], *s["quaternions"][row]]), snap.time)
         if self.wanted("tf"):
-            # world -> every body (child = its name), odom -> base_link, base_link -> wheels,
-            # each other vehicle -> its wheels.
-            frames = car_frames + other_wheels
-            parents, children = self.tf_frames(snap.names, frames)
             poses = self.pose_block(snap)
-            if frames:
-                poses = np.concatenate([poses, np.asarray([p for _, _, p in frames], float).reshape(-1, 7)])
+            poses = poses if len(rows) == len(snap.names) else poses[rows]
+            if moving:
+                poses = np.concatenate([poses, np.asarray([p for _, _, p in moving], float).reshape(-1, 7)])
             self.send("tf", self.tf_encoder.encode(snap.time, parents, children, poses), snap.time)
+
+    def odometry_tracker(self, name, spec, snap, truth, velocity):
+        """The robot's OdometryTracker, started at the true pose when the robot is new (or its
+        error model changed), when time went back (a reset, another scene) and when the robot
+        moved farther than it can drive since the last round (a teleport: ~/edit, initialpose);
+        the odom frame then starts where the robot stands, as a robot's driver starts again."""
+        model = spec.get("odometry")
+        entry = self._odometry.get(name)
+        if entry is not None:
+            tracker, last_model = entry
+            if last_model == model and (tracker.noiseless or drove(tracker, truth, velocity, snap.time)):
+                return tracker
+        tracker = OdometryTracker(name, model)
+        tracker.reset(*truth, snap.time)
+        self._odometry[name] = (tracker, model)
+        if len(self._odometry) > 2 * len(snap.vehicle_specs) + 16:  # robots come and go
+            self._odometry = {n: e for n, e in self._odometry.items() if n in snap.vehicle_specs}
+        return tracker
 
     def pose_block(self, snap):
         """(N, 7) float64 rows of xyz + xyzw, read-only, made once per motion state: for
@@ -525,17 +602,23 @@ class Broadcaster:
             self._pose_block = cached = (positions, quaternions, block)
         return cached[2]
 
-    def tf_frames(self, names, car_frames):
-        """/tf's parents and children (tuples): world -> each body, then the car's frames; made
-        again only when the names (a list shared by the snapshots of one layout) or the car's
-        frames change."""
-        car = tuple((parent, child) for parent, child, _ in car_frames)
+    def tf_frames(self, snap, moving):
+        """/tf's body rows (an index array: every body with publish_body_frames, else those that
+        carry a sensor, whose frames hang from them), parents and children (tuples): world ->
+        each of those bodies, then the robots' frames. Made again only when the names (a list
+        shared by the snapshots of one layout), the sensors or the robots' frames change."""
+        names, carriers = snap.names, self._carriers
+        key = (names, carriers, self.parameters["publish_body_frames"], tuple((p, c) for p, c, _ in moving))
         cached = self._tf_frames
-        if cached is None or cached[0] is not names or cached[1] != car:
-            parents = (self.frames[0],) * len(names) + tuple(parent for parent, _ in car)
-            children = tuple(names) + tuple(child for _, child in car)
-            self._tf_frames = cached = (names, car, parents, children)
-        return cached[2], cached[3]
+        if cached is None or cached[0][0] is not names or cached[0][1] is not carriers or cached[0][2:] != key[2:]:
+            if key[2]:
+                rows = np.arange(len(names))
+            else:
+                rows = np.array([row for row, name in enumerate(names) if name in carriers], np.int64)
+            parents = (self.frames.world,) * len(rows) + tuple(p for p, _ in key[3])
+            children = tuple(names[row] for row in rows.tolist()) + tuple(c for _, c in key[3])
+            self._tf_frames = cached = (key, rows, parents, children)
+        return cached[1], cached[2], cached[3]
 
     def marker_id(self, name):
         """A body's marker id, stable while it exists."""
@@ -559,15 +642,15 @@ class Broadcaster:
             self.marker_ids = {n: i for n, i in self.marker_ids.items() if n in present}
 
     def publish_markers(self, snap):
-        world_frame = self.frames[0]
-        car = self.car(snap)
+        world_frame = self.frames.world
         if self.wanted("body_markers"):
             self.send("body_markers", self.body_markers.encode(snap, world_frame, self.marker_ids_of(snap.names),
-                                                               self.pose_block(snap), car), snap.time)
-        if car is not None and self.wanted("car_markers"):
-            wheels = snap.wheels.get(car)
-            if wheels is not None:
-                self.send("car_markers", messages.car_markers(snap, car, world_frame, wheels), snap.time)
+                                                               self.pose_block(snap)), snap.time)
+        for r in self.robots(snap):
+            key = self.robot_topic(r, "markers")
+            if self.wanted(key):
+                self.send(key, messages.car_markers(snap, r.name, world_frame, snap.vehicle_specs[r.name]["wheels"]),
+                          snap.time)
         if self.parameters["contacts.publish"] and snap.contacts is not None:
             limit = self.parameters["contacts.max_points"]
             if self.wanted("contact_points"):
@@ -577,7 +660,7 @@ class Broadcaster:
 
     def publish_scenery(self, snap, octree_cells):
         """The scenery, latched (octree_cells read on the simulation thread at this snapshot)."""
-        self.send("scene_markers", messages.scene_markers(snap.time, self.frames[0], snap.scenery.ground,
+        self.send("scene_markers", messages.scene_markers(snap.time, self.frames.world, snap.scenery.ground,
                                                           snap.scenery.triangles, octree_cells), snap.time)
 
     def publish_rtf(self, snap):
@@ -604,10 +687,10 @@ class Broadcaster:
              {"active": active, "frozen": frozen, "removed": removed,
               "last_removed": sim.removed[-1] if sim.removed else ""}),
         ]
-        car = self.car(snap)
-        if car is not None:
-            age = snap.vehicles[car]["command_age"]
-            statuses.append(("car", OK, f"{car}: last command {age:.1f} s ago", {"command_age": round(age, 3)}))
+        for r in self.robots(snap):
+            age = snap.vehicles[r.name]["command_age"]
+            statuses.append((f"robot {r.name}", OK, f"{r.name}: last command {age:.1f} s ago",
+                             {"command_age": round(age, 3), "namespace": r.namespace, "localization": r.localization}))
         failed = [job for job in (*self._jobs.values(), self._scenery, self._sensor_job) if job.errors]
         statuses.append(("publisher", ERROR if failed else (WARN if self.skipped else OK),
                          "; ".join(f"{job.name} failed {job.errors} times: {job.last_error}" for job in failed)
@@ -627,3 +710,28 @@ class Broadcaster:
                 continue
             for suffix, data in sensor_messages.build(spec, reading, reading["time"]):
                 self.send(keys[suffix], data, reading["time"])
+
+
+def drove(tracker, truth, velocity, seconds):
+    """Whether a robot could have driven from where its odometry last saw it to its true pose
+    now (not when time went back, or it was put somewhere else)."""
+    dt = seconds - tracker.time
+    if dt < 0.0:
+        return False
+    reach = (float(np.linalg.norm(velocity)) + MAX_ACCELERATION * dt) * dt + TELEPORT_SLACK
+    return float(np.linalg.norm(np.subtract(truth[0], tracker.position))) <= reach
+
+
+def robot_topics(robot, resolve_name=resolve):
+    """{ROBOT_TOPICS key: Topic} of a robot, each keyed by its absolute name (unique, and what
+    a reader asks for)."""
+    out = {}
+    for which, (suffix, kind, qos, private) in ROBOT_TOPICS.items():
+        name = resolve_name(f"~/{topic_token(robot.name)}/{suffix}" if private else robot.topic(suffix))
+        out[which] = Topic(name, name, kind, qos)
+    return out
+
+
+def topic_token(name):
+    """An entity name as one token of a topic name ('.' and '-' are not allowed there)."""
+    return re.sub(r"[^A-Za-z0-9_]", "_", name)

@@ -194,6 +194,8 @@ class FoxgloveServer:
     def on_client_advertise(self, client, channel):
         topic = channel.topic if channel.topic.startswith("/") else f"/{channel.topic}"
         sub = self.inputs.get(topic)
+        if sub is None and topic in self.runtime.inputs.command_topics():  # a namespaced robot's cmd_vel
+            sub = self.inputs[self.runtime.resolve_name("cmd_vel")]
         if sub is None and topic in NAVIGATION_GOALS:
             self.runtime.log.debug(f"foxglove: {channel.topic}: a navigation goal, ignored (no planner)")
             return
@@ -212,7 +214,7 @@ class FoxgloveServer:
             self._warn(f"{channel.topic}: encoding {channel.encoding!r} not supported (cdr or json)")
             return
         with self._lock:
-            self.client_channels[(client.id, channel.id)] = (sub.key, decode)
+            self.client_channels[(client.id, channel.id)] = (sub.key, decode, topic)
 
     def on_client_unadvertise(self, client, client_channel_id):
         with self._lock:
@@ -222,13 +224,13 @@ class FoxgloveServer:
         entry = self.client_channels.get((client.id, client_channel_id))
         if entry is None:
             return
-        key, decode = entry
+        key, decode, topic = entry
         try:
             message = decode(data)
         except Exception as error:  # a client's bytes must never reach the loop as an exception
             self._warn(f"{key}: undecodable message ignored ({type(error).__name__}: {error})")
             return
-        self.runtime.inputs.handle(key, message)
+        self.runtime.inputs.handle(key, message, topic)
 
     def on_get_parameters(self, client, param_names, request_id=None):
         store = self.runtime.parameters

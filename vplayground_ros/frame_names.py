@@ -1,21 +1,28 @@
-"""The names of the frames the node publishes beside the entities' own (SPEC 6.1, 7): no body,
-vehicle or sensor may take one. A body's name is its frame on /tf and a sensor's name is its
-frame too, so such a name would give a frame two parents, or a loop."""
+"""The names of the frames the node publishes beside the entities' own (SPEC 6.1, 7; issue 39):
+no body, vehicle or sensor may take one. A body's name is its frame on /tf and a sensor's name is
+its frame too, so such a name would give a frame two parents, or a loop. A namespaced robot's
+frames hold a '/', which no entity name does."""
 from .messages import WHEEL_NAMES
-from .parameters import FRAMES
+from .parameters import FRAMES, Frames
+from .robots import STACK_FRAMES, robot_frames
 from .sensor_messages import optical_frame
 from .sensors import CAMERAS, WORLD
 
-WHEEL_FRAMES = tuple(f"wheel_{wheel}" for wheel in WHEEL_NAMES)  # base_link -> wheel_<position>
-DEFAULT_FRAMES = tuple(FRAMES.values())  # (world, odom, base) as the parameters have them by default
+DEFAULT_FRAMES = Frames(*FRAMES.values())  # as the parameters have them by default
 
 
 def node_frames(frames=DEFAULT_FRAMES):
     """{frame: what it is} of the frames the node publishes beside the entities' own, for the
-    (world, odom, base) frame names `frames`."""
-    world_frame, odom_frame, base_frame = frames
-    return {WORLD: "the world frame's name in a sensor's parent", **{wheel: "a wheel frame of the car" for wheel in WHEEL_FRAMES},
-            world_frame: "the world_frame", odom_frame: "the odom_frame", base_frame: "the base_frame (the car)"}
+    frame names `frames` (parameters.Frames): the world frame, the frames a stack gives names of
+    its own (map, earth), and a robot's in the root namespace (odom, base_footprint, base_link,
+    its wheels' links)."""
+    root = robot_frames(frames, "")
+    wheel_links = {link: "a wheel link of the robot in the root namespace"
+                   for links in (root.suspension, root.steering, root.wheel) for link in links}
+    return {WORLD: "the world frame's name in a sensor's parent",
+            **{frame: "a frame a ROS 2 stack publishes (REP 105)" for frame in STACK_FRAMES}, **wheel_links,
+            frames.world: "the world_frame", root.odom: "the odom_frame", root.footprint: "the footprint_frame",
+            root.base: "the base_frame (the robot in the root namespace)"}
 
 
 def sensor_frames(spec):
@@ -28,8 +35,8 @@ def optical_frames(sensor_specs):
     return {optical_frame(s["name"]): f"the optical frame of {s['name']}" for s in sensor_specs if s["type"] in CAMERAS}
 
 
-def mount_frame(frames, car):
-    """The frame a sensor's `parent` names, as a function of it: `world` the world frame, the
-    driven car (`car`, or None) the base frame, a body its own frame (its name)."""
-    world_frame, _, base_frame = frames
-    return lambda parent: world_frame if parent == WORLD else base_frame if parent == car else parent
+def mount_frame(frames, robots):
+    """The frame a sensor's `parent` names, as a function of it: `world` the world frame, a
+    robot (robots.Robot, by its vehicle's name) its base_link, a body its own frame (its name)."""
+    bases = {robot.name: robot.frames.base for robot in robots}
+    return lambda parent: frames.world if parent == WORLD else bases.get(parent, parent)

@@ -13,6 +13,7 @@ import yaml
 
 from .api.frames import frame_pose
 from .interfaces import decoder
+from .parameters import frames as frame_names
 from .physics.math3d import rpy_to_quat
 from .sensors import pose_matrix
 
@@ -48,21 +49,33 @@ def from_cdr(type_name, data):
 
 
 class Inputs:
-    def __init__(self, sim, requests, parameters, log, car):
+    """`robots` (snapshot -> [robots.Robot]) and `resolve` (relative name -> absolute, remaps
+    applied) are the Broadcaster's: each robot's cmd_vel is its namespace's."""
+
+    def __init__(self, sim, requests, parameters, log, robots, resolve):
         self.sim = sim
         self.requests = requests
         self.parameters = parameters
         self.log = log
-        self.car = car  # snapshot -> the driven car's name or None
+        self.robots = robots
+        self.resolve = resolve
         self.handlers = {"cmd_vel": self.cmd_vel, "clicked_point": self.clicked_point,
                          "initial_pose": self.initial_pose, "push": self.push}
 
-    def handle(self, key, msg):
-        """Runs the handler of subscription `key`; a message missing a field is logged, not
-        raised, and a bug is logged once and counted (Simulation.fault), whichever transport
-        delivered the message."""
+    def command_topics(self):
+        """{absolute cmd_vel topic: robot name} of every robot now (the root namespace's is
+        cmd_vel's own subscription; the transports subscribe to the others as robots come)."""
+        return {self.resolve(robot.topic("cmd_vel")): robot.name for robot in self.robots(self.sim.snapshot)}
+
+    def handle(self, key, msg, topic=None):
+        """Runs the handler of subscription `key` (cmd_vel: `topic` says which, absolute; the
+        root namespace's when None); a message missing a field is logged, not raised, and a bug
+        is logged once and counted (Simulation.fault), whichever transport delivered it."""
         try:
-            self.handlers[key](msg)
+            if key == "cmd_vel":
+                self.cmd_vel(msg, topic or self.resolve("cmd_vel"))
+            else:
+                self.handlers[key](msg)
         except (AttributeError, TypeError, ValueError) as error:
             self.log.warning(f"{key}: malformed message ignored ({error})")
         except TimeoutError as error:
@@ -80,20 +93,20 @@ class Inputs:
                 self.log.warning(f"{key} ignored: {reason}")
         self.sim.submit(fn).add_done_callback(report)
 
-    def cmd_vel(self, msg):
+    def cmd_vel(self, msg, topic):
+        """Twist or TwistStamped on a robot's cmd_vel `topic` (absolute): drives that robot."""
         twist = msg.twist if hasattr(msg, "twist") else msg
         speed, yaw_rate = float(twist.linear.x), float(twist.angular.z)
         timeout = self.parameters["cmd_vel_timeout"]
         if not (math.isfinite(speed) and math.isfinite(yaw_rate)):
-            self.log.warning("cmd_vel with non-finite values ignored")
+            self.log.warning(f"{topic} with non-finite values ignored")
             return
-        car = self.car(self.sim.snapshot)
+        car = self.command_topics().get(topic)
         if car is not None:
-            self.submit("cmd_vel", lambda world: world.drive(car, speed, yaw_rate, timeout))
+            self.submit(topic, lambda world: world.drive(car, speed, yaw_rate, timeout))
 
     def frames(self):
-        """(world, odom, base) frame names."""
-        return tuple(self.parameters[p] for p in ("world_frame", "odom_frame", "base_frame"))
+        return frame_names(self.parameters)
 
     def to_world(self, frame, point):
         """A point in any frame the simulator publishes, in the world frame (None if unknown)."""
@@ -114,13 +127,13 @@ class Inputs:
         (self.log.info if ok else self.log.warning)(f"clicked_point: {message}")
 
     def initial_pose(self, msg):
-        car = self.car(self.sim.snapshot)
+        car = next((r.name for r in self.robots(self.sim.snapshot) if not r.namespace), None)
         frame = str(msg.header.frame_id)
         pose = msg.pose.pose
         p = [float(getattr(pose.position, k)) for k in "xyz"]
         q = [float(getattr(pose.orientation, k)) for k in "xyzw"]
         if car is None:
-            self.log.warning("initialpose ignored: there is no car")
+            self.log.warning("initialpose ignored: no robot in the root namespace")
             return
         if not (np.all(np.isfinite(p)) and np.all(np.isfinite(q))):
             self.log.warning(f"initialpose ignored: the pose is not finite ({p}, {q})")

@@ -1,10 +1,7 @@
 """Snapshots -> the CDR bytes of the SPEC 6.1 messages, built without rclpy: markers, poses,
 clouds and transforms straight from numpy (cdr.py), the small messages as dicts through
-interfaces.encode. Every stamp is simulation time; frames follow REP-105: `world` -> `odom` ->
-`base_link` (the car), wheels under base_link, bodies under `world`.
-
-Odometry here is perfect (a simulator knows), so odom is the world: world -> odom is the
-identity.
+interfaces.encode. Every stamp is simulation time; frames follow REP 105 (robots.py: each
+robot's odom -> base_footprint -> base_link, its wheels under base_link), bodies under `world`.
 """
 import math
 from collections import namedtuple
@@ -17,10 +14,20 @@ from .physics import shapes
 from .physics.math3d import quaternions_to_matrices
 
 WHEEL_NAMES = ("front_left", "front_right", "rear_left", "rear_right")
+# Each wheel's joints, from the chassis out (robots.py, robot_description.py): <wheel>_suspension
+# (prismatic, the spring's compression), <wheel>_steer (revolute), <wheel>_spin (continuous).
+WHEEL_JOINTS = ("suspension", "steer", "spin")
+WHEEL_WIDTH = 0.25  # m: as the markers and robot_description draw a wheel
+
+
+def joint_names():
+    """The wheels' joints in the order joint_states sends them: each wheel's WHEEL_JOINTS."""
+    return [f"{wheel}_{joint}" for wheel in WHEEL_NAMES for joint in WHEEL_JOINTS]
 COLOURS = {  # category -> RGBA
     "box": (0.85, 0.55, 0.20, 1.0),
     "immovable": (0.35, 0.35, 0.45, 1.0),
     "vehicle": (0.15, 0.45, 0.85, 1.0),
+    "wheel": (0.1, 0.1, 0.1, 1.0),
     "frozen": (0.6, 0.6, 0.6, 1.0),
     "ground": (0.30, 0.42, 0.30, 1.0),
     "playground": (0.55, 0.60, 0.65, 1.0),
@@ -57,6 +64,10 @@ def clock(seconds):
 
 def uint8(value):
     return encode("std_msgs/msg/UInt8", {"data": int(value)})
+
+
+def string(value):
+    return encode("std_msgs/msg/String", {"data": str(value)})
 
 
 def float64(value):
@@ -137,7 +148,7 @@ def shape_markers(shape_codes, dimensions, poses, ids):
 
 class BodyMarkers:
     """~/bodies/markers: DELETEALL, then each body's shape (shape_markers; ns = category, ids
-    stable per name, frozen grey), but for the driven car: ~/car/markers draws it with its
+    stable per name, frozen grey), but for the vehicles: ~/<name>/markers draws each with its
     wheels, and two markers at one place would show whichever colour the viewer draws last.
 
     Names, categories, ids, shapes and sizes change only with the layout (spawn, remove, edit):
@@ -150,15 +161,19 @@ class BodyMarkers:
         self._layout = None   # (key, drawn rows or None, kinds, namespaces, ShapeMarkerLayout, points)
         self._colours = None  # (frozen flags, the layout entry, colours)
 
-    def layout(self, snapshot, ids, car):
+    def layout(self, snapshot, ids):
         s = snapshot.state
         key = (snapshot.names, s["immovable"], s["shapes"], s["dimensions"], s["hull_triangles"], ids,
-               tuple(snapshot.vehicles), car)
+               tuple(snapshot.vehicles))
         cached = self._layout
         if cached is not None and all(a is b for a, b in zip(key[:6], cached[0][:6])) and key[6:] == cached[0][6:]:
             return cached
         kinds = categories(snapshot)
-        drawn = None if car is None else np.arange(len(kinds)) != snapshot.names.index(car)
+        vehicles = [snapshot.names.index(name) for name in snapshot.vehicles]
+        drawn = None
+        if vehicles:
+            drawn = np.ones(len(kinds), bool)
+            drawn[vehicles] = False
         codes, dimensions = s["shapes"], s["dimensions"]
         if drawn is not None:
             kinds, ids, codes, dimensions = kinds[drawn], np.asarray(ids)[drawn], codes[drawn], dimensions[drawn]
@@ -166,16 +181,16 @@ class BodyMarkers:
         namespaces = CATEGORIES[kinds[markers.rows]]
         for array in (kinds, namespaces, *markers):
             array.flags.writeable = False
-        hulls = hull_points(s["hull_triangles"], None if car is None else snapshot.names.index(car))
+        hulls = hull_points(s["hull_triangles"], vehicles)
         points = None if hulls is None else tuple(
             b"" if hulls[row] is None else np.ascontiguousarray(hulls[row], "<f8").tobytes()
             for row in markers.rows.tolist())
         self._layout = (key, drawn, kinds, namespaces, markers, points)
         return self._layout
 
-    def encode(self, snapshot, frame, ids, poses, car=None):
+    def encode(self, snapshot, frame, ids, poses):
         """ids (N,) the bodies' marker ids, poses (N, 7) xyz + xyzw of every body."""
-        layout = self.layout(snapshot, ids, car)
+        layout = self.layout(snapshot, ids)
         _, drawn, kinds, namespaces, markers, points = layout
         frozen = snapshot.state["frozen"]
         cached = self._colours
@@ -188,15 +203,13 @@ class BodyMarkers:
                                    markers.scales, cached[2], points)
 
 
-def hull_points(hull_triangles, left_out=None):
+def hull_points(hull_triangles, left_out=()):
     """Each row's TRIANGLE_LIST points (a convex body's hull triangles, (3T, 3)), None for the
-    other shapes; None when no body is convex. `left_out`: a row that is not drawn (the car)."""
+    other shapes; None when no body is convex. `left_out`: rows that are not drawn (vehicles)."""
     if all(t is None for t in hull_triangles):
         return None
-    rows = [t.reshape(-1, 3) if t is not None else None for t in hull_triangles]
-    if left_out is not None:
-        del rows[left_out]
-    return rows
+    skipped = set(left_out)
+    return [t.reshape(-1, 3) if t is not None else None for row, t in enumerate(hull_triangles) if row not in skipped]
 
 
 def marker_array(seconds, frame, markers):
@@ -254,37 +267,33 @@ def contact_markers(snapshot, frame, max_points):
         marker("contact_normals", 1, LINE_LIST, scale=(0.01, 0.01, 0.01), rgba=COLOURS["contact"], points=segments)])
 
 
-# The odometry is the car's true motion: its covariances are this small diagonal (as the IMU's
-# exact parts), not zero, which robot_localization and others take for "unknown".
+# What the simulator knows exactly gets this small diagonal (as the IMU's exact parts), not
+# zeros, which robot_localization and others take for "unknown".
 EXACT_VARIANCE = 1e-12
 EXACT_COVARIANCE = [EXACT_VARIANCE if row == column else 0.0 for row in range(6) for column in range(6)]
 
 
-def car_odometry(snapshot, name, frame, child):
-    """Odometry of the car: pose in `frame` (world and odom coincide), twist in base_link."""
-    row = snapshot.names.index(name)
-    s = snapshot.state
-    q = s["quaternions"][row]
-    to_body = quaternions_to_matrices(q[None])[0].T
+def odometry(seconds, frame, child, pose, child_orientation, linear, angular, pose_covariance=EXACT_COVARIANCE,
+             twist_covariance=EXACT_COVARIANCE):
+    """nav_msgs/Odometry: `pose` (xyz, xyzw) of `child` in `frame`; the twist (world linear and
+    angular velocity) in the child's axes, which `child_orientation` (xyzw) turns into the world's."""
+    to_child = quaternions_to_matrices(np.asarray(child_orientation, float)[None])[0].T
     return encode("nav_msgs/msg/Odometry", {
-        "header": header(snapshot.time, frame), "child_frame_id": child,
-        "pose": {"pose": {"position": xyz(s["positions"][row]), "orientation": xyzw(q)},
-                 "covariance": EXACT_COVARIANCE},
-        "twist": {"twist": {"linear": xyz(to_body @ s["linear_velocities"][row]),
-                            "angular": xyz(to_body @ s["angular_velocities"][row])},
-                  "covariance": EXACT_COVARIANCE}})
+        "header": header(seconds, frame), "child_frame_id": child,
+        "pose": {"pose": {"position": xyz(pose[0]), "orientation": xyzw(pose[1])}, "covariance": list(pose_covariance)},
+        "twist": {"twist": {"linear": xyz(to_child @ linear), "angular": xyz(to_child @ angular)},
+                  "covariance": list(twist_covariance)}})
 
 
 def joint_states(snapshot, name):
-    """Per wheel: <wheel>_steer (angle, rad/s over the last step), <wheel>_spin (angle, rate),
-    <wheel>_suspension (compression m, its rate m/s)."""
+    """Per wheel (joint_names()): <wheel>_suspension (compression m, its rate m/s),
+    <wheel>_steer (angle, rad/s over the last step), <wheel>_spin (angle, rate)."""
     v = snapshot.vehicles[name]
-    names, position, velocity = [], [], []
-    for w, wheel in enumerate(WHEEL_NAMES):
-        names += [f"{wheel}_steer", f"{wheel}_spin", f"{wheel}_suspension"]
-        position += [float(v["steer_angle"][w]), float(v["spin_angle"][w]), float(v["compression"][w])]
-        velocity += [float(v["steer_rate"][w]), float(v["spin_rate"][w]), float(v["compression_rate"][w])]
-    return encode("sensor_msgs/msg/JointState", {"header": header(snapshot.time, ""), "name": names,
+    position, velocity = [], []
+    for w in range(len(WHEEL_NAMES)):
+        position += [float(v["compression"][w]), float(v["steer_angle"][w]), float(v["spin_angle"][w])]
+        velocity += [float(v["compression_rate"][w]), float(v["steer_rate"][w]), float(v["spin_rate"][w])]
+    return encode("sensor_msgs/msg/JointState", {"header": header(snapshot.time, ""), "name": joint_names(),
                                                  "position": position, "velocity": velocity})
 
 
@@ -293,32 +302,6 @@ def car_command(snapshot, name, frame):
     return encode("geometry_msgs/msg/TwistStamped", {
         "header": header(snapshot.time, frame),
         "twist": {"linear": xyz((v["command_speed"], 0, 0)), "angular": xyz((0, 0, v["command_yaw_rate"]))}})
-
-
-def car_transforms(snapshot, name, frames, wheels):
-    """[(parent, child, pose xyz + xyzw)]: odom -> base_link, and base_link -> wheel_<position>
-    (wheel_transforms)."""
-    _, odom_frame, base_frame = frames
-    row = snapshot.names.index(name)
-    s = snapshot.state
-    return [(odom_frame, base_frame, np.concatenate([s["positions"][row], s["quaternions"][row]])),
-            *wheel_transforms(snapshot, name, base_frame, "", wheels)]
-
-
-def wheel_transforms(snapshot, name, parent, prefix, wheels):
-    """[(parent, child, pose xyz + xyzw)] of vehicle `name`'s wheels from its chassis frame
-    `parent`: <prefix>wheel_<position> at the wheel's centre (the mount, down by the spring's
-    current length), steered and spun."""
-    v = snapshot.vehicles[name]
-    out = []
-    for w, wheel in enumerate(WHEEL_NAMES):
-        centre = list(wheels[w]["mount"])
-        centre[2] -= wheels[w]["spring_length"] - v["compression"][w]
-        steer, spin = 0.5 * v["steer_angle"][w], 0.5 * v["spin_angle"][w]
-        rotation = quaternion_multiply((0.0, 0.0, math.sin(steer), math.cos(steer)),
-                                       (0.0, math.sin(spin), 0.0, math.cos(spin)))
-        out.append((parent, f"{prefix}wheel_{wheel}", [*centre, *rotation]))
-    return out
 
 
 def car_markers(snapshot, name, frame, wheels):
@@ -340,8 +323,8 @@ def car_markers(snapshot, name, frame, wheels):
         axle = quaternion_multiply(quaternion_multiply(tuple(q), (0.0, 0.0, math.sin(half), math.cos(half))),
                                    (math.sin(math.pi / 4), 0.0, 0.0, math.cos(math.pi / 4)))
         diameter = 2.0 * wheel["radius"]
-        markers.append(marker("wheels", w, CYLINDER, [*centre_world, *axle], (diameter, diameter, 0.25),
-                              (0.1, 0.1, 0.1, 1.0)))
+        markers.append(marker("wheels", w, CYLINDER, [*centre_world, *axle], (diameter, diameter, WHEEL_WIDTH),
+                              COLOURS["wheel"]))
         springs += [mount_world, centre_world]
         if v["in_contact"][w]:
             hits.append(v["contact_point"][w])

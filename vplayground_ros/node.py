@@ -29,6 +29,8 @@ def reliable(depth, durability=DurabilityPolicy.VOLATILE):
 
 QOS = {"reliable_1": reliable(1), "reliable_10": reliable(10), "reliable_100": reliable(100),
        "latched": reliable(1, DurabilityPolicy.TRANSIENT_LOCAL)}
+# Wall s between looks at which robots there are, to subscribe to their cmd_vel.
+ROBOT_POLL_PERIOD = 0.25
 # Best effort, depth 1: matches both reliable and best-effort publishers (Foxglove's Teleop).
 COMMAND_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT, history=HistoryPolicy.KEEP_LAST)
 PARAMETER_TYPES = {"bool": Parameter.Type.BOOL, "int": Parameter.Type.INTEGER, "float": Parameter.Type.DOUBLE,
@@ -164,12 +166,28 @@ class SimulatorNode(Node):
         self.runtime = runtime
         self._declare_parameters()
         runtime.broadcaster.add_sink(RosSink(self))
-        for sub in subscriptions(runtime.parameters["cmd_vel_stamped"]):
+        table = subscriptions(runtime.parameters["cmd_vel_stamped"])
+        for sub in table:
             self.create_subscription(interface_class(sub.type), sub.name,
                                      lambda msg, key=sub.key: runtime.inputs.handle(key, msg),
                                      COMMAND_QOS if sub.key == "cmd_vel" else QOS["reliable_10"])
+        self._command_type = interface_class(next(sub.type for sub in table if sub.key == "cmd_vel"))
+        self._commands = {}  # absolute topic -> subscription of a namespaced robot's cmd_vel
+        self._follow_robots()
+        self.create_timer(ROBOT_POLL_PERIOD, self._follow_robots)
         for service in runtime.services:
             self.create_service(interface_class(service.type), service.name, self._serve(service.handler))
+
+    def _follow_robots(self):
+        """Each namespaced robot's cmd_vel, subscribed as robots come (a spawn, another scene)
+        and dropped as they go; the root namespace's is the table's own subscription."""
+        inputs = self.runtime.inputs
+        wanted = set(inputs.command_topics()) - {inputs.resolve("cmd_vel")}
+        for topic in wanted - self._commands.keys():
+            self._commands[topic] = self.create_subscription(
+                self._command_type, topic, lambda msg, t=topic: inputs.handle("cmd_vel", msg, t), COMMAND_QOS)
+        for topic in self._commands.keys() - wanted:
+            self.destroy_subscription(self._commands.pop(topic))
 
     @staticmethod
     def _serve(handler):

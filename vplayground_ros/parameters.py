@@ -14,6 +14,7 @@ writes a value itself:
 """
 import math
 import threading
+from collections import namedtuple
 from dataclasses import dataclass
 from types import MappingProxyType
 
@@ -21,8 +22,35 @@ from .physics import specs
 
 PHYSICS = ("gravity", "steps_per_second", "resolve_iterations", "octree_depth", "freezing.enabled",
            "freezing.time", "freezing.linear_speed", "freezing.angular_speed")
-# The frames the node publishes (REP-105), read-only parameters: their defaults.
-FRAMES = {"world_frame": "world", "odom_frame": "odom", "base_frame": "base_link"}
+# The frames the node publishes (REP 105), read-only parameters: their defaults, in Frames' order.
+FRAMES = {"world_frame": "world", "odom_frame": "odom", "footprint_frame": "base_footprint",
+          "base_frame": "base_link"}
+Frames = namedtuple("Frames", "world odom footprint base")
+
+
+def frames(values):
+    """The Frames of parameter values (a Parameters, or a mapping)."""
+    return Frames(*(values[name] for name in FRAMES))
+
+
+def check_frames(values):
+    """Refuses frame names that would give a frame two parents or make it its own parent (tf2
+    rejects an odom -> odom transform): each must be distinct; ValueError naming both."""
+    seen = {}
+    for name in FRAMES:
+        frame = values[name]
+        if not frame or frame.startswith("/") or any(c.isspace() for c in frame):
+            raise ValueError(f"{name}: {frame!r} is not a frame name (no leading '/', no spaces, not empty)")
+        if frame in seen:
+            raise ValueError(f"{name} and {seen[frame]} are both {frame!r}: one frame would be its own parent "
+                             "or have two")
+        seen[frame] = name
+
+
+def localization(value, name):
+    """What sits above a robot's odom frame (robots.py): the true pose's transform, or nothing."""
+    if value not in specs.LOCALIZATIONS:
+        raise ValueError(f"{name}: {value!r} is not one of {', '.join(specs.LOCALIZATIONS)}")
 # ~/reset scopes (simulation_interfaces ResetSimulation): `reset_scope` and ~/reset take the
 # same values, by the one rule of reset_scope().
 SCOPE_TIME, SCOPE_STATE, SCOPE_SPAWNED, SCOPE_ALL = 1, 2, 4, 255
@@ -89,9 +117,18 @@ def parameter_table(settings, options, scene_directories, max_bodies, solver_thr
         P("cmd_vel_timeout", 1.2, "s without cmd_vel before the car brakes to rest", "float", 0.01, 3600),
         P("cmd_vel_stamped", False, "cmd_vel is geometry_msgs/TwistStamped", "bool", read_only=True),
         P("world_frame", FRAMES["world_frame"], "fixed frame of the simulation", "str", read_only=True),
-        P("odom_frame", FRAMES["odom_frame"], "the car's odometry frame", "str", read_only=True),
-        P("base_frame", FRAMES["base_frame"], "the car's body frame", "str", read_only=True),
-        P("publish_body_frames", False, "publish a transform per body on ~/transforms", "bool"),
+        P("odom_frame", FRAMES["odom_frame"], "each robot's odometry frame (<namespace>/ before it)", "str",
+          read_only=True),
+        P("footprint_frame", FRAMES["footprint_frame"], "each robot's base_footprint: base_link on the ground, "
+          "heading only", "str", read_only=True),
+        P("base_frame", FRAMES["base_frame"], "each robot's body frame", "str", read_only=True),
+        P("localization", "ground_truth", "above each robot's odom: ground_truth publishes world_frame -> odom "
+          "(the odometry's drift), none nothing (for SLAM or AMCL); a vehicle's own key wins", "str",
+          rule=localization),
+        P("publish_odom_tf", True, "publish odom -> base_footprint (false: another node, an EKF, owns it); "
+          "a vehicle's own key wins", "bool"),
+        P("publish_body_frames", False, "publish world -> every body on /tf and ~/transforms (bodies that carry "
+          "sensors always are)", "bool"),
         P("step_count", 1, "steps one ~/step call advances", "int", 1, 1000000),
         P("reset_scope", SCOPE_ALL, "~/reset scope bits: 1 TIME, 2 STATE, 4 SPAWNED, 255 ALL", "int", 1, SCOPE_ALL,
           rule=reset_scope),
@@ -140,6 +177,8 @@ class Parameters:
         if spec.kind == "str":
             if not isinstance(value, str):
                 raise ValueError(f"{name}: expected a string, got {type(value).__name__}")
+            if spec.rule is not None:
+                spec.rule(value, name)
             return value
         if spec.kind == "str[]":
             if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) for v in value):
@@ -169,6 +208,8 @@ class Parameters:
         """Start-up values from the command line (--ros-args -p), read-only ones included:
         type- and range-checked like a set, then applied; ValueError naming the first problem."""
         checked = {name: self.check(name, value, read_only_ok=True) for name, value in values.items()}
+        if checked.keys() & FRAMES:
+            check_frames({**self._values, **checked})
         writable = {n: v for n, v in checked.items() if not self.specs[n].read_only}
         ok, reason = self.set(writable)
         if not ok:

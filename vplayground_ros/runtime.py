@@ -8,7 +8,7 @@ from pathlib import Path
 from .api import DEFAULT_MAX_BODIES, Requests, default_scene_directories
 from .broadcast import BagSink, Broadcaster, resolve
 from .inputs import Inputs
-from .parameters import FRAMES, PHYSICS, Parameters, parameter_table, settings_from
+from .parameters import FRAMES, PHYSICS, Parameters, frames, parameter_table, settings_from
 from .services import service_table
 
 
@@ -30,7 +30,7 @@ class Runtime:
         self.broadcaster = Broadcaster(sim, self.parameters, log, resolve_name)
         if recorder is not None:
             self.broadcaster.add_sink(BagSink(recorder))
-        self.inputs = Inputs(sim, self.requests, self.parameters, log, self.broadcaster.car)
+        self.inputs = Inputs(sim, self.requests, self.parameters, log, self.broadcaster.robots, resolve_name)
         self.services = service_table(self)
         self.sim.real_time_factor = self.parameters["real_time_factor"]
         self._stop = threading.Event()
@@ -75,7 +75,7 @@ class Runtime:
         if "duration" in changed:
             self.sim.duration = changed["duration"] or None  # 0: until stopped
         if changed.keys() & FRAMES:
-            self.broadcaster.frames = tuple(self.parameters[name] for name in FRAMES)
+            self.broadcaster.frames = frames(self.parameters)
 
 
 def take_settings(world, settings):

@@ -19,6 +19,7 @@ from .physics import specs
 from .physics.math3d import rpy_to_quat
 from .physics.math3d import quaternions_to_matrices
 from .resources import find_shared
+from .robots import validate_robot
 from .sensors import validate_sensors
 
 SCENE_VERSION = 1
@@ -276,7 +277,7 @@ def validate_scene(scene, base, max_bodies=None, directories=None, frames=DEFAUL
     bodies = [claim(specs.validate_body(body_mesh_points(raw, f"bodies[{k}]", base, directories),
                                         f"bodies[{k}]"), f"bodies[{k}]")
               for k, raw in enumerate(validate_list(scene, "bodies"))]
-    vehicles = [claim(specs.validate_vehicle(raw, f"vehicles[{k}]"), f"vehicles[{k}]")
+    vehicles = [claim(validate_robot(specs.validate_vehicle(raw, f"vehicles[{k}]"), f"vehicles[{k}]"), f"vehicles[{k}]")
                 for k, raw in enumerate(validate_list(scene, "vehicles"))]
     # Named before the sensors are checked: a sensor's name is a frame and must not be a body's,
     # generated or not.

@@ -57,7 +57,7 @@ class Snapshot:
     # [(sensors.Sensor, reading)] of the sensors read after this batch's last step, on the
     # simulation thread (the rays need the World); the publisher turns them into messages.
     readings: list = field(default_factory=list)
-    wheels: dict = field(default_factory=dict)  # vehicle name -> its wheel specs (shared)
+    vehicle_specs: dict = field(default_factory=dict)  # vehicle name -> World.vehicle() (shared)
     scenery: "Scenery" = None
 
 
@@ -67,7 +67,7 @@ class Snapshot:
 Scenery = namedtuple("Scenery", "ground triangles version")
 
 # What the snapshots of one world's layout share, taken once per layout rather than per batch.
-SharedLayout = namedtuple("SharedLayout", "world version names vehicle_names properties wheels scenery")
+SharedLayout = namedtuple("SharedLayout", "world version names vehicle_names properties vehicle_specs scenery")
 
 
 class Simulation:
@@ -351,7 +351,7 @@ class Simulation:
             state={**self._motion_state(world, layout), **layout.properties},
             vehicles={name: world.vehicle_state(name) for name in layout.vehicle_names},
             contacts=world.contacts() if self.with_contacts else None,
-            wheels=layout.wheels, scenery=layout.scenery)
+            vehicle_specs=layout.vehicle_specs, scenery=layout.scenery)
 
     def _resting(self, world):
         """Every body was frozen or immovable in the last snapshot of this world and no command
@@ -377,7 +377,7 @@ class Simulation:
         return motion
 
     def _shared_layout(self, world):
-        """Names, body properties, wheels and scenery, taken again only when the world's layout
+        """Names, body properties, vehicle specs and scenery, taken again only when the world's layout
         or scenery changed: the publisher reads these from snapshots, never from the World."""
         layout = self._layout
         version = (world.layout_version, world.scenery_version)
@@ -394,5 +394,5 @@ class Simulation:
                 scenery = Scenery(world.ground, triangles, world.scenery_version)
             layout = self._layout = SharedLayout(
                 world, version, world.body_names(), vehicle_names, properties,
-                {name: world.vehicle(name)["wheels"] for name in vehicle_names}, scenery)
+                {name: world.vehicle(name) for name in vehicle_names}, scenery)
         return layout

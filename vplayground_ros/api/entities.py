@@ -11,6 +11,7 @@ import yaml
 from ..frame_names import node_frames, optical_frames, sensor_frames
 from ..physics import specs
 from ..physics.world import prepare_body
+from ..robots import validate_robot
 from ..scene import body_mesh_points
 from ..sensors import TYPES as SENSOR_TYPES, validate_sensor
 from .descriptions import describe, describe_sensor
@@ -104,7 +105,7 @@ class EntityRequests:
         vehicle = "wheels" in item or "chassis" in item
         # A body's hull and mass are checked here too: a list is refused before the world is
         # asked, not rolled back (which would wake what the bodies touched).
-        spec = specs.validate_vehicle(item, path) if vehicle else prepare_body(item, path)[0]
+        spec = validate_robot(specs.validate_vehicle(item, path), path) if vehicle else prepare_body(item, path)[0]
         return path, vehicle, spec, rename, frame
 
     def _spawn(self, world, prepared, cap, frames):

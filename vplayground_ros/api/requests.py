@@ -8,7 +8,7 @@ import copy
 import logging
 from pathlib import Path
 
-from ..parameters import FRAMES, WorldSettings
+from ..parameters import WorldSettings, frames
 from ..scene import world_to_scene
 from .entities import EntityRequests
 from .file_access import default_scene_directories
@@ -41,8 +41,8 @@ class Requests(EntityRequests, ControlRequests, SceneRequests):
         self.initial = copy.deepcopy(world_to_scene(simulation.world))
 
     def frames(self):
-        """(world, odom, base) frame names: the parameters' (read-only)."""
-        return tuple(self.settings[name] for name in FRAMES)
+        """The frame names: the parameters' (read-only), parameters.Frames."""
+        return frames(self.settings)
 
     def _follow_scene_settings(self):
         """The settings owner takes the loaded scene's settings, which the new World has."""

@@ -284,6 +284,14 @@ VEHICLE_DEFAULTS = {
 }
 VEHICLE_KEYS = {"name", "position", "rpy", "quaternion", "linear_velocity", "angular_velocity",
                 "chassis", "engine_power", "brake_power", "max_steer", "wheels"}
+# What a vehicle is as a ROS robot (vplayground_ros.robots): kept with it, no physics. Its
+# `odometry` error model is a mapping whose keys vplayground_ros.odometry checks (scene files and
+# ~/spawn do, before the World is asked).
+ROBOT_KEYS = {"namespace", "localization", "publish_odom_tf", "odometry"}
+LOCALIZATIONS = ("ground_truth", "none")
+# A ROS namespace, relative: tokens of letters, digits and '_' (not starting with a digit), '/'
+# between them; '' for none.
+NAMESPACE_PATTERN = re.compile(r"(?:[A-Za-z_][A-Za-z0-9_]*(?:/[A-Za-z_][A-Za-z0-9_]*)*)?")
 WHEEL_COUNT = 4  # front-left, front-right, rear-left, rear-right
 # The chassis is a body: its material and flags, besides its size and (own) mass.
 CHASSIS_BODY_KEYS = {"elasticity", "static_friction", "dynamic_friction", "immovable",
@@ -347,7 +355,7 @@ def validate_vehicle_edit(raw, path):
 
 def validate_vehicle(raw, path="vehicle"):
     """A complete vehicle spec (SPEC 3 `vehicles` entry) over the defaults."""
-    mapping(raw, path, VEHICLE_KEYS)
+    mapping(raw, path, VEHICLE_KEYS | ROBOT_KEYS)
     for key in ("chassis", "wheels"):
         if key not in raw:
             raise SpecError(child(path, key), "missing")
@@ -368,6 +376,19 @@ def validate_vehicle(raw, path="vehicle"):
             out[key] = number(value, p, 0.0, 1.0e9)
         elif key == "max_steer":
             out[key] = number(value, p, 0.0, 1.5)
+        elif key == "namespace":
+            if not isinstance(value, str) or not NAMESPACE_PATTERN.fullmatch(value):
+                raise SpecError(p, f"{quote(value)} is not a relative ROS namespace (letters, digits and '_' in "
+                                   "tokens separated by '/', or '' for none)")
+            out[key] = value
+        elif key == "localization":
+            if value not in LOCALIZATIONS:
+                raise SpecError(p, f"{quote(value)} is not one of {', '.join(LOCALIZATIONS)}")
+            out[key] = value
+        elif key == "publish_odom_tf":
+            out[key] = boolean(value, p)
+        elif key == "odometry":
+            out[key] = dict(mapping(value, p, value if isinstance(value, dict) else ()))
         else:  # wheels
             if not isinstance(value, list):
                 raise SpecError(p, f"expected a list of {WHEEL_COUNT} wheels, got {type(value).__name__}")

@@ -5,6 +5,7 @@ buffers); the physics runs inside `pipeline.step_world`, many steps per call.
 """
 import heapq
 import os
+import re
 import time
 from collections import namedtuple
 
@@ -183,6 +184,14 @@ class World(WorldQueries):
         name = vehicle.get("name") or self._generate_name("car")
         if name in self._slots:
             raise ValueError(f"{path}.name: a body named {name!r} already exists")
+        # Its ROS namespace (vplayground_ros.robots), fixed now so that no later change moves its
+        # topics: the first robot stands in the root namespace, each other in its name's (with
+        # '_' for the '.' and '-' a name may have and a namespace may not).
+        taken = {self._vehicles.spec(other)["namespace"]: other for other in self.vehicle_names()}
+        vehicle.setdefault("namespace", re.sub(r"[^A-Za-z0-9_]", "_", name) if "" in taken else "")
+        if vehicle["namespace"] in taken:
+            raise specs.SpecError(f"{path}.namespace", f"{vehicle['namespace']!r} is the namespace of "
+                                                       f"{taken[vehicle['namespace']]} already")
         wheels = vehicle["wheels"]
         chassis = {**vehicle["chassis"], "name": name, "position": vehicle["position"],
                    "mass": vehicle["chassis"]["mass"] + sum(w["mass"] for w in wheels)}
