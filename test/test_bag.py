@@ -139,7 +139,7 @@ def reading(topic, msg):
 def test_a_bag_holds_the_same_scans_at_any_speed(bags_at_two_speeds):
     """The default car's sensors, read on simulated time from the state after the step: the
     same readings in real time as as fast as possible (seeded noise included)."""
-    for topic in ("/laser/scan", "/lidar/points", "/depth_camera/depth/image_raw", "/camera/image_raw", "/imu/data"):
+    for topic in ("/scan", "/points", "/depth/image_raw", "/camera/image_raw", "/imu/data"):
         real_time, fast = ([(log_time, reading(topic, msg)) for name, log_time, _, msg in bags_at_two_speeds[rtf]
                             if name == topic] for rtf in ("1", "0"))
         assert len(fast) >= 19 and real_time == fast, topic
@@ -227,12 +227,12 @@ def test_every_split_file_has_one_schema_per_message_type(split_files):
 
 def test_a_point_cloud_reader_finds_every_point_cloud_topic(bag):
     """What KISS-ICP's MCAP loader does: the PointCloud2 schema is the first of that name, its
-    topics the channels with that schema id; it never saw /lidar/points."""
+    topics the channels with that schema id; it never saw the lidar's cloud."""
     with open(bag, "rb") as stream:
         summary = make_reader(stream).get_summary()
     schema_id = [s.id for s in summary.schemas.values() if s.name == "sensor_msgs/msg/PointCloud2"][0]
     topics = {c.topic for c in summary.channels.values() if c.schema_id == schema_id}
-    assert {"/lidar/points", "/vplayground/contacts/points"} <= topics
+    assert {"/points", "/vplayground/contacts/points"} <= topics
 
 
 def test_every_channel_offers_its_qos_as_rosbag2_records_it(bag):

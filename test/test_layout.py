@@ -91,29 +91,32 @@ def test_the_detail_panel_shows_the_simulation_figures():
     assert (detail["selectedHardwareId"], detail["selectedName"]) == ("vplayground", "simulation")
 
 
-def default_robot_topics():
-    """{topic: type} of the default scene's robot, as the node names them."""
-    from vplayground_ros.parameters import FRAMES, Frames
-    from vplayground_ros.resources import find_shared
-    from vplayground_ros.robots import robot
-    from vplayground_ros.scene import load_world
-    world = load_world(find_shared("config/default_scene.yaml"))
-    return {t.name: t.type for name in world.vehicle_names()
-            for t in robot_topics(robot(world.vehicle(name), Frames(*FRAMES.values()))).values()}
-
-
 def test_plots_read_published_topics():
     published = {resolve(t.name) for t in TOPICS} | set(default_robot_topics())
     paths = [p["value"] for p in PANELS["Plot!plot"]["paths"]]
     assert paths and all(path.split(".", 1)[0] in published for path in paths), paths
 
 
-def default_sensor_topics():
-    """{topic: type} of the default scene's sensors, as the node names them."""
+def default_robots_and_sensors():
+    from vplayground_ros.parameters import FRAMES, Frames
     from vplayground_ros.resources import find_shared
+    from vplayground_ros.robots import robot
     from vplayground_ros.scene import load_world
     world = load_world(find_shared("config/default_scene.yaml"))
-    return {resolve(t.name): t.type for spec in world.sensor_specs for t in sensor_messages.topics(spec)}
+    return {name: robot(world.vehicle(name), Frames(*FRAMES.values())) for name in world.vehicle_names()}, \
+        world.sensor_specs
+
+
+def default_sensor_topics():
+    """{topic: type} of the default scene's sensors, as the node names them."""
+    robots, sensors = default_robots_and_sensors()
+    return {resolve(t.name): t.type for spec in sensors for t in sensor_messages.topics(spec, robots.get(spec["parent"]))}
+
+
+def default_robot_topics():
+    """{topic: type} of the default scene's robot, as the node names them."""
+    robots, _ = default_robots_and_sensors()
+    return {t.name: t.type for r in robots.values() for t in robot_topics(r).values()}
 
 
 def test_the_3d_panel_shows_the_default_cars_scan_and_cloud():

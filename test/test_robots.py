@@ -346,3 +346,57 @@ def test_robot_description_reproduces_the_published_transforms(run):
     for frame in [f"wheel_{w}" for w in WHEELS] + ["roof_scan"]:
         assert np.allclose(urdf.get_transform(frame, "base_link"), published(frame), atol=1e-9), frame
     assert set(joints.name) <= set(urdf.joint_map)
+
+
+def test_a_robots_sensors_publish_where_a_stack_reads_them(run):
+    """Sensors on a robot default to the names Nav2, slam_toolbox and image_transport read,
+    under the robot's namespace, in frames with its prefix; `topic` and `frame_id` choose."""
+    other = {**CAR, "name": "car_b", "position": [0, 10, 1.6]}
+    sensors = [LIDAR, {**LIDAR, "name": "rear_scan", "topic": "scan_rear", "frame_id": "rear_laser"},
+               {"name": "b_scan", "type": "lidar_2d", "parent": "car_b", "rate": 10},
+               {"name": "b_cam", "type": "camera", "parent": "car_b", "rate": 10, "width": 8, "height": 6},
+               {"name": "b_imu", "type": "imu", "parent": "car_b", "rate": 20}, POST]
+    runtime, sink = run({**SCENE, "vehicles": [CAR, other], "sensors": sensors}, "--duration", "0.5")
+    runtime.sim.wait(60)
+    runtime.stop()
+    def last(topic, kind):  # the Broadcaster keys a sensor's topic by its name and type
+        return sink.of(f"sensor:{topic}:{kind}", decoder(kind))[-1][1]
+    scan = "sensor_msgs/msg/LaserScan"
+    assert last("scan", scan).header.frame_id == "roof_scan"
+    assert last("scan_rear", scan).header.frame_id == "rear_laser"
+    assert last("car_b/scan", scan).header.frame_id == "car_b/b_scan"
+    assert last("car_b/camera/image_raw", "sensor_msgs/msg/Image").header.frame_id == "car_b/b_cam_optical"
+    assert last("car_b/camera/camera_info", "sensor_msgs/msg/CameraInfo").header.frame_id == "car_b/b_cam_optical"
+    assert last("car_b/imu/data", "sensor_msgs/msg/Imu") and last("post_imu/data", "sensor_msgs/msg/Imu")
+    parent_of = tree(sink)
+    assert chain(parent_of, "car_b/b_cam_optical")[:3] == ["car_b/b_cam_optical", "car_b/b_cam", "car_b/base_link"]
+    assert parent_of["rear_laser"] == "base_link"
+
+
+def test_sensors_on_one_topic_or_frame_are_refused_naming_both():
+    twin = {**LIDAR, "name": "twin_scan"}
+    with pytest.raises(ValueError, match="twin_scan.topic: roof_scan publishes 'scan' already"):
+        load_world({**SCENE, "sensors": [LIDAR, twin]})
+    with pytest.raises(ValueError, match=r"sensors\[1\].frame_id: the frame 'crate' is"):
+        load_world({**SCENE, "sensors": [LIDAR, {**twin, "topic": "scan2", "frame_id": "crate"}]})
+    with pytest.raises(ValueError, match=r"sensors\[1\].frame_id: the frame 'base_link' is"):
+        load_world({**SCENE, "sensors": [LIDAR, {**twin, "topic": "scan2", "frame_id": "base_link"}]})
+    with pytest.raises(ValueError, match=r"sensors\[0\].topic: '/bad topic' is not a topic name"):
+        load_world({**SCENE, "sensors": [{**LIDAR, "topic": "/bad topic"}]})
+
+
+def test_spawned_and_edited_sensors_keep_topics_and_frames_apart(run):
+    runtime, _ = run(SCENE, "--start-paused")
+    requests = runtime.requests
+    ok, message = requests.spawn("{name: twin_scan, type: lidar_2d, parent: car}")
+    assert not ok and "roof_scan publishes 'scan' already" in message, message
+    ok, message = requests.spawn("{name: twin_scan, type: lidar_2d, parent: car, topic: scan2, frame_id: roof_scan,"
+                                 " allow_renaming: true}")
+    assert not ok and message.startswith("NAME_NOT_UNIQUE: spawn.frame_id:"), message
+    ok, message = requests.spawn("{name: twin_scan, type: lidar_2d, parent: car, topic: scan2}")
+    assert ok, message
+    ok, message = requests.edit("{entity: twin_scan, topic: scan}")
+    assert not ok and "publishes 'scan' already" in message, message
+    ok, message = requests.edit("{entity: twin_scan, frame_id: crate}")
+    assert not ok and message.startswith("NAME_NOT_UNIQUE: twin_scan.frame_id: 'crate'"), message
+    assert requests.edit("{entity: twin_scan, frame_id: side_laser}")[0]

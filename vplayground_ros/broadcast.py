@@ -17,7 +17,7 @@ from collections import deque, namedtuple
 import numpy as np
 
 from . import cdr, messages, sensor_messages
-from .frame_names import mount_frame
+from .frame_names import mount_frame, sensor_frame
 from .parameters import frames as frame_names
 from .odometry import OdometryTracker
 from .physics.math3d import quaternions_to_matrices
@@ -232,13 +232,14 @@ class Broadcaster:
                 keys.add(key)
             self._ready.notify_all()
 
-    def sensor_topic(self, spec, suffix):
-        """The key of a sensor's topic (`<name>/<suffix>`), added to the table on first use:
-        the sinks make their publishers and channels for it as it comes."""
-        ident = (spec["name"], spec["type"], suffix)
+    def sensor_topic(self, spec, suffix, robot):
+        """The key of a sensor's topic (sensor_messages.topics; `robot` carries it, or None),
+        added to the table on first use: the sinks make their publishers and channels for it as
+        it comes."""
+        ident = (spec["name"], spec["type"], suffix, spec.get("topic"), robot and robot.namespace)
         key = self._sensor_topics.get(ident)
         if key is None:
-            topic = next(t for t in sensor_messages.topics(spec) if t.suffix == suffix)
+            topic = next(t for t in sensor_messages.topics(spec, robot) if t.suffix == suffix)
             key = f"sensor:{topic.name}:{topic.type}"
             self.topics[key] = Topic(key, self.resolve_name(topic.name), topic.type, SENSOR_QOS)
             self._sensor_topics[ident] = key
@@ -365,7 +366,8 @@ class Broadcaster:
         if self._static_key is not None and all(a is b for a, b in zip(key, self._static_key)):
             return False
         self._static_key = key
-        frames = sensor_messages.static_frames(world.sensor_specs, mount_frame(self.frames, robots))
+        frames = sensor_messages.static_frames(world.sensor_specs, mount_frame(self.frames, robots),
+                                               sensor_frame(robots))
         changed = frames != self._sensor_frames
         # The bodies that carry a sensor, whose frames /tf must have: for the publisher thread,
         # which reads no World.
@@ -703,12 +705,16 @@ class Broadcaster:
     def publish_readings(self, snap):
         """The sensors read after this snapshot's step: each reading's messages, built when
         some sink wants one of its topics (the bag always does)."""
+        robots = self.robots(snap)
+        carriers, frame_of = {r.name: r for r in robots}, sensor_frame(robots)
         for sensor, reading in snap.readings:
             spec = sensor.spec
-            keys = {suffix: self.sensor_topic(spec, suffix) for suffix, _ in sensor_messages.TOPIC_SUFFIXES[spec["type"]]}
+            robot = carriers.get(spec["parent"])
+            keys = {suffix: self.sensor_topic(spec, suffix, robot)
+                    for suffix, _ in sensor_messages.TOPIC_SUFFIXES[spec["type"]]}
             if not any(self.wanted(key) for key in keys.values()):
                 continue
-            for suffix, data in sensor_messages.build(spec, reading, reading["time"]):
+            for suffix, data in sensor_messages.build(spec, reading, reading["time"], frame_of(spec)):
                 self.send(keys[suffix], data, reading["time"])
 
 

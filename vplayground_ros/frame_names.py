@@ -26,13 +26,29 @@ def node_frames(frames=DEFAULT_FRAMES):
 
 
 def sensor_frames(spec):
-    """The frames a sensor takes: its name, and a camera's optical frame under it."""
-    return [spec["name"]] + ([optical_frame(spec["name"])] if spec["type"] in CAMERAS else [])
+    """The frames a sensor takes, as its keys name them (a namespaced robot's namespace comes
+    before them, sensor_frame): its frame_id or name, and a camera's optical frame under it."""
+    frame = spec.get("frame_id", spec["name"])
+    return [frame] + ([optical_frame(frame)] if spec["type"] in CAMERAS else [])
 
 
-def optical_frames(sensor_specs):
-    """{frame: what it is} of the cameras' optical frames."""
-    return {optical_frame(s["name"]): f"the optical frame of {s['name']}" for s in sensor_specs if s["type"] in CAMERAS}
+def sensor_frame(robots):
+    """A sensor's frame as a function of its spec: its frame_id, else its name, after the
+    namespace of the robot that carries it."""
+    prefixes = {robot.name: robot.prefix for robot in robots}
+    return lambda spec: prefixes.get(spec["parent"], "") + spec.get("frame_id", spec["name"])
+
+
+def sensor_frames_taken(sensor_specs):
+    """{frame: what it is} of the sensors' frames that are not their names (a frame_id, a
+    camera's optical frame): a name is a frame already, unique among the entities'."""
+    out = {}
+    for s in sensor_specs:
+        frame, *optical = sensor_frames(s)
+        if frame != s["name"]:
+            out[frame] = f"the frame of the sensor {s['name']}"
+        out.update({o: f"the optical frame of {s['name']}" for o in optical})
+    return out
 
 
 def mount_frame(frames, robots):

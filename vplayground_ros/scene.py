@@ -12,14 +12,15 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from .frame_names import DEFAULT_FRAMES, node_frames, optical_frames
+from .frame_names import DEFAULT_FRAMES, node_frames, sensor_frames, sensor_frames_taken
 from .mesh_files import MeshError, read_obj, read_with_trimesh
 from .physics import World
 from .physics import specs
 from .physics.math3d import rpy_to_quat
 from .physics.math3d import quaternions_to_matrices
 from .resources import find_shared
-from .robots import validate_robot
+from .robots import validate_robot, world_robots
+from .sensor_messages import check_topics
 from .sensors import validate_sensors
 
 SCENE_VERSION = 1
@@ -283,19 +284,28 @@ def validate_scene(scene, base, max_bodies=None, directories=None, frames=DEFAUL
     # generated or not.
     owners = name_unnamed(bodies, vehicles, names)
     sensors = validate_sensors(scene.get("sensors"), owners)
-    reserved = {**node_frames(frames), **optical_frames(sensors)}
+    # The names against the node's frames and the optical frames of the cameras named by them;
+    # a frame_id is checked against everything below, naming the sensor's key.
+    reserved = {**node_frames(frames), **sensor_frames_taken([s for s in sensors if "frame_id" not in s])}
     for key, entries in (("bodies", bodies), ("vehicles", vehicles), ("sensors", sensors)):
         for k, entry in enumerate(entries):
             if entry["name"] in reserved:
                 raise specs.SpecError(f"{key}[{k}].name", f"{specs.quote(entry['name'])} is {reserved[entry['name']]} "
                                                           "(names are frames: the node publishes that one)")
+    # A sensor's frame_id is a frame too: none of the node's, no entity's name, no other sensor's.
+    taken = {**reserved, **owners, **{s["name"]: f"the sensor {s['name']}" for s in sensors}}
+    for k, sensor in enumerate(sensors):
+        for frame in sensor_frames(sensor) if "frame_id" in sensor else ():
+            if frame in taken:
+                raise specs.SpecError(f"sensors[{k}].frame_id", f"the frame {specs.quote(frame)} is {taken[frame]}")
+            taken[frame] = f"a frame of the sensor {sensor['name']}"
     return settings, ground, playground, bodies, vehicles, sensors
 
 
 def load_world(path_or_dict, max_bodies=None, directories=None, frames=DEFAULT_FRAMES):
     """A World from a scene file or dict. `max_bodies` caps bodies plus vehicles; `directories`
     confines the playground mesh to them (and the package's meshes/); `frames` are the node's
-    (world, odom, base) frame names, which no body or sensor may take."""
+    frame names (parameters.Frames), which no body or sensor may take."""
     scene, label, base = read_scene(path_or_dict)
     try:
         settings, ground, playground, bodies, vehicles, sensor_specs = validate_scene(
@@ -321,6 +331,10 @@ def load_world(path_or_dict, max_bodies=None, directories=None, frames=DEFAULT_F
                 add(entry, f"{key}[{k}]")
             except ValueError as error:  # checks that need the world (e.g. inside its bounds)
                 raise SceneError(f"{label}: {error}") from None
+    try:  # needs the robots' namespaces, which the World gave them
+        check_topics(sensor_specs, world_robots(world, frames))
+    except specs.SpecError as error:
+        raise SceneError(f"{label}: sensors: {error}") from None
     world.sensor_specs = sensor_specs
     return world
 

@@ -16,7 +16,10 @@ from .interfaces import encode
 from .physics.math3d import rpy_to_quat
 from .sensors import camera_intrinsics, lidar_2d_angles
 
-# Topics of each sensor type: (suffix, message type); names relative to the node's namespace.
+# Topics of each sensor type: (suffix, message type). A topic's name is the sensor's `topic`
+# (its base) with the suffix after it; the base is by default the name a stack reads on a robot
+# (ROBOT_TOPICS, under the robot's namespace: Nav2's and slam_toolbox's `scan`), and
+# `<name>/<first part of the suffix>` elsewhere (a body's or the world's sensor).
 TOPIC_SUFFIXES = {
     "lidar_2d": [("scan", "sensor_msgs/msg/LaserScan")],
     "lidar_3d": [("points", "sensor_msgs/msg/PointCloud2")],
@@ -24,6 +27,13 @@ TOPIC_SUFFIXES = {
     "camera": [("image_raw", "sensor_msgs/msg/Image"), ("camera_info", "sensor_msgs/msg/CameraInfo")],
     "imu": [("data", "sensor_msgs/msg/Imu")],
 }
+# What a topic base leaves of each suffix: a lidar's or an IMU's `topic` is its topic; a
+# camera's is its namespace (image_transport's), before image_raw and camera_info.
+TAILS = {"scan": "", "points": "", "data": "", "depth/image_raw": "image_raw", "depth/camera_info": "camera_info",
+         "image_raw": "image_raw", "camera_info": "camera_info"}
+ROBOT_TOPICS = {"lidar_2d": "scan", "lidar_3d": "points", "imu": "imu/data", "camera": "camera",
+                "depth_camera": "depth"}
+OTHER_TOPICS = {"lidar_2d": "scan", "lidar_3d": "points", "imu": "data", "camera": "", "depth_camera": "depth"}
 SensorTopic = namedtuple("SensorTopic", "suffix name type")
 # The optical frame in the sensor frame: rpy (-pi/2, 0, -pi/2) turns z forward, x right, y down.
 OPTICAL_ROTATION = tuple(float(v) for v in rpy_to_quat((-0.5 * math.pi, 0.0, -0.5 * math.pi)))
@@ -40,50 +50,72 @@ CLOUD_FIELDS = [(name, CLOUD_DTYPE.fields[name][1], UINT16 if name == "ring" els
 EXACT_VARIANCE = 1e-12
 
 
-def topics(spec):
-    """[SensorTopic] of one sensor spec: `<name>/<suffix>`."""
-    return [SensorTopic(suffix, f"{spec['name']}/{suffix}", kind) for suffix, kind in TOPIC_SUFFIXES[spec["type"]]]
+def topics(spec, robot=None):
+    """[SensorTopic] of one sensor spec, names relative to the node's namespace: under `robot`'s
+    namespace (robots.Robot, the one carrying it, or None) unless its `topic` is absolute."""
+    kind = spec["type"]
+    base = spec.get("topic") or (ROBOT_TOPICS[kind] if robot is not None
+                                 else "/".join(part for part in (spec["name"], OTHER_TOPICS[kind]) if part))
+    if robot is not None and not base.startswith("/"):
+        base = robot.topic(base)
+    return [SensorTopic(suffix, f"{base}/{TAILS[suffix]}" if TAILS[suffix] else base, message)
+            for suffix, message in TOPIC_SUFFIXES[kind]]
+
+
+def check_topics(sensor_specs, robots):
+    """Refuses two sensors publishing on one topic, naming both (two lidars on one robot both
+    default to `scan`: one needs a `topic`). `robots`: robots.Robot of the world's vehicles."""
+    from .physics.specs import SpecError
+    carriers = {robot.name: robot for robot in robots}
+    seen = {}
+    for spec in sensor_specs:
+        for topic in topics(spec, carriers.get(spec["parent"])):
+            other = seen.setdefault(topic.name, spec["name"])
+            if other != spec["name"]:
+                raise SpecError(f"{spec['name']}.topic", f"{other} publishes {topic.name!r} already (give one of "
+                                                         "them a `topic`)")
 
 
 def optical_frame(name):
     return f"{name}_optical"
 
 
-def static_frames(specs, parent_frame):
+def static_frames(specs, parent_frame, sensor_frame=lambda spec: spec.get("frame_id", spec["name"])):
     """[(parent, child, pose xyz + xyzw)] of every sensor: its mount in its parent's frame
     (`parent_frame(the spec's parent)`: `world` means the world frame), and a camera's optical
-    frame."""
+    frame; `sensor_frame(spec)` is its frame (frame_names.sensor_frame)."""
     out = []
     for spec in specs:
-        pose = spec["pose"]
-        out.append((parent_frame(spec["parent"]), spec["name"], [*pose[:3], *rpy_to_quat(pose[3:])]))
+        pose, frame = spec["pose"], sensor_frame(spec)
+        out.append((parent_frame(spec["parent"]), frame, [*pose[:3], *rpy_to_quat(pose[3:])]))
         if spec["type"] in ("depth_camera", "camera"):
-            out.append((spec["name"], optical_frame(spec["name"]), [0.0, 0.0, 0.0, *OPTICAL_ROTATION]))
+            out.append((frame, optical_frame(frame), [0.0, 0.0, 0.0, *OPTICAL_ROTATION]))
     return out
 
 
-def build(spec, reading, seconds):
-    """[(suffix, CDR bytes)] of one reading, in the order of TOPIC_SUFFIXES."""
-    kind, name = spec["type"], spec["name"]
+def build(spec, reading, seconds, frame):
+    """[(suffix, CDR bytes)] of one reading, in the order of TOPIC_SUFFIXES; `frame` is the
+    sensor's (a camera's messages are in its optical frame)."""
+    kind = spec["type"]
     if kind == "lidar_2d":
-        return [("scan", laser_scan(spec, reading["ranges"], seconds))]
+        return [("scan", laser_scan(spec, reading["ranges"], seconds, frame))]
     if kind == "lidar_3d":
-        return [("points", lidar_cloud(name, reading, seconds))]
+        return [("points", lidar_cloud(frame, reading, seconds))]
     if kind == "depth_camera":
-        return [("depth/image_raw", image(seconds, optical_frame(name), reading["depth"], "32FC1")),
-                ("depth/camera_info", camera_info(spec, seconds))]
+        return [("depth/image_raw", image(seconds, optical_frame(frame), reading["depth"], "32FC1")),
+                ("depth/camera_info", camera_info(spec, seconds, frame))]
     if kind == "camera":
-        return [("image_raw", image(seconds, optical_frame(name), reading["rgb"], "rgb8")),
-                ("camera_info", camera_info(spec, seconds))]
-    return [("data", imu(spec, reading, seconds))]
+        return [("image_raw", image(seconds, optical_frame(frame), reading["rgb"], "rgb8")),
+                ("camera_info", camera_info(spec, seconds, frame))]
+    return [("data", imu(spec, reading, seconds, frame))]
 
 
-def laser_scan(spec, ranges, seconds):
+def laser_scan(spec, ranges, seconds, frame):
     """sensor_msgs/LaserScan: ranges as read (+inf no return, -inf nearer than range_min)."""
     angles = lidar_2d_angles(spec)
     increment = float(angles[1] - angles[0]) if len(angles) > 1 else 0.0
     w = cdr.Writer()
-    w.header(cdr.split_stamp(seconds), spec["name"])
+    w.header(cdr.split_stamp(seconds), frame)
     w.f32s([angles[0], angles[-1], increment, 0.0, 1.0 / spec["rate"], spec["range_min"], spec["range_max"]])
     w.u32(len(ranges))
     w.data += np.ascontiguousarray(ranges, "<f4").tobytes()
@@ -116,12 +148,12 @@ def image(seconds, frame, pixels, encoding):
     return cdr.ENCAPSULATION + bytes(w.data)
 
 
-def camera_info(spec, seconds):
+def camera_info(spec, seconds, frame):
     """sensor_msgs/CameraInfo of the pinhole camera the rays were cast through (no distortion)."""
     fx, fy, cx, cy = camera_intrinsics(spec)
     return encode("sensor_msgs/msg/CameraInfo", {
         "header": {"stamp": dict(zip(("sec", "nanosec"), cdr.split_stamp(seconds))),
-                   "frame_id": optical_frame(spec["name"])},
+                   "frame_id": optical_frame(frame)},
         "height": spec["height"], "width": spec["width"], "distortion_model": "plumb_bob",
         "d": [0.0] * 5, "k": [fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0],
         "r": [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
@@ -133,10 +165,10 @@ def diagonal(variance):
     return [v, 0.0, 0.0, 0.0, v, 0.0, 0.0, 0.0, v]
 
 
-def imu(spec, reading, seconds):
+def imu(spec, reading, seconds, frame):
     """sensor_msgs/Imu in the sensor frame; covariances diagonal, the noises' variances."""
     return encode("sensor_msgs/msg/Imu", {
-        "header": {"stamp": dict(zip(("sec", "nanosec"), cdr.split_stamp(seconds))), "frame_id": spec["name"]},
+        "header": {"stamp": dict(zip(("sec", "nanosec"), cdr.split_stamp(seconds))), "frame_id": frame},
         "orientation": dict(zip("xyzw", map(float, reading["orientation"]))),
         "orientation_covariance": diagonal(0.0),
         "angular_velocity": dict(zip("xyz", map(float, reading["angular_velocity"]))),

@@ -8,7 +8,8 @@ steps (steps_until_due), so a run at any real-time factor reads the same scans. 
 one generator per sensor seeded from `settings.seed` and the sensor's name: the same scene gives
 bit-identical readings.
 
-Frames: a sensor's frame is its name, posed by `pose` (xyz + rpy) in its parent's frame (a
+Frames: a sensor's frame is its `frame_id`, else its name (with a namespaced robot's namespace
+before it), posed by `pose` (xyz + rpy) in its parent's frame (a
 vehicle's base_link, a body's own frame, or the world frame for `parent: world`). Lidars and the
 IMU look along +x with z up (REP 103); cameras also have `<name>_optical` (z forward, x right,
 y down; pixel centres at integer coordinates, as OpenCV and image_geometry take them).
@@ -22,6 +23,7 @@ nearer is not drawn).
 """
 import logging
 import math
+import re
 import zlib
 
 import numpy as np
@@ -34,7 +36,11 @@ from .physics.math3d import quaternions_to_matrices
 
 TYPES = ("lidar_2d", "lidar_3d", "depth_camera", "camera", "imu")
 CAMERAS = ("depth_camera", "camera")  # the types that see through a pinhole, with an optical frame
-COMMON_KEYS = {"name", "type", "parent", "pose", "rate"}
+COMMON_KEYS = {"name", "type", "parent", "pose", "rate", "topic", "frame_id"}
+# A topic name (relative, or absolute with a leading '/') and a frame name, as a sensor's
+# `topic` and `frame_id` keys take them.
+TOPIC_PATTERN = re.compile(r"/?[A-Za-z_][A-Za-z0-9_]*(?:/[A-Za-z_][A-Za-z0-9_]*)*")
+FRAME_PATTERN = re.compile(r"[A-Za-z_][A-Za-z0-9_.\-]*(?:/[A-Za-z_][A-Za-z0-9_.\-]*)*")
 RANGE_KEYS = {"range_min", "range_max", "noise_stddev"}
 TYPE_KEYS = {
     "lidar_2d": RANGE_KEYS | {"angle_min", "angle_max", "samples"},
@@ -84,6 +90,13 @@ def validate_sensor(raw, path, parents):
                                                            f"{specs.quote(parent)} (or 'world')")
     out = {"name": name, "type": kind, "parent": parent}
     at = lambda key: specs.child(path, key)  # noqa: E731
+    for key, pattern, what in (("topic", TOPIC_PATTERN, "a topic name (tokens of letters, digits and '_' "
+                                "separated by '/', absolute with a leading '/')"),
+                               ("frame_id", FRAME_PATTERN, "a frame name (no leading '/', no spaces)")):
+        if key in raw:  # kept only when given: the defaults follow where the sensor is mounted
+            if not isinstance(raw[key], str) or len(raw[key]) > 200 or not pattern.fullmatch(raw[key]):
+                raise specs.SpecError(at(key), f"{specs.quote(raw[key])} is not {what}")
+            out[key] = raw[key]
     value = lambda key: raw.get(key, DEFAULTS[key])  # noqa: E731
     out["pose"] = specs.vector(value("pose"), at("pose"), 6, -specs.MAX_COORDINATE, specs.MAX_COORDINATE)
     out["rate"] = specs.number(value("rate"), at("rate"), 0.0, MAX_RATE, low_open=True)

@@ -8,10 +8,11 @@ from pathlib import Path
 
 import yaml
 
-from ..frame_names import node_frames, optical_frames, sensor_frames
+from ..frame_names import node_frames, sensor_frames, sensor_frames_taken
 from ..physics import specs
 from ..physics.world import prepare_body
-from ..robots import validate_robot
+from ..robots import validate_robot, world_robots
+from ..sensor_messages import check_topics
 from ..scene import body_mesh_points
 from ..sensors import TYPES as SENSOR_TYPES, validate_sensor
 from .descriptions import describe, describe_sensor
@@ -114,7 +115,7 @@ class EntityRequests:
             raise RequestError(FAILED, f"spawn of {len(prepared)} entities: the world has {len(existing)} "
                                        f"bodies and max_bodies is {cap}")
         # Names are frames (a body's on /tf, a sensor's), so the node's own frames are taken too.
-        frames_taken = {**node_frames(frames), **optical_frames(world.sensor_specs)}
+        frames_taken = {**node_frames(frames), **sensor_frames_taken(world.sensor_specs)}
         names, suffixes = set(existing) | {s["name"] for s in world.sensor_specs} | set(frames_taken), {}
         # Bodies and vehicles first: a sensor of the request rides the body of the request that
         # its parent names, under the name that body gets.
@@ -151,6 +152,8 @@ class EntityRequests:
                 clash = next((n for n in frame_names if n in names), None)
                 if clash is None:
                     break
+                if "frame_id" in sensor and clash in sensor_frames({**sensor, "name": ""}):  # no new name frees it
+                    raise RequestError(NAME_NOT_UNIQUE, f"{path}.frame_id: {taken_name(clash, frames_taken)}")
                 if not rename:
                     raise RequestError(NAME_NOT_UNIQUE, f"{path}.name: {taken_name(clash, frames_taken)} (sensor names "
                                                         "are frames; allow_renaming: true picks a free name)")
@@ -163,6 +166,8 @@ class EntityRequests:
             for _, vehicle, spec, _, _ in prepared:
                 if vehicle != "sensor":
                     added.append(world.add_vehicle(spec) if vehicle else world.add_body(spec))
+            if sensors:  # with the robots' namespaces, which adding gave them
+                check_topics([*world.sensor_specs, *sensors], world_robots(world, frames))
         except Exception:
             world.remove_bodies(added)  # all or nothing
             raise
@@ -178,7 +183,8 @@ class EntityRequests:
             raise RequestError(FAILED, "edit.entity: the name of the entity to edit is missing")
         label = name if specs.NAME_PATTERN.fullmatch(name) else specs.quote(name)  # for messages
         if self.sim.call(lambda world: sensor_named(world, name) is not None):
-            return self.sim.call(lambda world: self._edit_sensor(world, name, request))
+            frames = self.frames()
+            return self.sim.call(lambda world: self._edit_sensor(world, name, request, frames))
         state = as_mapping(request.pop("state", {}) or {}, "edit.state")
         specs.mapping(state, "edit.state", {"pose", "twist", "header", "acceleration"})
         set_pose = specs.boolean(request.pop("set_pose", "pose" in state), "edit.set_pose")
@@ -229,7 +235,7 @@ class EntityRequests:
         return reply(OK, f"edited {name}: {', '.join(sorted(fields) + (['vehicle'] if vehicle_edit else []))}")
 
     @staticmethod
-    def _edit_sensor(world, name, fields):
+    def _edit_sensor(world, name, fields, frames):
         """A sensor's keys replaced and the whole spec validated again (its name and type stay)."""
         spec = sensor_named(world, name)
         if spec is None:
@@ -240,6 +246,14 @@ class EntityRequests:
                                            "(remove it and spawn another)")
         parents = set(world.body_names())
         edited = validate_sensor({**spec, **fields}, name, parents)
+        others = [s for s in world.sensor_specs if s is not spec]
+        if sensor_frames(edited) != sensor_frames(spec):
+            taken = {**node_frames(frames), **sensor_frames_taken(others), **dict.fromkeys(parents, "a body's name"),
+                     **{s["name"]: "a sensor's name" for s in others}}
+            clash = next((frame for frame in sensor_frames(edited) if frame in taken), None)
+            if clash is not None:
+                raise RequestError(NAME_NOT_UNIQUE, f"{name}.frame_id: {specs.quote(clash)} is {taken[clash]}")
+        check_topics([*others, edited], world_robots(world, frames))
         world.sensor_specs = [edited if s is spec else s for s in world.sensor_specs]
         return reply(OK, f"edited {name}: {', '.join(sorted(set(fields) - {'name', 'type'}))}")
 

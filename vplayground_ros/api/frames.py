@@ -7,7 +7,7 @@ thread, from the World: the state the next step starts from.
 """
 import numpy as np
 
-from ..frame_names import mount_frame
+from ..frame_names import mount_frame, sensor_frame
 from ..robots import robot_transforms, world_robots
 from ..sensor_messages import static_frames
 from ..sensors import WORLD, matrix_to_quaternion, pose_matrix
@@ -28,7 +28,7 @@ def frame_pose(world, frame, frames):
         f = robot.frames
         if frame in (f.odom, f.footprint, f.base, *f.suspension, *f.steering, *f.wheel):
             edges += robot_frames_now(world, robot, frames)
-    edges += static_frames(world.sensor_specs, mount_frame(frames, robots))
+    edges += static_frames(world.sensor_specs, mount_frame(frames, robots), sensor_frame(robots))
     for parent, child, pose in edges:
         if child == frame:  # names are unique among frames, so the chain up ends at the world
             up = frame_pose(world, parent, frames)
