@@ -309,6 +309,40 @@ def twist_publisher(client, encoding):
         {"linear": {"x": speed, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": yaw}}))
 
 
+def stamped_twist_publisher(client, topic):
+    schema = ("std_msgs/Header header\nTwist twist\n" + "=" * 80 + "\nMSG: std_msgs/Header\n"
+              "builtin_interfaces/Time stamp\nstring frame_id\n" + "=" * 80 + "\nMSG: builtin_interfaces/Time\n"
+              "int32 sec\nuint32 nanosec\n" + "=" * 80 + "\nMSG: geometry_msgs/Twist\nVector3 linear\n"
+              "Vector3 angular\n" + "=" * 80 + "\nMSG: geometry_msgs/Vector3\nfloat64 x\nfloat64 y\nfloat64 z\n")
+    channel = client.advertise(topic, "cdr", "geometry_msgs/msg/TwistStamped", schema)
+    encode = serialize_dynamic("geometry_msgs/msg/TwistStamped", schema)["geometry_msgs/msg/TwistStamped"]
+    return lambda speed: client.publish(channel, encode(
+        {"header": {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": ""},
+         "twist": {"linear": {"x": speed, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 0.0}}}))
+
+
+def test_a_stamped_twist_and_a_namespaced_robots_cmd_vel_drive_over_foxglove(client):
+    """Issue 39: cmd_vel takes TwistStamped as well as Twist from a client, and a namespaced
+    robot's cmd_vel is taken as it comes."""
+    car = {"name": "rover", "position": [-20.0, 20.0, 1.2], "chassis": {"size": [2.0, 1.2, 0.4], "mass": 300},
+           "wheels": [{"mount": [x, y, -0.2], "radius": 0.3, "power_gain": 0.5} for x in (0.8, -0.8) for y in (0.6, -0.6)]}
+    response = client.call(f"{NS}/spawn", {"load_namespace": json.dumps(car)})
+    assert response.success, response.message
+    try:
+        client.subscribe(f"{NS}/car/command", f"{NS}/rover/command")
+        drive_car, drive_rover = stamped_twist_publisher(client, "/cmd_vel"), stamped_twist_publisher(client, "/rover/cmd_vel")
+        end = time.monotonic() + 3.0
+        while time.monotonic() < end:
+            drive_car(1.25)
+            drive_rover(-0.75)
+            time.sleep(0.1)
+        assert client.latest(f"{NS}/car/command")[1].twist.linear.x == 1.25
+        assert client.latest(f"{NS}/rover/command")[1].twist.linear.x == -0.75
+        drive_car(0.0)
+    finally:
+        client.call(f"{NS}/remove", {"load_namespace": "{entity: rover}"})
+
+
 @pytest.mark.parametrize("encoding", ["cdr", "json"])
 def test_twist_published_by_the_client_drives_the_car(client, encoding):
     client.subscribe(f"{NS}/car/command", "/odom")

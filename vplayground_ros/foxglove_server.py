@@ -22,7 +22,7 @@ from foxglove import Channel, Context, MessageSchema, Parameter, ParameterType, 
 from foxglove.websocket import Capability, StatusLevel
 
 from .foxglove_front import ProtocolFront
-from .inputs import from_cdr, from_json, subscriptions
+from .inputs import TWIST, TWIST_STAMPED, from_cdr, from_json, subscriptions
 from .interfaces import decoder, encode, schema
 
 DEFAULT_PORT = 8765
@@ -206,10 +206,15 @@ class FoxgloveServer:
         if channel.encoding == "json":
             decode = from_json
         elif channel.encoding == "cdr":
-            if channel.schema_name and channel.schema_name.replace("/msg/", "/") != sub.type.replace("/msg/", "/"):
-                self._warn(f"{channel.topic}: expected {sub.type}, the client advertises {channel.schema_name}")
+            # cmd_vel takes Twist and TwistStamped alike (a client's channel has its own type,
+            # where a ROS topic has one: there cmd_vel_stamped chooses).
+            kinds = (TWIST, TWIST_STAMPED) if sub.key == "cmd_vel" else (sub.type,)
+            advertised = (channel.schema_name or sub.type).replace("/msg/", "/")
+            kind = next((k for k in kinds if k.replace("/msg/", "/") == advertised), None)
+            if kind is None:
+                self._warn(f"{channel.topic}: expected {' or '.join(kinds)}, the client advertises {channel.schema_name}")
                 return
-            decode = lambda data, kind=sub.type: from_cdr(kind, data)  # noqa: E731
+            decode = lambda data, kind=kind: from_cdr(kind, data)  # noqa: E731
         else:
             self._warn(f"{channel.topic}: encoding {channel.encoding!r} not supported (cdr or json)")
             return

@@ -18,13 +18,13 @@ from .physics.math3d import rpy_to_quat
 from .sensors import pose_matrix
 
 Subscription = namedtuple("Subscription", "key name type")
+TWIST, TWIST_STAMPED = "geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped"
 SUBSCRIPTIONS = [
-    Subscription("cmd_vel", "cmd_vel", "geometry_msgs/msg/Twist"),
+    Subscription("cmd_vel", "cmd_vel", TWIST),
     Subscription("clicked_point", "clicked_point", "geometry_msgs/msg/PointStamped"),
     Subscription("initial_pose", "initialpose", "geometry_msgs/msg/PoseWithCovarianceStamped"),
     Subscription("push", "~/push", "geometry_msgs/msg/WrenchStamped"),
 ]
-TWIST_STAMPED = "geometry_msgs/msg/TwistStamped"
 
 
 def subscriptions(cmd_vel_stamped):
