@@ -563,10 +563,9 @@ class Broadcaster:
         for parent, child, pose in [*moving, *self._sensor_frames]:  # the sensors': static, the same each time
             self.send("transforms", cdr.transform_stamped(snap.time, parent, child, pose), snap.time)
         rows, parents, children = self.tf_frames(snap, moving)
-        if self.parameters["publish_body_frames"]:
-            for row in rows.tolist():
-                self.send("transforms", cdr.transform_stamped(
-                    snap.time, frames.world, snap.names[row], [*s["positions"][row], *s["quaternions"][row]]), snap.time)
+        for row in rows.tolist():  # the bodies /tf carries, as /tf has them
+            self.send("transforms", cdr.transform_stamped(
+                snap.time, frames.world, snap.names[row], [*s["positions"][row], *s["quaternions"][row]]), snap.time)
         if self.wanted("tf"):
             poses = self.pose_block(snap)
             poses = poses if len(rows) == len(snap.names) else poses[rows]
