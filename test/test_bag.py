@@ -615,3 +615,27 @@ def test_a_reset_under_load_keeps_each_files_channels_in_order(tmp_path):
     assert len(files) >= 8
     for f in files:
         assert_channels_go_forward(f.name, read_all(f)[2])
+
+
+def test_a_removed_robots_description_does_not_open_the_next_file(tmp_path):
+    """Issue 39: a robot's latched robot_description ends with the robot: a later file (after a
+    reset here) opens with the latched topics of the robots that are there only."""
+    scene = load_world(parse_args([]).scene)
+    car = scene.vehicle("car")
+    other = {**{k: v for k, v in car.items() if k not in ("name", "namespace")}, "name": "car_b",
+             "position": [-20.0, 20.0, 1.2]}
+    path = tmp_path / "run.mcap"
+    with recording(path, 4.0) as runtime:
+        ok, message = runtime.requests.spawn(json.dumps(other))
+        assert ok, message
+        assert wait_for(lambda: runtime.sim.snapshot.time > 0.5, 30)
+        assert runtime.requests.remove("{entity: car_b}")[0]
+        assert wait_for(lambda: "car_b" not in runtime.sim.snapshot.vehicles, 30)
+        assert runtime.requests.reset(1)[0]  # the time alone: a new file
+        assert wait_for(lambda: len(runtime.recorder.files) >= 2, 30)
+        started = runtime.sim.snapshot.time
+        assert wait_for(lambda: runtime.sim.snapshot.time > started + 0.5, 30)
+    first, second = runtime.recorder.files[:2]
+    topics = lambda p: {c.topic for c in make_reader(open(p, "rb")).get_summary().channels.values()}  # noqa: E731
+    assert "/car_b/robot_description" in topics(first)
+    assert "/car_b/robot_description" not in topics(second) and "/robot_description" in topics(second)

@@ -167,8 +167,8 @@ def test_frame_id(car):
     """A sensor's frame_id, when it has one, names its link and its optical frame's."""
     spec = {**car.sensors[-1], "frame_id": "front_camera_link"}
     urdf = yourdfpy.URDF.load(io.StringIO(robot_description(car.vehicle, [spec], "car")), load_meshes=False)
-    assert urdf.joint_map["other_camera_joint"].child == "front_camera_link"
-    assert urdf.joint_map["other_camera_optical_joint"].child == "front_camera_link_optical"
+    assert urdf.joint_map["front_camera_link_joint"].child == "front_camera_link"
+    assert urdf.joint_map["front_camera_link_optical_joint"].child == "front_camera_link_optical"
     assert "other_camera" not in urdf.link_map
 
 

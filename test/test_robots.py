@@ -1,7 +1,9 @@
 """Robots in a ROS 2 stack (issue 39): REP 105 frames owned on purpose, namespaced robots with
 commands of their own, /tf_static sent when it changes, bodies off /tf. Through a running
 Runtime whose every message is collected, as the bag and the ROS publishers get them."""
+import json
 import logging
+import time
 from types import SimpleNamespace
 
 import numpy as np
@@ -375,7 +377,7 @@ def test_a_robots_sensors_publish_where_a_stack_reads_them(run):
 
 def test_sensors_on_one_topic_or_frame_are_refused_naming_both():
     twin = {**LIDAR, "name": "twin_scan"}
-    with pytest.raises(ValueError, match="twin_scan.topic: roof_scan publishes 'scan' already"):
+    with pytest.raises(ValueError, match="twin_scan.topic: /scan is the sensor roof_scan's already"):
         load_world({**SCENE, "sensors": [LIDAR, twin]})
     with pytest.raises(ValueError, match=r"sensors\[1\].frame_id: the frame 'crate' is"):
         load_world({**SCENE, "sensors": [LIDAR, {**twin, "topic": "scan2", "frame_id": "crate"}]})
@@ -389,14 +391,104 @@ def test_spawned_and_edited_sensors_keep_topics_and_frames_apart(run):
     runtime, _ = run(SCENE, "--start-paused")
     requests = runtime.requests
     ok, message = requests.spawn("{name: twin_scan, type: lidar_2d, parent: car}")
-    assert not ok and "roof_scan publishes 'scan' already" in message, message
+    assert not ok and "/scan is the sensor roof_scan's already" in message, message
     ok, message = requests.spawn("{name: twin_scan, type: lidar_2d, parent: car, topic: scan2, frame_id: roof_scan,"
                                  " allow_renaming: true}")
     assert not ok and message.startswith("NAME_NOT_UNIQUE: spawn.frame_id:"), message
     ok, message = requests.spawn("{name: twin_scan, type: lidar_2d, parent: car, topic: scan2}")
     assert ok, message
     ok, message = requests.edit("{entity: twin_scan, topic: scan}")
-    assert not ok and "publishes 'scan' already" in message, message
+    assert not ok and "/scan is the sensor roof_scan's already" in message, message
     ok, message = requests.edit("{entity: twin_scan, frame_id: crate}")
     assert not ok and message.startswith("NAME_NOT_UNIQUE: twin_scan.frame_id: 'crate'"), message
     assert requests.edit("{entity: twin_scan, frame_id: side_laser}")[0]
+
+
+# ------------------------------------------------------------------ review findings (issue 39)
+@pytest.mark.parametrize("topic", ["odom", "/tf", "cmd_vel", "joint_states", "robot_description", "/clock",
+                                   "/vplayground/state", "clicked_point"])
+def test_a_sensor_may_not_publish_on_a_topic_of_the_node_or_a_robot(run, topic):
+    runtime, _ = run(SCENE, "--start-paused")
+    ok, message = runtime.requests.spawn(f"{{name: odd_imu, type: imu, parent: car, topic: '{topic}'}}")
+    assert not ok and "odd_imu.topic:" in message and "already" in message, message
+
+
+def test_a_sensor_frame_may_not_be_a_robots_frame_nor_a_robot_land_on_one(run):
+    other = {**CAR, "name": "car_b", "position": [0, 10, 1.6]}
+    runtime, _ = run({**SCENE, "vehicles": [CAR, other]}, "--start-paused")
+    requests = runtime.requests
+    ok, message = requests.spawn("{name: odd, type: imu, parent: world, frame_id: car_b/base_link}")
+    assert not ok and "odd.frame_id: the frame 'car_b/base_link' is car_b's base_link" in message, message
+    ok, message = requests.spawn("{name: odd, type: imu, parent: world, frame_id: car_c/base_footprint}")
+    assert ok, message
+    ok, message = requests.spawn(json.dumps({**CAR, "name": "car_c", "position": [0, 20, 1.6]}))
+    assert not ok and "car_c's base_footprint" in message, message
+    assert "car_c" not in runtime.sim.call(lambda world: world.body_names())
+
+
+def test_robot_description_joints_are_unique_whatever_the_sensors_are_called():
+    import io
+
+    import yourdfpy
+    from vplayground_ros.parameters import FRAMES, Frames
+    from vplayground_ros.robot_description import robot_description
+    world = load_world({**SCENE, "sensors": [{"name": "cam", "type": "camera", "parent": "car", "frame_id": "front_cam"},
+                                             {"name": "cam_optical", "type": "imu", "parent": "car"}]})
+    text = robot_description(world.vehicle("car"), world.sensor_specs, "car", Frames(*FRAMES.values()))
+    urdf = yourdfpy.URDF.load(io.StringIO(text), load_meshes=False)
+    import xml.etree.ElementTree as ET
+    names = [joint.get("name") for joint in ET.fromstring(text).iter("joint")]
+    assert len(names) == len(set(names)) and len(urdf.joint_map) == len(names)
+
+
+def test_odometry_starts_again_for_a_robot_spawned_again(run):
+    car = {**CAR, "odometry": {"slip_across": 0.3, "seed": 5}}
+    runtime, sink = run({**SCENE, "vehicles": [car], "sensors": [POST]})
+    runtime.sim.call(lambda world: world.drive("car", 4.0, 0.0, timeout=100))
+    assert wait_for(lambda: runtime.sim.snapshot.time > 4.0, 60)
+    spec = runtime.sim.call(lambda world: world.vehicle("car"))
+    assert runtime.requests.remove("{entity: car}")[0]
+    assert wait_for(lambda: "car" not in runtime.sim.snapshot.vehicles)
+    ok, message = runtime.requests.spawn(json.dumps(spec))
+    assert ok, message
+    spawned = runtime.sim.snapshot.time
+    assert wait_for(lambda: any(t > spawned for t, _ in sink.of("/odom")), 60)
+    odom = next(ODOMETRY(data) for t, data in sink.of("/odom") if t > spawned)
+    assert np.array(odom.pose.covariance).reshape(6, 6)[1, 1] < 0.3 ** 2 * 0.5  # not the 16 m of drift before
+
+
+@pytest.mark.parametrize("overrides", [{"localization": "none"}, {"publish_odom_tf": False}])
+def test_requests_take_a_robots_frames_whoever_publishes_their_edges(run, overrides):
+    runtime, _ = run(SCENE, "--start-paused", overrides=overrides)
+    for frame in ("odom", "base_footprint", "base_link", "wheel_front_left", "roof_scan"):
+        ok, message = runtime.requests.spawn(f"{{initial_pose: {{header: {{frame_id: {frame}}}, pose: {{position: "
+                                             f"{{x: 0, y: 0, z: 3}}}}}}, allow_renaming: true, name: probe}}")
+        assert ok, (frame, message)
+
+
+def test_a_sensor_named_with_dots_publishes_on_a_name_ros_takes(run):
+    from rclpy.validate_full_topic_name import validate_full_topic_name
+    sensors = [{"name": "front.lidar", "type": "lidar_2d", "parent": "world", "rate": 20}, POST]
+    runtime, sink = run({**SCENE, "sensors": sensors}, "--duration", "0.3")
+    runtime.sim.wait(60)
+    runtime.stop()
+    assert sink.of("sensor:front_lidar/scan:sensor_msgs/msg/LaserScan")
+    for key, _, _ in sink.messages:
+        validate_full_topic_name(runtime.broadcaster.topics[key].name)
+
+
+@pytest.mark.parametrize("localization", ["none", "ground_truth"])
+def test_initialpose_is_the_localisers_when_one_runs(run, localization):
+    """With localization none, initialpose is AMCL's pose estimate: no teleport."""
+    runtime, _ = run(SCENE, "--start-paused", overrides={"localization": localization})
+    pose = SimpleNamespace(position=SimpleNamespace(x=20.0, y=20.0, z=0.0),
+                           orientation=SimpleNamespace(x=0.0, y=0.0, z=0.0, w=1.0))
+    runtime.inputs.handle("initial_pose", SimpleNamespace(header=SimpleNamespace(frame_id="world"),
+                                                          pose=SimpleNamespace(pose=pose)))
+    def teleported():
+        return runtime.sim.call(lambda world: world.body("car")["position"][0]) == pytest.approx(20.0)
+    if localization == "ground_truth":
+        assert wait_for(teleported)
+    else:
+        time.sleep(0.3)  # as long as a teleport takes
+        assert not teleported()

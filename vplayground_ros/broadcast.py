@@ -8,7 +8,6 @@ A sink has `publish(topic, data, seconds)`, `subscribed(topic)` and `statuses()`
 does).
 """
 import math
-import re
 import threading
 import time
 import traceback
@@ -17,7 +16,8 @@ from collections import deque, namedtuple
 import numpy as np
 
 from . import cdr, messages, sensor_messages
-from .frame_names import mount_frame, sensor_frame
+from .frame_names import check_sensor_frames, mount_frame, sensor_frame
+from .messages import topic_token
 from .parameters import frames as frame_names
 from .odometry import OdometryTracker
 from .physics.math3d import quaternions_to_matrices
@@ -89,6 +89,9 @@ class BagSink:
 
     def new_timeline(self):
         self.recorder.new_timeline()
+
+    def retract(self, topic):
+        self.recorder.retract(topic.name)
 
     def subscribed(self, topic):
         return True
@@ -386,8 +389,16 @@ class Broadcaster:
             if self._descriptions.get(key) != text:
                 self.send(key, messages.string(text), snapshot.time)
         for key in self._descriptions.keys() - current.keys():
-            self._latched.pop(key, None)
+            self.retract(key)
         self._descriptions = current
+
+    def retract(self, key):
+        """A latched topic that ended (a robot gone): newcomers no longer get it, a new bag file
+        does not open with it, and the ROS publisher that kept it for late subscribers goes."""
+        self._latched.pop(key, None)
+        for sink in self.sinks:
+            if hasattr(sink, "retract"):
+                sink.retract(self.topics[key])
 
     def _send_state(self, seconds, frames_changed=False):
         """~/state when the state changes, and /tf_static (latched) when the static frames do:
@@ -526,12 +537,15 @@ class Broadcaster:
         try:
             job.publish(snapshot, *args)
         except Exception as error:
-            job.errors += 1
-            job.last_error = f"{type(error).__name__}: {error}"
-            if job.errors == 1:
-                self.log.error(f"publishing {job.name} failed (logged once, counted on /diagnostics):\n"
-                               f"{traceback.format_exc()}")
+            self._failed(job, error)
         job.published = snapshot
+
+    def _failed(self, job, error):
+        job.errors += 1
+        job.last_error = f"{type(error).__name__}: {error}"
+        if job.errors == 1:
+            self.log.error(f"publishing {job.name} failed (logged once, counted on /diagnostics):\n"
+                           f"{traceback.format_exc()}")
 
     # ------------------------------------------------------------------ topics
     def publish_state(self, snap):
@@ -539,6 +553,8 @@ class Broadcaster:
         self.send("poses", cdr.pose_array_of(snap.time, frames.world, self.pose_block(snap)), snap.time)
         s = snap.state
         moving = []  # (parent, child, pose) of every robot: /tf's after the bodies
+        if self._odometry.keys() - snap.vehicle_specs.keys():  # a robot gone: spawned again, it starts afresh
+            self._odometry = {n: e for n, e in self._odometry.items() if n in snap.vehicle_specs}
         for r in self.robots(snap):
             row = snap.names.index(r.name)
             truth = (s["positions"][row], s["quaternions"][row])
@@ -575,7 +591,7 @@ class Broadcaster:
 
     def odometry_tracker(self, name, spec, snap, truth, velocity):
         """The robot's OdometryTracker, started at the true pose when the robot is new (or its
-        error model changed), when time went back (a reset, another scene) and when the robot
+        error model changed; a robot removed is forgotten at the next round), when time went back (a reset, another scene) and when the robot
         moved farther than it can drive since the last round (a teleport: ~/edit, initialpose);
         the odom frame then starts where the robot stands, as a robot's driver starts again."""
         model = spec.get("odometry")
@@ -587,8 +603,6 @@ class Broadcaster:
         tracker = OdometryTracker(name, model)
         tracker.reset(*truth, snap.time)
         self._odometry[name] = (tracker, model)
-        if len(self._odometry) > 2 * len(snap.vehicle_specs) + 16:  # robots come and go
-            self._odometry = {n: e for n, e in self._odometry.items() if n in snap.vehicle_specs}
         return tracker
 
     def pose_block(self, snap):
@@ -707,12 +721,14 @@ class Broadcaster:
         robots = self.robots(snap)
         carriers, frame_of = {r.name: r for r in robots}, sensor_frame(robots)
         for sensor, reading in snap.readings:
-            spec = sensor.spec
-            robot = carriers.get(spec["parent"])
-            keys = {suffix: self.sensor_topic(spec, suffix, robot)
-                    for suffix, _ in sensor_messages.TOPIC_SUFFIXES[spec["type"]]}
-            if not any(self.wanted(key) for key in keys.values()):
-                continue
+            try:  # one sensor's failure (a sink refusing its topic) leaves the others publishing
+                self._publish_reading(sensor.spec, reading, carriers.get(sensor.spec["parent"]), frame_of)
+            except Exception as error:
+                self._failed(self._sensor_job, error)
+
+    def _publish_reading(self, spec, reading, robot, frame_of):
+        keys = {suffix: self.sensor_topic(spec, suffix, robot) for suffix, _ in sensor_messages.TOPIC_SUFFIXES[spec["type"]]}
+        if any(self.wanted(key) for key in keys.values()):
             for suffix, data in sensor_messages.build(spec, reading, reading["time"], frame_of(spec)):
                 self.send(keys[suffix], data, reading["time"])
 
@@ -727,6 +743,34 @@ def drove(tracker, truth, velocity, seconds):
     return float(np.linalg.norm(np.subtract(truth[0], tracker.position))) <= reach
 
 
+def check_sensors(sensor_specs, robots):
+    """The sensors' topics and frames against each other's, the robots' and the node's
+    (SpecError naming the sensor's key)."""
+    check_sensor_topics(sensor_specs, robots)
+    check_sensor_frames(sensor_specs, robots)
+
+
+def check_sensor_topics(sensor_specs, robots):
+    """Refuses a sensor whose topic another sensor, a robot or the node publishes on, or the node
+    subscribes to (a second type on one name: the node's /tf with an Imu in it), naming both;
+    `robots`: robots.Robot of the world's vehicles. Names compared as the root namespace
+    resolves them: a node's namespace or remap moves them all alike."""
+    from .inputs import SUBSCRIPTIONS  # (inputs imports the requests, which import this module)
+    from .physics.specs import SpecError
+    taken = {resolve(t.name): f"the node's {t.name}" for t in TOPICS}
+    taken.update({resolve(s.name): f"the node's subscription {s.name}" for s in SUBSCRIPTIONS})
+    for r in robots:
+        taken.update({t.name: f"{r.name}'s {which}" for which, t in robot_topics(r).items()})
+        taken[resolve(r.topic("cmd_vel"))] = f"{r.name}'s cmd_vel"
+    carriers = {robot.name: robot for robot in robots}
+    for spec in sensor_specs:
+        for topic in sensor_messages.topics(spec, carriers.get(spec["parent"])):
+            name = resolve(topic.name)
+            if name in taken:
+                raise SpecError(f"{spec['name']}.topic", f"{name} is {taken[name]} already (give the sensor a `topic`)")
+            taken[name] = f"the sensor {spec['name']}'s"
+
+
 def robot_topics(robot, resolve_name=resolve):
     """{ROBOT_TOPICS key: Topic} of a robot, each keyed by its absolute name (unique, and what
     a reader asks for)."""
@@ -735,8 +779,3 @@ def robot_topics(robot, resolve_name=resolve):
         name = resolve_name(f"~/{topic_token(robot.name)}/{suffix}" if private else robot.topic(suffix))
         out[which] = Topic(name, name, kind, qos)
     return out
-
-
-def topic_token(name):
-    """An entity name as one token of a topic name ('.' and '-' are not allowed there)."""
-    return re.sub(r"[^A-Za-z0-9_]", "_", name)

@@ -4,7 +4,7 @@ its frame too, so such a name would give a frame two parents, or a loop. A names
 frames hold a '/', which no entity name does."""
 from .messages import WHEEL_NAMES
 from .parameters import FRAMES, Frames
-from .robots import STACK_FRAMES, robot_frames
+from .robots import STACK_FRAMES, frames_of, robot_frames
 from .sensor_messages import optical_frame
 from .sensors import CAMERAS, WORLD
 
@@ -30,6 +30,20 @@ def sensor_frames(spec):
     before them, sensor_frame): its frame_id or name, and a camera's optical frame under it."""
     frame = spec.get("frame_id", spec["name"])
     return [frame] + ([optical_frame(frame)] if spec["type"] in CAMERAS else [])
+
+
+def check_sensor_frames(sensor_specs, robots):
+    """Refuses a sensor whose frame (or optical frame) is a robot's (`car_b/base_link` as a
+    frame_id, or a robot spawned onto a sensor's `car_c/odom`): that frame would have two
+    parents. Names the sensor's frame_id."""
+    from .physics.specs import SpecError
+    taken = frames_of(robots)
+    frame_of = sensor_frame(robots)
+    for spec in sensor_specs:
+        frame = frame_of(spec)
+        for name in (frame, optical_frame(frame)) if spec["type"] in CAMERAS else (frame,):
+            if name in taken:
+                raise SpecError(f"{spec['name']}.frame_id", f"the frame {name!r} is {taken[name]}")
 
 
 def sensor_frame(robots):

@@ -127,14 +127,20 @@ class Inputs:
         (self.log.info if ok else self.log.warning)(f"clicked_point: {message}")
 
     def initial_pose(self, msg):
-        car = next((r.name for r in self.robots(self.sim.snapshot) if not r.namespace), None)
+        """Teleports the robot in the root namespace, unless a localiser owns its pose
+        (localization none): in a Nav2 graph initialpose is AMCL's, a pose estimate."""
+        robot = next((r for r in self.robots(self.sim.snapshot) if not r.namespace), None)
         frame = str(msg.header.frame_id)
         pose = msg.pose.pose
         p = [float(getattr(pose.position, k)) for k in "xyz"]
         q = [float(getattr(pose.orientation, k)) for k in "xyzw"]
-        if car is None:
+        if robot is None:
             self.log.warning("initialpose ignored: no robot in the root namespace")
             return
+        if robot.localization == "none":
+            self.log.info(f"initialpose left to the localiser ({robot.name}'s localization is none): not a teleport")
+            return
+        car = robot.name
         if not (np.all(np.isfinite(p)) and np.all(np.isfinite(q))):
             self.log.warning(f"initialpose ignored: the pose is not finite ({p}, {q})")
             return

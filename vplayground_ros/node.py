@@ -115,6 +115,12 @@ class RosSink:
         publisher = self.publisher(topic)
         return publisher is not None and publisher.get_subscription_count() > 0
 
+    def retract(self, topic):
+        """A latched topic that ended: its transient-local publisher would serve it for ever."""
+        publisher = self.publishers.pop(topic.key, None)
+        if publisher is not None:
+            self.node.destroy_publisher(publisher)
+
     def statuses(self):
         return []
 

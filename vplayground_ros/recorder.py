@@ -38,7 +38,7 @@ import threading
 import time
 import types
 import zlib
-from collections import deque
+from collections import deque, namedtuple
 from pathlib import Path
 
 import mcap.writer
@@ -289,6 +289,7 @@ def offered_qos_profiles(qos):
 
 
 NEW_TIMELINE = object()  # in the recorder's queue: what follows starts again in time
+Retract = namedtuple("Retract", "topic")  # in the queue: a latched topic that ended (a robot gone)
 
 
 class Recorder:
@@ -331,6 +332,10 @@ class Recorder:
     def new_timeline(self):
         """The messages after this one start again in time: they go to a new file."""
         self._queue.append(NEW_TIMELINE)
+
+    def retract(self, topic):
+        """A latched topic ended (its robot is gone): a later file does not open with it."""
+        self._queue.append(Retract(topic))
 
     def close(self, timeout=30.0):
         """Writes what is queued and finishes the file (summary, footer)."""
@@ -394,6 +399,9 @@ class Recorder:
                     break
                 if item is NEW_TIMELINE:
                     new_timeline = True
+                    continue
+                if isinstance(item, Retract):
+                    self._latched.pop(item.topic, None)
                     continue
                 if self.error is not None:
                     continue  # the disk failed: keep draining so nobody blocks, record nothing

@@ -78,10 +78,10 @@ def robot_description(vehicle_spec, sensor_specs, name, frames=DEFAULT_FRAMES):
         if spec["parent"] != name:
             continue
         frame, pose = spec.get("frame_id", spec["name"]), spec["pose"]
-        joint(robot, f"{spec['name']}_joint", "fixed", f.base, frame, pose[:3], pose[3:])
+        joint(robot, f"{frame}_joint", "fixed", f.base, frame, pose[:3], pose[3:])  # links are unique, so joints are
         link(robot, frame)
         if spec["type"] in CAMERAS:
-            joint(robot, f"{spec['name']}_optical_joint", "fixed", frame, optical_frame(frame), rpy=OPTICAL_RPY)
+            joint(robot, f"{optical_frame(frame)}_joint", "fixed", frame, optical_frame(frame), rpy=OPTICAL_RPY)
             link(robot, optical_frame(frame))
     ET.indent(robot)
     return ET.tostring(robot, encoding="unicode")

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from .broadcast import check_sensors
 from .frame_names import DEFAULT_FRAMES, node_frames, sensor_frames, sensor_frames_taken
 from .mesh_files import MeshError, read_obj, read_with_trimesh
 from .physics import World
@@ -20,7 +21,6 @@ from .physics.math3d import rpy_to_quat
 from .physics.math3d import quaternions_to_matrices
 from .resources import find_shared
 from .robots import validate_robot, world_robots
-from .sensor_messages import check_topics
 from .sensors import validate_sensors
 
 SCENE_VERSION = 1
@@ -332,7 +332,7 @@ def load_world(path_or_dict, max_bodies=None, directories=None, frames=DEFAULT_F
             except ValueError as error:  # checks that need the world (e.g. inside its bounds)
                 raise SceneError(f"{label}: {error}") from None
     try:  # needs the robots' namespaces, which the World gave them
-        check_topics(sensor_specs, world_robots(world, frames))
+        check_sensors(sensor_specs, world_robots(world, frames))
     except specs.SpecError as error:
         raise SceneError(f"{label}: sensors: {error}") from None
     world.sensor_specs = sensor_specs

@@ -13,6 +13,7 @@ import numpy as np
 
 from . import cdr
 from .interfaces import encode
+from .messages import topic_token
 from .physics.math3d import rpy_to_quat
 from .sensors import camera_intrinsics, lidar_2d_angles
 
@@ -55,25 +56,11 @@ def topics(spec, robot=None):
     namespace (robots.Robot, the one carrying it, or None) unless its `topic` is absolute."""
     kind = spec["type"]
     base = spec.get("topic") or (ROBOT_TOPICS[kind] if robot is not None
-                                 else "/".join(part for part in (spec["name"], OTHER_TOPICS[kind]) if part))
+                                 else "/".join(part for part in (topic_token(spec["name"]), OTHER_TOPICS[kind]) if part))
     if robot is not None and not base.startswith("/"):
         base = robot.topic(base)
     return [SensorTopic(suffix, f"{base}/{TAILS[suffix]}" if TAILS[suffix] else base, message)
             for suffix, message in TOPIC_SUFFIXES[kind]]
-
-
-def check_topics(sensor_specs, robots):
-    """Refuses two sensors publishing on one topic, naming both (two lidars on one robot both
-    default to `scan`: one needs a `topic`). `robots`: robots.Robot of the world's vehicles."""
-    from .physics.specs import SpecError
-    carriers = {robot.name: robot for robot in robots}
-    seen = {}
-    for spec in sensor_specs:
-        for topic in topics(spec, carriers.get(spec["parent"])):
-            other = seen.setdefault(topic.name, spec["name"])
-            if other != spec["name"]:
-                raise SpecError(f"{spec['name']}.topic", f"{other} publishes {topic.name!r} already (give one of "
-                                                         "them a `topic`)")
 
 
 def optical_frame(name):

@@ -8,11 +8,11 @@ from pathlib import Path
 
 import yaml
 
+from ..broadcast import check_sensors
 from ..frame_names import node_frames, sensor_frames, sensor_frames_taken
 from ..physics import specs
 from ..physics.world import prepare_body
 from ..robots import validate_robot, world_robots
-from ..sensor_messages import check_topics
 from ..scene import body_mesh_points
 from ..sensors import TYPES as SENSOR_TYPES, validate_sensor
 from .descriptions import describe, describe_sensor
@@ -166,8 +166,8 @@ class EntityRequests:
             for _, vehicle, spec, _, _ in prepared:
                 if vehicle != "sensor":
                     added.append(world.add_vehicle(spec) if vehicle else world.add_body(spec))
-            if sensors:  # with the robots' namespaces, which adding gave them
-                check_topics([*world.sensor_specs, *sensors], world_robots(world, frames))
+            if sensors or added:  # with the robots' namespaces, which adding gave them
+                check_sensors([*world.sensor_specs, *sensors], world_robots(world, frames))
         except Exception:
             world.remove_bodies(added)  # all or nothing
             raise
@@ -253,7 +253,7 @@ class EntityRequests:
             clash = next((frame for frame in sensor_frames(edited) if frame in taken), None)
             if clash is not None:
                 raise RequestError(NAME_NOT_UNIQUE, f"{name}.frame_id: {specs.quote(clash)} is {taken[clash]}")
-        check_topics([*others, edited], world_robots(world, frames))
+        check_sensors([*others, edited], world_robots(world, frames))
         world.sensor_specs = [edited if s is spec else s for s in world.sensor_specs]
         return reply(OK, f"edited {name}: {', '.join(sorted(set(fields) - {'name', 'type'}))}")
 

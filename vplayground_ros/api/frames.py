@@ -43,7 +43,10 @@ def robot_frames_now(world, robot, frames):
     """[(parent, child, pose)] of a robot's frames, made by the function that publishes them."""
     body = world.body(robot.name)
     truth = (body["position"], body["quaternion"])
-    return robot_transforms(robot, truth, truth, world.vehicle_state(robot.name), world.vehicle(robot.name)["wheels"],
+    # Every edge, whoever publishes it (a localiser's map -> odom, an EKF's odom ->
+    # base_footprint): where the frame is, not who sends it.
+    whole = robot._replace(localization="ground_truth", publish_odom_tf=True)
+    return robot_transforms(whole, truth, truth, world.vehicle_state(robot.name), world.vehicle(robot.name)["wheels"],
                             frames.world)
 
 
