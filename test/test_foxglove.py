@@ -329,6 +329,7 @@ def test_a_stamped_twist_and_a_namespaced_robots_cmd_vel_drive_over_foxglove(cli
     response = client.call(f"{NS}/spawn", {"load_namespace": json.dumps(car)})
     assert response.success, response.message
     try:
+        assert client.wait(lambda: f"{NS}/rover/command" in client.channels)  # advertised as it first goes out
         client.subscribe(f"{NS}/car/command", f"{NS}/rover/command")
         drive_car, drive_rover = stamped_twist_publisher(client, "/cmd_vel"), stamped_twist_publisher(client, "/rover/cmd_vel")
         end = time.monotonic() + 3.0
