@@ -7,6 +7,9 @@ everything as it was.
 import math
 import re
 import reprlib
+from collections import namedtuple
+
+import numpy as np
 
 from .shapes import SHAPES
 
@@ -399,3 +402,25 @@ def validate_vehicle(raw, path="vehicle"):
     if "rpy" in out and "quaternion" in out:
         raise SpecError(path, "give either rpy or quaternion, not both")
     return out
+
+
+MassProperties = namedtuple("MassProperties", "mass inv_mass inv_inertia")
+
+
+def mass_properties(solid, mass, path):
+    """Mass (kg), its inverse and the inverse inertia (3, 3, body frame) of `solid` (shapes.Solid) weighing
+    `mass`, all computed before a body is written: a SpecError naming `path` (the key the mass
+    came from) unless the mass is finite and at least MIN_MASS and the inertia is
+    positive definite with a finite inverse."""
+    if not (math.isfinite(mass) and mass >= MIN_MASS):
+        problem = ("is not positive" if not mass > 0.0 else "is not finite" if not math.isfinite(mass)
+                   else f"is below {MIN_MASS:g} kg")
+        raise SpecError(path, f"the body's mass {mass:g} kg {problem}")
+    inertia = mass * solid.unit_inertia
+    with np.errstate(all="ignore"):
+        moments = np.linalg.eigvalsh(inertia)
+        inverse = np.linalg.inv(inertia) if moments.min() > 0.0 else None
+    if inverse is None or not np.all(np.isfinite(inverse)):
+        raise SpecError(path, f"the body's inertia (principal moments {', '.join(f'{m:g}' for m in moments)} "
+                              "kg m^2) has no finite inverse")
+    return MassProperties(float(mass), 1.0 / mass, inverse)

@@ -56,11 +56,11 @@ def body_bounds(b, slots):
 
 def prepare_body(spec, path="body"):
     """A SPEC 3 body spec checked whole before any world is touched: (validated spec, its
-    shapes.Solid, its shapes.MassProperties). Errors name the key from `path`."""
+    shapes.Solid, its specs.MassProperties). Errors name the key from `path`."""
     body = specs.validate_body(spec, path)
     solid = shapes.solid(body["shape"], body, path)
     mass = body["mass"] if "mass" in body else body.get("density", specs.DEFAULT_DENSITY) * solid.volume
-    return body, solid, shapes.mass_properties(solid, mass, mass_key(body, path))
+    return body, solid, specs.mass_properties(solid, mass, mass_key(body, path))
 
 
 def mass_key(body, path):
@@ -211,7 +211,7 @@ class World(WorldQueries):
         wheels_after = sum(edit.get("wheels", {}).get(k, {}).get("mass", wheel["mass"]) for k, wheel in enumerate(wheels))
         # The chassis body weighs the chassis and its wheels (add_vehicle).
         slot = self._slots[name]
-        mass = shapes.mass_properties(self._solids[slot][1], self._bodies.mass[slot] + wheels_after
+        mass = specs.mass_properties(self._solids[slot][1], self._bodies.mass[slot] + wheels_after
                                       - self._wheels_mass(name), f"{name}.vehicle.wheels")
         self._vehicles.edit(name, edit)
         self._set_fields(slot, {}, mass)
@@ -265,9 +265,9 @@ class World(WorldQueries):
             if name in self._vehicles and mass <= self._wheels_mass(name):
                 raise ValueError(f"{name}.mass: a car weighs its chassis and its wheels "
                                  f"({self._wheels_mass(name):g} kg): {mass:g} kg is not more")
-            mass = shapes.mass_properties(solid, mass, mass_key(body, name))
+            mass = specs.mass_properties(solid, mass, mass_key(body, name))
         else:  # the mass stays; a new size changes the inertia
-            mass = shapes.mass_properties(solid, float(b.mass[slot]), specs.child(name, (resized or ["mass"])[0]))
+            mass = specs.mass_properties(solid, float(b.mass[slot]), specs.child(name, (resized or ["mass"])[0]))
         self._wake_touching([slot])
         self._forget_contacts([slot])
         if "position" in body:
@@ -488,7 +488,7 @@ class World(WorldQueries):
 
     def _set_fields(self, slot, body, mass):
         """Material, flags and velocities from a validated (partial) spec, and the mass arrays
-        from `mass` (shapes.MassProperties, computed for the body's current solid)."""
+        from `mass` (specs.MassProperties, computed for the body's current solid)."""
         b = self._bodies
         for key in ("elasticity", "static_friction", "dynamic_friction", "immovable",
                     "allow_freezing"):

@@ -8,7 +8,6 @@ supporting face for the narrow phase's convex path, ray cast; all in the body's 
 row in SHAPES and in each dispatcher below. The compiled dispatchers take the hull table and
 the body's slot (`hulls, h`) whatever the shape; only convex bodies read them.
 """
-import math
 from collections import namedtuple
 
 import numpy as np
@@ -148,25 +147,3 @@ def solid(name, spec, path="body"):
     dims = module.dimensions(spec)
     return Solid(dims, module.spec_fields(dims), module.volume(dims), np.diag(module.unit_inertia(dims)), None)
 
-
-MassProperties = namedtuple("MassProperties", "mass inv_mass inv_inertia")
-
-
-def mass_properties(solid, mass, path):
-    """Mass (kg), its inverse and the inverse inertia (3, 3, body frame) of `solid` weighing
-    `mass`, all computed before a body is written: a SpecError naming `path` (the key the mass
-    came from) unless the mass is finite and at least specs.MIN_MASS and the inertia is
-    positive definite with a finite inverse."""
-    from ..specs import MIN_MASS, SpecError
-    if not (math.isfinite(mass) and mass >= MIN_MASS):
-        problem = ("is not positive" if not mass > 0.0 else "is not finite" if not math.isfinite(mass)
-                   else f"is below {MIN_MASS:g} kg")
-        raise SpecError(path, f"the body's mass {mass:g} kg {problem}")
-    inertia = mass * solid.unit_inertia
-    with np.errstate(all="ignore"):
-        moments = np.linalg.eigvalsh(inertia)
-        inverse = np.linalg.inv(inertia) if moments.min() > 0.0 else None
-    if inverse is None or not np.all(np.isfinite(inverse)):
-        raise SpecError(path, f"the body's inertia (principal moments {', '.join(f'{m:g}' for m in moments)} "
-                              "kg m^2) has no finite inverse")
-    return MassProperties(float(mass), 1.0 / mass, inverse)
