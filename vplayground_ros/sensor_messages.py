@@ -13,7 +13,7 @@ import numpy as np
 
 from . import cdr
 from .interfaces import encode
-from .messages import topic_token
+from .messages import EXACT_VARIANCE, topic_token
 from .physics.math3d import rpy_to_quat
 from .sensors import camera_intrinsics, lidar_2d_angles
 
@@ -46,9 +46,6 @@ CLOUD_DTYPE = np.dtype({"names": ["x", "y", "z", "intensity", "ring"],
                         "offsets": [0, 4, 8, 12, 16], "itemsize": 20})
 CLOUD_FIELDS = [(name, CLOUD_DTYPE.fields[name][1], UINT16 if name == "ring" else FLOAT32, 1)
                 for name in CLOUD_DTYPE.names]
-# A variance for what the simulator knows exactly (the orientation, a noiseless rate): REP 145
-# reads an all-zero covariance as "unknown".
-EXACT_VARIANCE = 1e-12
 
 
 def topics(spec, robot=None):
