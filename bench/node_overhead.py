@@ -12,6 +12,7 @@ never freezes (freezing off, 2 s after the drop): the boxes jostle in contact al
 every pose, marker, transform and contact changes each round.
 
     python bench/node_overhead.py [--boxes 1000] [--seconds 20] [--foxglove] [--awake] [--scene PATH]
+                                  [--param NAME:=VALUE ...]
 """
 import argparse
 import atexit
@@ -34,10 +35,11 @@ sys.path.insert(0, str(Path(__file__).parent.parent / "test"))
 from foxglove_client import URL_IN_LOG  # noqa: E402
 from pile import build_pile  # noqa: E402
 
-from vplayground_ros.broadcast import TOPICS  # noqa: E402
+from vplayground_ros.broadcast import TOPICS, resolve  # noqa: E402
 from vplayground_ros.scene import save_world  # noqa: E402
 
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
+LATCHED = {resolve(t.name) for t in TOPICS if t.qos == "latched"}
 
 
 # The pile settles for at most this long (simulated s) before the measurement anyway.
@@ -94,6 +96,8 @@ def main():
     parser.add_argument("--foxglove", action="store_true", help="also serve Foxglove, a client subscribed to all")
     parser.add_argument("--awake", action="store_true", help="a pile that never freezes, instead of a settled one")
     parser.add_argument("--scene", type=Path, help="run this scene instead of building a settled pile (--boxes unused)")
+    parser.add_argument("--param", action="append", default=[], metavar="NAME:=VALUE",
+                        help="a node parameter (--ros-args -p NAME:=VALUE), repeatable")
     args = parser.parse_args()
     os.environ.setdefault("ROS_DOMAIN_ID", str(150 + os.getpid() % 50))
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
@@ -117,9 +121,10 @@ def measure(args, workspace):
     latest = {}
     started = time.perf_counter()
     bag = workspace / "overhead.mcap"
-    node = subprocess.Popen([sys.executable, str(Path(__file__).with_name("named_node.py")),
+    node = subprocess.Popen([sys.executable, os.environ.get("NODE_RUNNER", str(Path(__file__).with_name("named_node.py"))),
                              "--scene", str(scene), "--record", str(bag),
-                             *(["--foxglove", "0"] if args.foxglove else [])],
+                             *(["--foxglove", "0"] if args.foxglove else []),
+                             *(["--ros-args", *(a for p in args.param for a in ("-p", p))] if args.param else [])],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     # A run that fails (no /diagnostics, say) must not leave the node running: one left over from
     # such a run once loaded every later measurement on the machine with ~15 % of a core.
@@ -146,7 +151,7 @@ def measure(args, workspace):
         if name.startswith("/vplayground") or name in ("/clock", "/odom", "/joint_states", "/diagnostics"):
             module, _, kind = types[0].replace("/msg/", "/").partition("/")
             message = getattr(__import__(f"{module}.msg", fromlist=[kind]), kind)
-            durable = name.endswith("scene/markers") or name.endswith("/state")
+            durable = name in LATCHED or name == "/robot_description"
             qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL if durable else DurabilityPolicy.VOLATILE)
             client.create_subscription(message, name, lambda m: None, qos)

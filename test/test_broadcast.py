@@ -105,9 +105,12 @@ def test_the_car_is_drawn_once_and_no_list_marker_is_empty(running):
     runtime.stop()
     first_time, first = sink.of("/vplayground/car/markers", MARKERS)[0]
     assert first_time == 0.0  # in the air: no ray hits, no contacts
-    bodies = sink.of("body_markers", MARKERS)
-    for _, array in bodies:
-        assert array.markers[0].action == 3 and [m.ns for m in array.markers[1:]] == ["box"]  # the crate only
+    resting = sink.of("resting_markers", MARKERS)
+    for seconds, array in sink.of("body_markers", MARKERS):
+        at_rest = [a for t, a in resting if t <= seconds][-1]
+        assert array.markers[0].action == 3 and at_rest.markers[0].action == 3
+        # the crate only, on one topic or the other (it freezes on the ground)
+        assert [m.ns for m in array.markers[1:] + at_rest.markers[1:]] == ["box"]
     for key in ("/vplayground/car/markers", "contact_markers", "scene_markers"):
         for _, array in sink.of(key, MARKERS):
             assert array.markers[0].action == 3, key  # DELETEALL: a marker left out disappears
@@ -258,6 +261,54 @@ def test_the_publisher_never_reads_the_world_it_only_reads_snapshots():
     assert sink.of("scene_markers") and sink.of("/vplayground/car/markers") and sink.of("body_markers")
     # MainThread: this test's set-up and the Runtime's construction, before stepping.
     assert world.threads == {"MainThread", "vplayground-physics"}
+
+
+def test_bodies_at_rest_are_drawn_on_a_latched_topic_sent_when_they_change(running):
+    """Issue 36.4: ~/bodies/markers (every round) draws what moves, ~/bodies/resting_markers
+    (latched) the frozen and immovable bodies, sent when one freezes, wakes or is edited and
+    every static_republish_period, not every round."""
+    scene = {"version": 1, "bodies": [
+        {"name": "sleeper", "position": [0, 0, 0.5], "frozen": True},
+        {"name": "wall", "position": [5, 0, 1], "size": [0.2, 2, 2], "immovable": True},
+        {"name": "faller", "position": [10, 0, 2]}]}
+    runtime, sink = running(scene, "--real-time-factor", "0")
+    sim = runtime.sim
+    ids = {name: runtime.broadcaster.marker_id(name) for name in ("sleeper", "wall", "faller")}
+
+    def drawn(key, index=-1):
+        messages = sink.of(key, MARKERS)
+        if not messages:
+            return None, {}
+        seconds, array = messages[index]
+        assert array.markers[0].action == 3  # DELETEALL first: each is a complete snapshot of its set
+        return seconds, {m.id: tuple(round(c, 3) for c in (m.color.r, m.color.g, m.color.b)) for m in array.markers[1:]}
+
+    assert wait_for(lambda: drawn("resting_markers", 0)[0] is not None and drawn("body_markers", 0)[0] is not None)
+    assert set(drawn("body_markers", 0)[1]) == {ids["faller"]}
+    first = drawn("resting_markers", 0)[1]
+    assert set(first) == {ids["sleeper"], ids["wall"]}
+    assert first[ids["sleeper"]] == (0.6, 0.6, 0.6) and first[ids["wall"]] == (0.35, 0.35, 0.45)  # frozen grey
+
+    # The faller lands and freezes: it moves to the resting topic, and the per-round one is empty.
+    assert wait_for(lambda: drawn("resting_markers")[1].keys() == set(ids.values()), timeout=120)
+    assert wait_for(lambda: sim.snapshot.time > 12.0, timeout=120)
+    rounds = sink.of("body_markers")
+    assert len(rounds) >= 12 * 30 - 2  # marker_rate
+    assert drawn("body_markers")[1] == {}
+    sent = [seconds for seconds, _ in sink.of("resting_markers")]
+    # t=0, the faller frozen, then once per static_republish_period (5 s) of a world at rest.
+    assert 3 <= len(sent) <= 6, sent
+    gaps = np.diff(sent)
+    assert all(gap >= 5.0 - 1e-9 for gap in gaps[2:]), sent
+
+    # A push wakes the sleeper: it leaves the resting topic at once and moves on the other.
+    woken = sim.call(lambda world: (world.apply_impulse("sleeper", (0.0, 0.0, 3000.0)), world.time)[1])
+    assert wait_for(lambda: ids["sleeper"] in drawn("body_markers")[1])
+    moving = [t for t, a in sink.of("body_markers", MARKERS) if t >= woken and ids["sleeper"] in {m.id for m in a.markers[1:]}]
+    left = [(t, a) for t, a in sink.of("resting_markers", MARKERS) if t >= woken][0]
+    # In the same round, so the viewer never draws it twice or not at all.
+    assert left[0] == moving[0] and ids["sleeper"] not in {m.id for m in left[1].markers[1:]}
+    assert wait_for(lambda: ids["sleeper"] in drawn("resting_markers")[1], timeout=120)  # it freezes again
 
 
 def test_body_markers_draw_each_shape_and_follow_a_capsule(running):

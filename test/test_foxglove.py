@@ -25,6 +25,7 @@ from vplayground_ros.foxglove_front import MAX_VIEWERS
 NS = "/vplayground"
 TOPICS = {
     "/clock": "rosgraph_msgs/msg/Clock", f"{NS}/bodies/markers": "visualization_msgs/msg/MarkerArray",
+    f"{NS}/bodies/resting_markers": "visualization_msgs/msg/MarkerArray",
     f"{NS}/bodies/poses": "geometry_msgs/msg/PoseArray", f"{NS}/scene/markers": "visualization_msgs/msg/MarkerArray",
     f"{NS}/contacts/points": "sensor_msgs/msg/PointCloud2", f"{NS}/contacts/markers": "visualization_msgs/msg/MarkerArray",
     f"{NS}/transforms": "geometry_msgs/msg/TransformStamped", "/tf": "tf2_msgs/msg/TFMessage",
@@ -165,8 +166,8 @@ def test_a_taken_port_is_a_clear_error(server):
 
 
 def test_subscribed_frames_decode_to_their_types_stamped_with_sim_time(client):
-    client.subscribe(f"{NS}/bodies/poses", "/odom", f"{NS}/bodies/markers", "/diagnostics", "/clock", "/tf",
-                     f"{NS}/scene/markers")
+    client.subscribe(f"{NS}/bodies/poses", "/odom", f"{NS}/bodies/markers", f"{NS}/bodies/resting_markers",
+                     "/diagnostics", "/clock", "/tf", f"{NS}/scene/markers")
     assert client.wait(lambda: any(stamp > 0 for stamp, _ in client.frames[f"{NS}/bodies/poses"]))
     log_time, poses = client.latest(f"{NS}/bodies/poses")
     assert len(poses.poses) == 44 and poses.header.frame_id == "world"
@@ -174,8 +175,12 @@ def test_subscribed_frames_decode_to_their_types_stamped_with_sim_time(client):
     assert stamp == log_time and 0 < stamp < 3600 * 10**9  # simulated, not wall-clock, time
     _, odom = client.latest("/odom")
     assert odom.child_frame_id == "base_footprint" and math.isfinite(odom.pose.pose.position.x)
-    _, markers = client.latest(f"{NS}/bodies/markers")
-    assert markers.markers[0].action == 3 and len(markers.markers) == 44  # DELETEALL + a cube per body but the car
+    # Each DELETEALL + a cube per body but the car, on one topic or the other (the resting one
+    # latched: re-sent to a new subscriber); the two of one round agree.
+    assert client.wait(lambda: sum(len(client.latest(t)[1].markers) for t in (f"{NS}/bodies/markers",
+                                                                            f"{NS}/bodies/resting_markers")) == 2 + 43)
+    assert client.latest(f"{NS}/bodies/markers")[1].markers[0].action == 3
+    assert client.latest(f"{NS}/bodies/resting_markers")[1].markers[0].action == 3
     _, scene = client.latest(f"{NS}/scene/markers")  # latched: re-sent to a new subscriber
     assert any(m.ns == "playground" and len(m.points) > 0 for m in scene.markers)
     _, tf = client.latest("/tf")
@@ -463,10 +468,11 @@ def test_a_viewer_joining_a_paused_simulation_gets_the_world_and_its_time(server
         late = FoxgloveClient(server[0])
         try:
             assert late.wait(lambda: len(late.channels) >= len(TOPICS))
-            late.subscribe(f"{NS}/bodies/poses", f"{NS}/bodies/markers", "/tf", "/odom")
+            late.subscribe(f"{NS}/bodies/poses", f"{NS}/bodies/markers", f"{NS}/bodies/resting_markers", "/tf", "/odom")
             _, poses = late.latest(f"{NS}/bodies/poses")
-            _, markers = late.latest(f"{NS}/bodies/markers")
-            assert len(poses.poses) > 40 and len(markers.markers) > 40
+            _, moving = late.latest(f"{NS}/bodies/markers")
+            _, resting = late.latest(f"{NS}/bodies/resting_markers")
+            assert len(poses.poses) > 40 and len(moving.markers) + len(resting.markers) == 2 + len(poses.poses) - 1
             assert late.latest("/tf") and late.latest("/odom")
             assert late.wait(lambda: len(late.times) >= 1) and late.times[-1] > 0
         finally:

@@ -117,6 +117,7 @@ def ros():
 def test_every_topic_is_advertised_with_its_type(ros):
     expected = {
         "/clock": "rosgraph_msgs/msg/Clock", f"{NS}/bodies/markers": "visualization_msgs/msg/MarkerArray",
+        f"{NS}/bodies/resting_markers": "visualization_msgs/msg/MarkerArray",
         f"{NS}/bodies/poses": "geometry_msgs/msg/PoseArray", f"{NS}/scene/markers": "visualization_msgs/msg/MarkerArray",
         f"{NS}/contacts/points": "sensor_msgs/msg/PointCloud2", f"{NS}/contacts/markers": "visualization_msgs/msg/MarkerArray",
         f"{NS}/transforms": "geometry_msgs/msg/TransformStamped", "/odom": "nav_msgs/msg/Odometry",
@@ -475,18 +476,26 @@ def test_a_ros_override_of_the_wrong_type_or_range_is_refused_in_a_line(override
 def test_marker_and_contact_topics_carry_the_bodies(ros):
     from sensor_msgs.msg import JointState, PointCloud2
     from visualization_msgs.msg import MarkerArray
+    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
     ros.listen(MarkerArray, f"{NS}/bodies/markers", 1)
-    ros.listen(MarkerArray, f"{NS}/scene/markers",
-               QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    ros.listen(MarkerArray, f"{NS}/bodies/resting_markers", latched)
+    ros.listen(MarkerArray, f"{NS}/scene/markers", latched)
     ros.listen(MarkerArray, f"{NS}/car/markers", 1)
     ros.listen(PointCloud2, f"{NS}/contacts/points", 1)
     ros.listen(JointState, "/joint_states")
-    topics = (f"{NS}/bodies/markers", f"{NS}/scene/markers", f"{NS}/car/markers", f"{NS}/contacts/points", "/joint_states")
+    topics = (f"{NS}/bodies/markers", f"{NS}/bodies/resting_markers", f"{NS}/scene/markers", f"{NS}/car/markers",
+              f"{NS}/contacts/points", "/joint_states")
     assert wait_for(lambda: all(t in ros.latest for t in topics))
-    bodies = ros.latest[f"{NS}/bodies/markers"].markers
-    # DELETEALL, then every body but the car, which ~/car/markers draws.
-    assert bodies[0].action == 3 and len(bodies) - 1 == len(ros.latest[f"{NS}/bodies/poses"].poses) - 1
-    assert {m.ns for m in bodies[1:]} <= {"box", "immovable", "vehicle"}
+
+    def drawn():
+        return ros.latest[f"{NS}/bodies/markers"].markers, ros.latest[f"{NS}/bodies/resting_markers"].markers
+
+    # Each DELETEALL, then every body but the car (which ~/car/markers draws) on one or the other
+    # (the two of one round: a body that froze leaves one as it joins the other).
+    assert wait_for(lambda: len(drawn()[0]) - 1 + len(drawn()[1]) - 1 == len(ros.latest[f"{NS}/bodies/poses"].poses) - 1)
+    moving, resting = drawn()
+    assert moving[0].action == resting[0].action == 3
+    assert {m.ns for m in moving[1:] + resting[1:]} <= {"box", "immovable", "vehicle"}
     scene = ros.latest[f"{NS}/scene/markers"].markers
     playground = [m for m in scene if m.ns == "playground"]
     assert playground and len(playground[0].points) == 3 * len(ros.sim.world.playground_triangles)

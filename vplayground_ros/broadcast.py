@@ -29,6 +29,7 @@ Topic = namedtuple("Topic", "key name type qos")
 TOPICS = [
     Topic("clock", "/clock", "rosgraph_msgs/msg/Clock", "reliable_1"),
     Topic("body_markers", "~/bodies/markers", "visualization_msgs/msg/MarkerArray", "reliable_1"),
+    Topic("resting_markers", "~/bodies/resting_markers", "visualization_msgs/msg/MarkerArray", "latched"),
     Topic("poses", "~/bodies/poses", "geometry_msgs/msg/PoseArray", "reliable_1"),
     Topic("scene_markers", "~/scene/markers", "visualization_msgs/msg/MarkerArray", "latched"),
     Topic("contact_points", "~/contacts/points", "sensor_msgs/msg/PointCloud2", "reliable_1"),
@@ -157,7 +158,9 @@ class Broadcaster:
         self.marker_ids = {}
         self._next_marker_id = 0
         self._ids_of = ([], np.zeros(0, np.int32))  # the last names and their marker ids
-        self.body_markers = messages.BodyMarkers()
+        self.body_markers = messages.BodyMarkers(resting=False)
+        self.resting_markers = messages.BodyMarkers(resting=True)
+        self._resting_sent = None  # simulated s when ~/bodies/resting_markers last went out
         self.tf_encoder = cdr.TransformEncoder()         # /tf, on the publisher thread
         self.tf_static_encoder = cdr.TransformEncoder()  # /tf_static, on the simulation thread
         self._pose_block = None  # (positions, quaternions, their (N, 7) rows) last made
@@ -658,9 +661,10 @@ class Broadcaster:
 
     def publish_markers(self, snap):
         world_frame = self.frames.world
+        ids, poses = self.marker_ids_of(snap.names), self.pose_block(snap)
         if self.wanted("body_markers"):
-            self.send("body_markers", self.body_markers.encode(snap, world_frame, self.marker_ids_of(snap.names),
-                                                               self.pose_block(snap)), snap.time)
+            self.send("body_markers", self.body_markers.encode(snap, world_frame, ids, poses), snap.time)
+        self._publish_resting_markers(snap, ids, poses)
         for r in self.robots(snap):
             key = self.robot_topic(r, "markers")
             if self.wanted(key):
@@ -672,6 +676,21 @@ class Broadcaster:
                 self.send("contact_points", messages.contact_cloud(snap, world_frame, limit), snap.time)
             if self.wanted("contact_markers"):
                 self.send("contact_markers", messages.contact_markers(snap, world_frame, limit), snap.time)
+
+    def _publish_resting_markers(self, snap, ids, poses):
+        """The bodies at rest (latched) when what they draw changed (a body froze, woke, was
+        spawned, edited, removed or moved while frozen) and every static_republish_period, so a
+        bag seeks to a complete scene; a round of a world at rest sends none. Built whether or
+        not a sink wants it now: a client subscribing later gets the latched copy (welcome),
+        which must be the current one. A newcomer's own round (welcome) has that copy already."""
+        if getattr(self._only, "sink", None) is not None:
+            return
+        last, period = self._resting_sent, self.parameters["static_republish_period"]
+        if (last is not None and 0.0 <= snap.time - last < period
+                and self.resting_markers.draws_the_same(snap, ids, poses)):
+            return
+        self.send("resting_markers", self.resting_markers.encode(snap, self.frames.world, ids, poses), snap.time)
+        self._resting_sent = snap.time
 
     def publish_scenery(self, snap, octree_cells):
         """The scenery, latched (octree_cells read on the simulation thread at this snapshot)."""

@@ -153,69 +153,73 @@ def shape_markers(shape_codes, dimensions, poses, ids):
 
 
 class BodyMarkers:
-    """~/bodies/markers: DELETEALL, then each body's shape (shape_markers; ns = category, ids
-    stable per name, frozen grey), but for the vehicles: ~/<name>/markers draws each with its
-    wheels, and two markers at one place would show whichever colour the viewer draws last.
+    """One of the two topics that draw the bodies: DELETEALL, then each body's shape
+    (shape_markers; ns = category, ids stable per name, frozen grey). `resting` draws the bodies
+    at rest (frozen or immovable: ~/bodies/resting_markers, latched), else the others
+    (~/bodies/markers, every round), so what does not move is not re-sent every round. Neither
+    draws the vehicles: ~/<name>/markers draws each with its wheels, and two markers at one
+    place would show whichever colour the viewer draws last.
 
-    Names, categories, ids, shapes and sizes change only with the layout (spawn, remove, edit):
-    what is made of them is kept, read-only, until it does; the colours until the frozen flags
-    change. A settled world's snapshots share their arrays (Simulation), so then only the
-    stamps are written (cdr.TemplateEncoder)."""
+    Names, categories, ids, shapes, sizes and which bodies are at rest change only with the
+    layout (spawn, remove, edit) or when a body freezes or wakes: what is made of them is kept,
+    read-only, until they do. A settled world's snapshots share their arrays (Simulation), so
+    then only the stamps are written (cdr.TemplateEncoder)."""
 
-    def __init__(self):
+    def __init__(self, resting):
+        self.resting = resting
         self.encoder = cdr.BodyMarkerEncoder()
-        self._layout = None   # (key, drawn rows or None, kinds, namespaces, ShapeMarkerLayout, points)
-        self._colours = None  # (frozen flags, the layout entry, colours)
+        self._layout = None  # (key, at rest flags, rows drawn, namespaces, ShapeMarkerLayout, colours, points)
+        self._drawn = None   # (layout, the pose block, the poses of the rows drawn) last encoded
 
     def layout(self, snapshot, ids):
         s = snapshot.state
         key = (snapshot.names, s["immovable"], s["shapes"], s["dimensions"], s["hull_triangles"], ids,
                tuple(snapshot.vehicles))
+        at_rest = s["frozen"] | s["immovable"]
         cached = self._layout
-        if cached is not None and all(a is b for a, b in zip(key[:6], cached[0][:6])) and key[6:] == cached[0][6:]:
+        if (cached is not None and all(a is b for a, b in zip(key[:6], cached[0][:6])) and key[6:] == cached[0][6:]
+                and np.array_equal(at_rest, cached[1])):
             return cached
-        kinds = categories(snapshot)
-        vehicles = [snapshot.names.index(name) for name in snapshot.vehicles]
-        drawn = None
-        if vehicles:
-            drawn = np.ones(len(kinds), bool)
-            drawn[vehicles] = False
-        codes, dimensions = s["shapes"], s["dimensions"]
-        if drawn is not None:
-            kinds, ids, codes, dimensions = kinds[drawn], np.asarray(ids)[drawn], codes[drawn], dimensions[drawn]
-        markers = shape_marker_layout(codes, dimensions, ids)
+        drawn = at_rest.copy() if self.resting else ~at_rest
+        drawn[[snapshot.names.index(name) for name in snapshot.vehicles]] = False
+        rows = np.nonzero(drawn)[0]
+        kinds = categories(snapshot)[rows]
+        markers = shape_marker_layout(s["shapes"][rows], s["dimensions"][rows], np.asarray(ids)[rows])
         namespaces = CATEGORIES[kinds[markers.rows]]
-        for array in (kinds, namespaces, *markers):
+        colours = CATEGORY_COLOURS[np.where(s["frozen"][rows], FROZEN, kinds)][markers.rows]
+        for array in (at_rest, rows, namespaces, colours, *markers):
             array.flags.writeable = False
-        hulls = hull_points(s["hull_triangles"], vehicles)
+        hulls = hull_points([s["hull_triangles"][row] for row in rows.tolist()])
         points = None if hulls is None else tuple(
             b"" if hulls[row] is None else np.ascontiguousarray(hulls[row], "<f8").tobytes()
             for row in markers.rows.tolist())
-        self._layout = (key, drawn, kinds, namespaces, markers, points)
+        self._layout = (key, at_rest, rows, namespaces, markers, colours, points)
         return self._layout
+
+    def draws_the_same(self, snapshot, ids, poses):
+        """Whether encode would draw what it drew last: the same bodies, shapes and colours at
+        the same poses (the stamp aside)."""
+        last = self._drawn
+        if last is None or self.layout(snapshot, ids) is not last[0]:
+            return False
+        return poses is last[1] or np.array_equal(poses[last[0][2]], last[2])
 
     def encode(self, snapshot, frame, ids, poses):
         """ids (N,) the bodies' marker ids, poses (N, 7) xyz + xyzw of every body."""
         layout = self.layout(snapshot, ids)
-        _, drawn, kinds, namespaces, markers, points = layout
-        frozen = snapshot.state["frozen"]
-        cached = self._colours
-        if cached is None or cached[0] is not frozen or cached[1] is not layout:
-            colours = CATEGORY_COLOURS[np.where(frozen if drawn is None else frozen[drawn], FROZEN, kinds)][markers.rows]
-            colours.flags.writeable = False
-            self._colours = cached = (frozen, layout, colours)
-        poses = shape_marker_poses(markers, poses if drawn is None else poses[drawn])
-        return self.encoder.encode(snapshot.time, frame, namespaces, markers.types, markers.ids, poses,
-                                   markers.scales, cached[2], points)
+        _, _, rows, namespaces, markers, colours, points = layout
+        drawn = poses[rows]
+        self._drawn = (layout, poses, drawn)
+        return self.encoder.encode(snapshot.time, frame, namespaces, markers.types, markers.ids,
+                                   shape_marker_poses(markers, drawn), markers.scales, colours, points)
 
 
-def hull_points(hull_triangles, left_out=()):
+def hull_points(hull_triangles):
     """Each row's TRIANGLE_LIST points (a convex body's hull triangles, (3T, 3)), None for the
-    other shapes; None when no body is convex. `left_out`: rows that are not drawn (vehicles)."""
+    other shapes; None when no body is convex."""
     if all(t is None for t in hull_triangles):
         return None
-    skipped = set(left_out)
-    return [t.reshape(-1, 3) if t is not None else None for row, t in enumerate(hull_triangles) if row not in skipped]
+    return [t.reshape(-1, 3) if t is not None else None for t in hull_triangles]
 
 
 def marker_array(seconds, frame, markers):
