@@ -13,6 +13,9 @@ every pose, marker, transform and contact changes each round.
 
     python bench/node_overhead.py [--boxes 1000] [--seconds 20] [--foxglove] [--awake] [--scene PATH]
                                   [--param NAME:=VALUE ...]
+
+NODE_RUNNER=script.py runs the node under another script taking named_node.py's arguments (a
+profiler wrapping it, say).
 """
 import argparse
 import atexit

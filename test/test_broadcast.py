@@ -146,14 +146,14 @@ def test_a_failing_job_is_logged_once_counted_and_the_others_go_on(running):
     log.addHandler(handler)
     try:
         runtime, sink = running(SCENE, "--real-time-factor", "0", "--duration", "3",
-                                sink=Collector(fail_on="body_markers"), log=log)
+                                sink=Collector(fail_on="/vplayground/car/markers"), log=log)
         runtime.sim.wait(60)
         runtime.stop()
     finally:
         log.removeHandler(handler)
     errors = [r for r in records if r.levelno == logging.ERROR]
     assert len(errors) == 1 and "publishing markers failed" in errors[0].getMessage()
-    assert "Traceback" in errors[0].getMessage() and "sink bug on body_markers" in errors[0].getMessage()
+    assert "Traceback" in errors[0].getMessage() and "sink bug on /vplayground/car/markers" in errors[0].getMessage()
     assert sink.of("poses")[-1][0] == pytest.approx(3.0)  # state went on to the end
     diagnostics = sink.of("diagnostics", DIAGNOSTICS)
     assert [t for t, _ in diagnostics] == [0.0, 1.0, 2.0, 3.0]
@@ -244,6 +244,23 @@ def test_real_time_sends_a_clock_for_every_step_in_order(running):
             assert round(t * rate) in clocks_sent
 
 
+def test_a_world_at_rest_wakes_at_its_publish_times_and_still_clocks_every_step(running):
+    """Issue 36.4: in real time a world at rest runs its batches to the next publish time
+    (Simulation.RESTING_BATCH_PERIOD), not two steps at a time: half the wake-ups at 30 Hz,
+    /clock still at every step in order."""
+    scene = {"version": 1, "bodies": [{"name": "sleeper", "position": [0, 0, 0.5], "frozen": True}]}
+    runtime, sink = running(scene, "--duration", "2.0")
+    batches = []
+    runtime.sim.add_listener(lambda snapshot: batches.append(snapshot.time))
+    runtime.sim.wait(30)
+    runtime.stop()
+    rate = runtime.sim.world.settings["steps_per_second"]
+    steps = [round(t * rate) for t, _ in sink.of("clock")]
+    assert steps == list(range(steps[0], steps[0] + len(steps))) and steps[-1] == 2 * rate
+    per_second = (len(batches) - 1) / (batches[-1] - batches[0])
+    assert 25 <= per_second <= 36, per_second  # 30 publish rounds a second (64 batches moving)
+
+
 def test_the_publisher_never_reads_the_world_it_only_reads_snapshots():
     # simulation.py's rule: nothing outside the simulation thread touches the World while it
     # steps. Scenery (scene markers) and wheels (car markers) come with the snapshots.
@@ -292,9 +309,17 @@ def test_bodies_at_rest_are_drawn_on_a_latched_topic_sent_when_they_change(runni
     # The faller lands and freezes: it moves to the resting topic, and the per-round one is empty.
     assert wait_for(lambda: drawn("resting_markers")[1].keys() == set(ids.values()), timeout=120)
     assert wait_for(lambda: sim.snapshot.time > 12.0, timeout=120)
-    rounds = sink.of("body_markers")
-    assert len(rounds) >= 12 * 30 - 2  # marker_rate
-    assert drawn("body_markers")[1] == {}
+    # While something moves, ~/bodies/markers every round; once nothing does, one DELETEALL and
+    # then nothing (so for the contact topics and /tf, which carry nothing here): a world at
+    # rest sends what draws only when it changes.
+    rounds = sink.of("body_markers", MARKERS)
+    still = [t for t, array in rounds if len(array.markers) == 1]
+    assert len(still) == 1 and rounds[-1][0] == still[0], [t for t, _ in rounds[-3:]]
+    assert len(rounds) >= still[0] * 30 - 2  # marker_rate until then
+    for key in ("contact_points", "contact_markers"):
+        assert [t for t, _ in sink.of(key) if t > still[0]] == [], key
+    assert [t for t, _ in sink.of("tf")] == [0.0]  # no robot, no sensor: /tf carries nothing
+    assert len(sink.of("poses")) >= 12 * 30 - 2  # the state goes out every round (publish_rate)
     sent = [seconds for seconds, _ in sink.of("resting_markers")]
     # t=0, the faller frozen, then once per static_republish_period (5 s) of a world at rest.
     assert 3 <= len(sent) <= 6, sent

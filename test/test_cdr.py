@@ -57,6 +57,18 @@ def test_contact_cloud_round_trip():
     assert decoded["x"].tolist() == [1.0, 2.0, 3.0] and decoded["body_b"].tolist() == [-1, 4, -2]
 
 
+@pytest.mark.parametrize("seconds", [0.0, 2.5, 1e6 + 0.0078125])
+def test_a_world_without_contacts_gets_the_bytes_a_full_build_gives(seconds):
+    """no_contacts restamps one message per frame: byte for byte what the general path builds."""
+    for frame in ("world", "another_frame"):
+        assert messages.no_contacts("cloud", frame, seconds) == cdr.point_cloud(
+            seconds, frame, messages.CONTACT_FIELD_LAYOUT, np.zeros(0, messages.CONTACT_DTYPE))
+        assert messages.no_contacts("markers", frame, seconds) == messages.marker_array(
+            seconds, frame, [messages.DELETE_ALL])
+        msg = deserialize_message(messages.no_contacts("cloud", frame, seconds), PointCloud2)
+        assert msg.header.frame_id == frame and stamp_of(msg.header) == pytest.approx(seconds, abs=1e-9)
+
+
 def test_tf_message_round_trip_without_tf2_msgs():
     from mcap_ros2._dynamic import generate_dynamic
 

@@ -161,6 +161,7 @@ class Broadcaster:
         self.body_markers = messages.BodyMarkers(resting=False)
         self.resting_markers = messages.BodyMarkers(resting=True)
         self._resting_sent = None  # simulated s when ~/bodies/resting_markers last went out
+        self._sent_empty = set()   # keys of the per-round topics whose last message drew or carried nothing
         self.tf_encoder = cdr.TransformEncoder()         # /tf, on the publisher thread
         self.tf_static_encoder = cdr.TransformEncoder()  # /tf_static, on the simulation thread
         self._pose_block = None  # (positions, quaternions, their (N, 7) rows) last made
@@ -482,6 +483,7 @@ class Broadcaster:
             with self._ready:
                 self._draining = False
                 self._ready.notify_all()
+        self._sent_empty.clear()  # a new file opens with each of them once
         for sink in self.sinks:
             if hasattr(sink, "new_timeline"):
                 sink.new_timeline()
@@ -585,7 +587,7 @@ class Broadcaster:
         for row in rows.tolist():  # the bodies /tf carries, as /tf has them
             self.send("transforms", cdr.transform_stamped(
                 snap.time, frames.world, snap.names[row], [*s["positions"][row], *s["quaternions"][row]]), snap.time)
-        if self.wanted("tf"):
+        if self.wanted("tf") and not self._repeats_empty("tf", len(rows) == 0 and not moving):
             poses = self.pose_block(snap)
             poses = poses if len(rows) == len(snap.names) else poses[rows]
             if moving:
@@ -662,7 +664,8 @@ class Broadcaster:
     def publish_markers(self, snap):
         world_frame = self.frames.world
         ids, poses = self.marker_ids_of(snap.names), self.pose_block(snap)
-        if self.wanted("body_markers"):
+        if self.wanted("body_markers") and not self._repeats_empty(
+                "body_markers", len(self.body_markers.layout(snap, ids)[2]) == 0):
             self.send("body_markers", self.body_markers.encode(snap, world_frame, ids, poses), snap.time)
         self._publish_resting_markers(snap, ids, poses)
         for r in self.robots(snap):
@@ -672,10 +675,26 @@ class Broadcaster:
                           snap.time)
         if self.parameters["contacts.publish"] and snap.contacts is not None:
             limit = self.parameters["contacts.max_points"]
-            if self.wanted("contact_points"):
+            touching = len(snap.contacts["depths"]) > 0 and limit > 0
+            if self.wanted("contact_points") and not self._repeats_empty("contact_points", not touching):
                 self.send("contact_points", messages.contact_cloud(snap, world_frame, limit), snap.time)
-            if self.wanted("contact_markers"):
+            if self.wanted("contact_markers") and not self._repeats_empty("contact_markers", not touching):
                 self.send("contact_markers", messages.contact_markers(snap, world_frame, limit), snap.time)
+
+    def _repeats_empty(self, key, empty):
+        """Whether the per-round topic's message would draw or carry nothing, as its last one
+        did: a world at rest would repeat it every round, and a viewer (or a seek in the bag)
+        shows the same from the last. Each such run starts with one message (its DELETEALL
+        clears what the topic drew), and a newcomer's own round (welcome) always gets one."""
+        if getattr(self._only, "sink", None) is not None:
+            return False
+        if not empty:
+            self._sent_empty.discard(key)
+            return False
+        if key in self._sent_empty:
+            return True
+        self._sent_empty.add(key)
+        return False
 
     def _publish_resting_markers(self, snap, ids, poses):
         """The bodies at rest (latched) when what they draw changed (a body froze, woke, was

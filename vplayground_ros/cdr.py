@@ -116,6 +116,11 @@ def split_stamp(seconds):
     return (sec + 1, 0) if nanosec == 1_000_000_000 else (sec, nanosec)
 
 
+def restamped(message, seconds, offset):
+    """CDR bytes `message` with the builtin_interfaces/Time at byte `offset` set to `seconds`."""
+    return b"".join((message[:offset], struct.pack("<iI", *split_stamp(seconds)), message[offset + 8:]))
+
+
 class TemplateEncoder:
     """Sequences of one message type whose elements differ only in numbers: each element is
     copied from a template written once per (strings, alignment) and its numbers patched in.

@@ -168,18 +168,20 @@ class BodyMarkers:
     def __init__(self, resting):
         self.resting = resting
         self.encoder = cdr.BodyMarkerEncoder()
-        self._layout = None  # (key, at rest flags, rows drawn, namespaces, ShapeMarkerLayout, colours, points)
+        # (key, at rest flags, rows drawn, namespaces, ShapeMarkerLayout, colours, points, the frozen
+        # flags they were made from: a settled world's snapshots share that array)
+        self._layout = None
         self._drawn = None   # (layout, the pose block, the poses of the rows drawn) last encoded
 
     def layout(self, snapshot, ids):
         s = snapshot.state
         key = (snapshot.names, s["immovable"], s["shapes"], s["dimensions"], s["hull_triangles"], ids,
                tuple(snapshot.vehicles))
-        at_rest = s["frozen"] | s["immovable"]
         cached = self._layout
-        if (cached is not None and all(a is b for a, b in zip(key[:6], cached[0][:6])) and key[6:] == cached[0][6:]
-                and np.array_equal(at_rest, cached[1])):
-            return cached
+        if cached is not None and all(a is b for a, b in zip(key[:6], cached[0][:6])) and key[6:] == cached[0][6:]:
+            if s["frozen"] is cached[7] or np.array_equal(s["frozen"] | s["immovable"], cached[1]):
+                return cached
+        at_rest = s["frozen"] | s["immovable"]
         drawn = at_rest.copy() if self.resting else ~at_rest
         drawn[[snapshot.names.index(name) for name in snapshot.vehicles]] = False
         rows = np.nonzero(drawn)[0]
@@ -193,7 +195,7 @@ class BodyMarkers:
         points = None if hulls is None else tuple(
             b"" if hulls[row] is None else np.ascontiguousarray(hulls[row], "<f8").tobytes()
             for row in markers.rows.tolist())
-        self._layout = (key, at_rest, rows, namespaces, markers, colours, points)
+        self._layout = (key, at_rest, rows, namespaces, markers, colours, points, s["frozen"])
         return self._layout
 
     def draws_the_same(self, snapshot, ids, poses):
@@ -207,7 +209,7 @@ class BodyMarkers:
     def encode(self, snapshot, frame, ids, poses):
         """ids (N,) the bodies' marker ids, poses (N, 7) xyz + xyzw of every body."""
         layout = self.layout(snapshot, ids)
-        _, _, rows, namespaces, markers, colours, points = layout
+        _, _, rows, namespaces, markers, colours, points, _ = layout
         drawn = poses[rows]
         self._drawn = (layout, poses, drawn)
         return self.encoder.encode(snapshot.time, frame, namespaces, markers.types, markers.ids,
@@ -255,6 +257,8 @@ def contact_cloud(snapshot, frame, max_points):
     """~/contacts/points."""
     c = snapshot.contacts
     n = min(len(c["depths"]), max_points)
+    if n == 0:
+        return no_contacts("cloud", frame, snapshot.time)
     rows = np.zeros(n, CONTACT_DTYPE)
     for k, key in enumerate(("x", "y", "z")):
         rows[key] = c["points"][:n, k]
@@ -268,6 +272,8 @@ def contact_markers(snapshot, frame, max_points):
     """The 2008 "show collisions": contact points and their normals (0.3 m long)."""
     c = snapshot.contacts
     n = min(len(c["depths"]), max_points)
+    if n == 0:
+        return no_contacts("markers", frame, snapshot.time)
     points = c["points"][:n]
     tips = points - 0.3 * c["normals"][:n]  # normals point from A into B: draw them out of B
     segments = np.stack([points, tips], axis=1).reshape(-1, 3)
@@ -275,6 +281,23 @@ def contact_markers(snapshot, frame, max_points):
         DELETE_ALL,
         marker("contact_points", 0, SPHERE_LIST, scale=(0.05, 0.05, 0.05), rgba=COLOURS["contact"], points=points),
         marker("contact_normals", 1, LINE_LIST, scale=(0.01, 0.01, 0.01), rgba=COLOURS["contact"], points=segments)])
+
+
+# A world at rest touches nothing (frozen bodies keep no contacts): its contact topics differ
+# round to round only in their stamp, so each is built once per frame and restamped.
+_NO_CONTACTS = {}  # (topic, frame) -> (message stamped 0, the stamp's byte offset)
+
+
+def no_contacts(topic, frame, seconds):
+    """~/contacts/points ("cloud") or ~/contacts/markers ("markers") with no contact."""
+    if (topic, frame) not in _NO_CONTACTS:
+        if topic == "cloud":  # the Header starts the message
+            built = cdr.point_cloud(0.0, frame, CONTACT_FIELD_LAYOUT, np.zeros(0, CONTACT_DTYPE)), 4
+        else:  # the array's count, then the DELETEALL's Header
+            built = marker_array(0.0, frame, [DELETE_ALL]), 8
+        _NO_CONTACTS[(topic, frame)] = built
+    message, offset = _NO_CONTACTS[(topic, frame)]
+    return cdr.restamped(message, seconds, offset)
 
 
 # What the simulator knows exactly gets this small diagonal (as the IMU's exact parts), not

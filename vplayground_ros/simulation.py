@@ -24,6 +24,10 @@ from .sensors import Sensors
 # took ~1 % of a core), so each one runs two steps rather than one; the broadcaster still
 # sends a /clock for every step, and commands wake the loop at once whenever they come.
 BATCH_PERIOD = 1.0 / 64
+# A world at rest (every body frozen or immovable, no command since) moves nothing until a
+# command comes, which wakes the loop at once: its batches run to the next time something is
+# published or read, at most this long, halving its wake-ups at the default rates.
+RESTING_BATCH_PERIOD = 4 * BATCH_PERIOD
 # Steps per batch when running as fast as possible.
 FAST_BATCH_STEPS = 16
 # Falling further behind than this many batches is not caught up on: the loop drops the debt
@@ -37,9 +41,10 @@ STOPPED, PLAYING, PAUSED = 0, 1, 2  # simulation_interfaces SimulationState
 log = logging.getLogger(__name__)
 
 
-def steps_per_batch(speed):
-    """Steps a real-time batch runs at `speed` steps per wall second (at least one)."""
-    return max(1, int(round(BATCH_PERIOD * speed)))
+def steps_per_batch(speed, period=BATCH_PERIOD):
+    """Steps a real-time batch of `period` wall s runs at `speed` steps per wall second (at
+    least one)."""
+    return max(1, int(round(period * speed)))
 
 
 @dataclass
@@ -275,9 +280,14 @@ class Simulation:
                 speed = self.real_time_factor * rate
                 done = (world.time - origin_sim) * rate
                 if (time.perf_counter() - origin_wall) * speed - done < 1.0 - 1e-9:
-                    wait = origin_wall + (done + steps_per_batch(speed)) / speed - time.perf_counter()
+                    batch, longest = steps_per_batch(speed), BATCH_PERIOD
+                    if self._resting(world):
+                        longest = RESTING_BATCH_PERIOD
+                        to_due = math.ceil((self._next_due_time(world) - world.time) * rate - 1e-6)
+                        batch = max(batch, min(to_due, steps_per_batch(speed, longest)))
+                    wait = origin_wall + (done + batch) / speed - time.perf_counter()
                     if wait > 0.0:
-                        self._wait_for_work(min(wait, BATCH_PERIOD))
+                        self._wait_for_work(min(wait, longest))
 
     def _wait_for_work(self, timeout):
         """Sleeps `timeout` s or until a command arrives."""
