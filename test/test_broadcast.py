@@ -335,6 +335,34 @@ def test_bodies_at_rest_are_drawn_on_a_latched_topic_sent_when_they_change(runni
     assert left[0] == moving[0] and ids["sleeper"] not in {m.id for m in left[1].markers[1:]}
     assert wait_for(lambda: ids["sleeper"] in drawn("resting_markers")[1], timeout=120)  # it freezes again
 
+    # Removed, or moved while frozen: the next round's resting markers say so.
+    removed = sim.call(lambda world: (world.remove_body("wall"), world.time)[1])
+    assert wait_for(lambda: drawn("resting_markers")[0] >= removed)
+    assert ids["wall"] not in drawn("resting_markers")[1]
+    moved = sim.call(lambda world: (world.edit_body("faller", position=[10.0, 3.0, 0.5], frozen=True), world.time)[1])
+    assert wait_for(lambda: drawn("resting_markers")[0] >= moved)
+    faller = next(m for m in sink.of("resting_markers", MARKERS)[-1][1].markers if m.id == ids["faller"])
+    assert faller.pose.position.y == pytest.approx(3.0)
+
+
+def test_resting_markers_see_a_body_that_woke_moved_and_froze_again_between_two_rounds():
+    """At a low marker_rate a body can be hit, move and freeze again between two rounds: the
+    same layout and frozen flags, another pose. The resting topic must not keep the old one."""
+    import dataclasses
+
+    from vplayground_ros.messages import BodyMarkers
+    sim = Simulation(load_world({"version": 1, "bodies": [{"name": "sleeper", "position": [0, 0, 0.5], "frozen": True}]}))
+    before = sim.snapshot
+    ids = np.array([0], np.int32)
+    poses = np.concatenate([before.state["positions"], before.state["quaternions"]], axis=1)
+    markers = BodyMarkers(resting=True)
+    markers.encode(before, "world", ids, poses)
+    assert markers.draws_the_same(before, ids, poses.copy())
+    moved = poses.copy()
+    moved[0, 0] += 1.0
+    after = dataclasses.replace(before, state={**before.state, "positions": moved[:, :3]})
+    assert not markers.draws_the_same(after, ids, moved)
+
 
 def test_body_markers_draw_each_shape_and_follow_a_capsule(running):
     scene = {"version": 1, "bodies": [
