@@ -89,12 +89,12 @@ def ray_triangle(origin, direction, reach, triangles, normals, j):
 
 
 @njit(cache=True, nogil=True)
-def cast_ray(origin, direction, reach, exclude, query_id, ctx):
+def cast_ray(origin, direction, reach, exclude, query_id, bodies, hulls, broad, playground, s):
     """Nearest hit of the segment origin + t direction, 0 <= t <= reach (direction unit), with
-    anything in the StepContext's world but body `exclude`: (t, what: a body slot, GROUND or
-    PLAYGROUND, normal), t NO_HIT when nothing is hit. `query_id` (negative, unique per ray in a
-    step) marks objects seen."""
-    bodies, broad, playground, s = ctx.bodies, ctx.broad, ctx.playground, ctx.settings
+    anything in the world of the StepContext's parts (`s` its Settings) but body `exclude`: (t,
+    what: a body slot, GROUND or PLAYGROUND, normal), t NO_HIT when nothing is hit. `query_id`
+    (negative, unique per ray in a step) marks objects seen. (The parts, not the context: a
+    kernel handed the context compiles a wrapper unboxing its ~200 arrays, seconds each.)"""
     ground_enabled, ground_height = s.ground_enabled, s.ground_height
     root_min, root_size, depth = s.root_min, s.root_size, s.octree_depth
     geometry = RayBodies(bodies.position, bodies.rotation, bodies.half_extents, bodies.shape,
@@ -115,7 +115,7 @@ def cast_ray(origin, direction, reach, exclude, query_id, ctx):
             j = broad.scratch[m]
             if j == exclude or not bodies.active[j]:
                 continue
-            t, normal = ray_body(origin, direction, reach, geometry, ctx.hulls, j)
+            t, normal = ray_body(origin, direction, reach, geometry, hulls, j)
             if t < best:
                 best, hit, best_normal = t, j, normal
     if len(playground.triangles):

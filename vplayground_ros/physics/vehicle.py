@@ -134,7 +134,7 @@ def ackermann(vehicles, v, w):
 
 
 @njit(cache=True, nogil=True)
-def drive_vehicles(ctx):
+def drive_vehicles(vehicles, bodies, hulls, broad, playground, settings):
     """Controller, wheel ray casts, suspension and tyre forces of every vehicle for one step,
     applied as impulses to the chassis (and the opposite to any box a wheel stands on). The four
     springs are evaluated on the same state, then applied; the tyres follow one by one, each
@@ -142,12 +142,12 @@ def drive_vehicles(ctx):
     TYRE_SWEEPS times over. They hold against this step's gravity too (tyre_velocity's `fall`),
     which is added after them: braked tyres that saw only the velocity before it let a car on a
     slope creep downhill at g sin(slope) dt (0.013 m/s at 0.15 rad and 128 steps/s)."""
-    vehicles, bodies, dt = ctx.vehicles, ctx.bodies, ctx.settings.dt
-    fall = (ctx.settings.gravity[0] * dt, ctx.settings.gravity[1] * dt, ctx.settings.gravity[2] * dt)
+    dt = settings.dt
+    fall = (settings.gravity[0] * dt, settings.gravity[1] * dt, settings.gravity[2] * dt)
     if not np.any(vehicles.active):
         return  # nothing to drive: no per-body work (a world at rest costs next to nothing)
     position, velocity = bodies.position, bodies.velocity
-    ctx.broad.stamp[:] = -1  # the rays' query ids repeat every step
+    broad.stamp[:] = -1  # the rays' query ids repeat every step
     for v in range(len(vehicles.active)):
         if not vehicles.active[v]:
             continue
@@ -177,7 +177,8 @@ def drive_vehicles(ctx):
                      position[c, 1] + r[1, 0] * m[0] + r[1, 1] * m[1] + r[1, 2] * m[2],
                      position[c, 2] + r[2, 0] * m[0] + r[2, 1] * m[1] + r[2, 2] * m[2])
             reach = vehicles.spring_length[v, w] + vehicles.radius[v, w]
-            t, hit, normal = cast_ray(mount, down, reach, c, wheel_query(v, w, WHEELS), ctx)
+            t, hit, normal = cast_ray(mount, down, reach, c, wheel_query(v, w, WHEELS),
+                                     bodies, hulls, broad, playground, settings)
             vehicles.in_contact[v, w] = t != NO_HIT
             if t == NO_HIT:
                 vehicles.compression[v, w] = vehicles.compression_rate[v, w] = 0.0
@@ -210,7 +211,7 @@ def drive_vehicles(ctx):
         applied = np.zeros((WHEELS, 2))  # (along the heading, sideways) so far
         grip = np.zeros((WHEELS, 2))  # static and dynamic friction of tyre and surface
         for w in range(WHEELS):
-            surface_static, surface_dynamic = ctx.settings.ground_material[1], ctx.settings.ground_material[2]
+            surface_static, surface_dynamic = settings.ground_material[1], settings.ground_material[2]
             if hits[w] >= 0:
                 surface_static, surface_dynamic = bodies.static_friction[hits[w]], bodies.dynamic_friction[hits[w]]
             grip[w, 0] = np.sqrt(vehicles.static_friction[v, w] * surface_static)
