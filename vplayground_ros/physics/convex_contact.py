@@ -788,8 +788,11 @@ def convex_triangle(hulls, kind, p, r, dims, slot, tri, tri_normal, margin, sc, 
     if front <= 0.0:
         return 0, nothing
     origin, frame = triangle_frame(tri, n)
+    # The triangle's kind and slot as run-time integers: as constants they made a second
+    # specialisation of shape_contact and everything it calls (about 9 s of the cold compile).
     found, normal, point_a, point_b, depth = shape_contact(
-        hulls, kind, p, r, dims, slot, TRIANGLE, origin, frame, nothing, NO_HULL, margin, sc)
+        hulls, kind, p, r, dims, slot, np.int64(TRIANGLE), origin, frame, nothing,
+        np.int64(NO_HULL), margin, sc)
     if not found:
         return 0, nothing
     into = (-n[0], -n[1], -n[2])
