@@ -294,7 +294,9 @@ def solve_rows(velocity, contacts, sweeps, target, normal_impulse, friction, wit
     # the position pass only penetrating ones, and re-skipping the rest in every sweep cost more
     # than solving them.
     order, points = contacts.solve_order, contacts.sweep_points
-    count = 0
+    # A typed zero: a literal 0 made Numba compile solve_rows_shared (and split_chains) once
+    # more for count == 0 while it typed this loop.
+    count = np.int64(0)
     for k in range(contacts.count[0]):
         if target[order[k]] > INACTIVE:
             points[count] = order[k]
