@@ -41,7 +41,7 @@ def child(modules):
     kernels = defaultdict(lambda: {"specialisations": set(), "inclusive": 0.0, "exclusive": 0.0,
                                    "llvm": 0.0, "function passes": 0.0, "module passes": 0.0,
                                    "machine code": 0.0, "instructions": 0, "linked instructions": 0,
-                                   "wrapper instructions": 0})
+                                   "wrapper instructions": 0, "passes": defaultdict(float)})
     frames = []  # the compiles under way, outermost first
 
     def innermost():
@@ -63,6 +63,8 @@ def child(modules):
                 kernel["inclusive"] += inclusive
             if frames:
                 frames[-1]["children"] += inclusive
+            if Passes.stack:  # the pass that set this compile off
+                Passes.stack[-1][1] += inclusive
 
     class LlvmLock(event.Listener):
         depth, start = 0, 0.0
@@ -77,8 +79,23 @@ def child(modules):
             if self.depth == 0:
                 innermost()["llvm"] += time.perf_counter() - self.start
 
+    class Passes(event.Listener):
+        """Each compiler pass's own seconds (without the compiles it sets off), by kernel."""
+        stack = []
+
+        def on_start(self, ev):
+            self.stack.append([time.perf_counter(), 0.0, len(frames)])
+
+        def on_end(self, ev):
+            start, children, depth = self.stack.pop()
+            duration = time.perf_counter() - start
+            innermost()["passes"][ev.data["name"].split(" [")[0]] += duration - children
+            if self.stack and self.stack[-1][2] == depth:  # a pass of a callee's compile counts
+                self.stack[-1][1] += duration               # as that compile (Compiles.on_end)
+
     event.register("numba:compile", Compiles())
     event.register("numba:llvm_lock", LlvmLock())
+    event.register("numba:run_pass", Passes())
 
     def timed(cls, method, field, after=None):
         original = getattr(cls, method)
@@ -141,6 +158,12 @@ def report(result, top, modules):
           f"{result['cpu']:.1f} s CPU ({result['cpu'] / result['wall']:.2f} CPU/wall); import "
           f"{result['import']:.1f} s; {sum(len(k['specialisations']) for k in kernels.values())} "
           f"compiles of {len(kernels)} kernels; LLVM {llvm:.1f} s")
+    passes = defaultdict(float)
+    for k in kernels.values():
+        for name, seconds in k["passes"].items():
+            passes[name] += seconds
+    print("  Numba's passes (own seconds; native_lowering includes LLVM): " + ", ".join(
+        f"{name} {seconds:.1f}" for name, seconds in sorted(passes.items(), key=lambda p: -p[1])[:8]))
     phases = ("function passes", "module passes", "machine code")
     print("  LLVM: " + ", ".join(f"{p} {sum(k[p] for k in kernels.values()):.1f} s" for p in phases))
     if modules:
@@ -160,7 +183,8 @@ def report(result, top, modules):
             print(f"  {name[:48]:<48} {len(k['specialisations']):>3} "
                   + " ".join(f"{k[c]:>12.1f}" for c in columns)
                   + (f" {k['instructions']:>12} {k['linked instructions'] / max(k['instructions'], 1):>7.0%}"
-                     f" {k['wrapper instructions'] / max(k['instructions'], 1):>8.0%}" if modules else ""))
+                     f" {k['wrapper instructions'] / max(k['instructions'], 1):>8.0%}" if modules else "")
+                  + "  " + ", ".join(f"{p} {t:.1f}" for p, t in sorted(k["passes"].items(), key=lambda p: -p[1])[:2]))
     several = [(name, k) for name, k in kernels.items() if len(k["specialisations"]) > 1]
     if several:
         print("\nkernels compiled more than once (exclusive s: argument types):")
