@@ -90,7 +90,7 @@ BIAS, LINEAR, ANGULAR, PUSH_LINEAR, PUSH_ANGULAR, MASS, INV_MASS = 0, 1, 4, 7, 1
 SHOCK_ROW_SIZE = 15
 
 
-@njit(cache=True, nogil=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
 def tangent_basis(n):
     """Two unit tangents completing n to a right-handed basis."""
     if abs(n[0]) > 0.57735:
@@ -102,7 +102,7 @@ def tangent_basis(n):
     return t1, cross(n, t1)
 
 
-@njit(cache=True, nogil=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
 def prepare_contacts(contacts, bodies, ground_material, gravity, dt):
     """Rows (directions, lever arms, angular responses, effective masses), pair materials, the
     targets of the three passes, and the warm-start friction projected onto this step's
@@ -207,7 +207,7 @@ def prepare_contacts(contacts, bodies, ground_material, gravity, dt):
     order_supports(contacts, bodies, gravity)
 
 
-@njit(cache=True, nogil=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
 def order_supports(contacts, bodies, gravity):
     """Finds each point's upper body (the one the other holds up against gravity; none for side
     contacts, or when the upper one does not move) and groups the support points per upper
@@ -280,7 +280,7 @@ def order_supports(contacts, bodies, gravity):
     contacts.support_count[0] = supports
 
 
-@njit(cache=True, nogil=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
 def solve_rows(velocity, contacts, sweeps, target, normal_impulse, friction, with_friction, position,
                gravity, threads):
     """Sequential impulses over every point, `sweeps` times. Points are visited bottom to top
@@ -312,7 +312,7 @@ def solve_rows(velocity, contacts, sweeps, target, normal_impulse, friction, wit
                    sweep % 2 == 1, target, normal_impulse, friction, with_friction)
 
 
-@njit(cache=True, nogil=True, fastmath=SOLVER_MATH, inline="always")
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH, inline="always")
 def solve_span(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, points, start, end,
                backwards, target, normal_impulse, friction, with_friction):
     """One sweep of sequential impulses over points[start:end] (backwards: from the end). Per
@@ -368,7 +368,7 @@ def solve_span(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, point
                 velocity[b, 3 + e] += d * rows[c, 0, TURN_B + e]
 
 
-@njit(cache=True, nogil=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
 def solve_rows_shared(velocity, contacts, sweeps, target, normal_impulse, friction, with_friction,
                       position, gravity, points, count, threads):
     """solve_rows' sweeps over points[:count] on up to two threads, bit for bit the serial
@@ -394,7 +394,7 @@ def solve_rows_shared(velocity, contacts, sweeps, target, normal_impulse, fricti
     return True
 
 
-@njit(cache=True, nogil=True, fastmath=SOLVER_MATH, parallel=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH, parallel=True)
 def run_workers(workers, velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, target,
                 normal_impulse, friction, with_friction, items, chain_start, need_up, need_down,
                 publish_up, publish_down, sweeps, sync):
@@ -405,7 +405,7 @@ def run_workers(workers, velocity, rows, row_mass, row_inv_mass, rows_a, rows_b,
                     need_down, publish_up, publish_down, sweeps, sync)
 
 
-@njit(cache=True, nogil=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
 def work_chains(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, target,
                 normal_impulse, friction, with_friction, items, chain_start, need_up, need_down,
                 publish_up, publish_down, sweeps, sync):
@@ -492,14 +492,14 @@ def work_chains(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, targ
                 own[c] = True
 
 
-@njit(cache=True, nogil=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
 def collision_pass(contacts, bodies, iterations, gravity, threads):
     solve_rows(bodies.velocity, contacts, iterations, contacts.collision_target,
                contacts.collision_impulse, contacts.collision_friction, True, bodies.position,
                gravity, threads)
 
 
-@njit(cache=True, nogil=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
 def warm_start(contacts, bodies):
     """Applies last step's contact-pass impulses: stacks start each solve near the answer."""
     velocity, rows, row_inv_mass = bodies.velocity, contacts.rows, contacts.row_inv_mass
@@ -514,7 +514,7 @@ def warm_start(contacts, bodies):
             velocity[b, 3 + e] += rows[c, 0, TURN_B + e] * pn + rows[c, 1, TURN_B + e] * f1 + rows[c, 2, TURN_B + e] * f2
 
 
-@njit(cache=True, nogil=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
 def shock_propagation(contacts, bodies, threads):
     """Guendelman, Bridson & Fedkiw (2003) section 7: one last pass of the contact pass, from the
     bottom up, in which each body meets its supports as if they had infinite mass. Body by body,
@@ -569,7 +569,7 @@ def shock_propagation(contacts, bodies, threads):
             g += 1
 
 
-@njit(cache=True, nogil=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
 def shock_start(velocity, rows, row_inv_mass, shock, shock_friction, support_mass, order,
                 velocity_a, velocity_b, group_start, group_end, upper, view):
     """Fills one group's view (what the supports below do is final, so their part of each
@@ -609,7 +609,7 @@ def shock_start(velocity, rows, row_inv_mass, shock, shock_friction, support_mas
     return u0, u1, u2, u3, u4, u5
 
 
-@njit(cache=True, nogil=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
 def view_speed(view, k, r, start, u):
     """start + row r of support point k's view (LINEAR, ANGULAR) . u, u = (linear, angular):
     with start = the row's BIAS, the row's relative velocity."""
@@ -617,7 +617,7 @@ def view_speed(view, k, r, start, u):
             + view[k, r, ANGULAR] * u[3] + view[k, r, ANGULAR + 1] * u[4] + view[k, r, ANGULAR + 2] * u[5])
 
 
-@njit(cache=True, nogil=True, fastmath=SOLVER_MATH, inline="always")
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH, inline="always")
 def shock_point(u, k, c, view, target, mu, impulse, friction, shock, shock_friction):
     """One support point of a sweep: the friction circle on the total friction, then the
     normal row on the total. Returns the upper body's new velocity and the largest velocity
@@ -657,7 +657,7 @@ def shock_point(u, k, c, view, target, mu, impulse, friction, shock, shock_frict
              u4 + view[k, 0, PUSH_ANGULAR + 1] * d, u5 + view[k, 0, PUSH_ANGULAR + 2] * d), largest)
 
 
-@njit(cache=True, nogil=True, fastmath=SOLVER_MATH, inline="always")
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH, inline="always")
 def finish_group(velocity, body, u, order, group_start, group_end, view, shock, shock_friction):
     """Stores the upper body's new velocity u, unless the group's one-sided impulses gave it
     kinetic energy: then they are taken back (the body keeps its velocity from before the
@@ -685,7 +685,7 @@ def finish_group(velocity, body, u, order, group_start, group_end, view, shock, 
         velocity[body, 3], velocity[body, 4], velocity[body, 5] = u[3], u[4], u[5]
 
 
-@njit(cache=True, nogil=True, fastmath=SOLVER_MATH, inline="always")
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH, inline="always")
 def shock_group(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock, shock_friction,
                 support_mass, order, velocity_a, velocity_b, group_start, group_end, upper, view):
     """Shock propagation's sweeps over one upper body's support points, order[group_start:
@@ -706,7 +706,7 @@ def shock_group(velocity, rows, row_inv_mass, target, mu, impulse, friction, sho
     finish_group(velocity, upper, u, order, group_start, group_end, view, shock, shock_friction)
 
 
-@njit(cache=True, nogil=True, fastmath=SOLVER_MATH, inline="always")
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH, inline="always")
 def shock_pair(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock, shock_friction,
                support_mass, order, velocity_a, velocity_b, start_a, end_a, upper_a, start_b,
                end_b, upper_b, view):
@@ -743,7 +743,7 @@ def shock_pair(velocity, rows, row_inv_mass, target, mu, impulse, friction, shoc
     finish_group(velocity, upper_b, u_b, order, start_b, end_b, view, shock, shock_friction)
 
 
-@njit(cache=True, nogil=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
 def reads_body(order, velocity_a, velocity_b, start, end, body):
     """Whether any point of order[start:end] has `body` on one of its sides."""
     for k in range(start, end):
@@ -753,7 +753,7 @@ def reads_body(order, velocity_a, velocity_b, start, end, body):
     return False
 
 
-@njit(cache=True, nogil=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
 def shock_propagation_shared(contacts, bodies, threads, group_start, groups, view):
     """shock_propagation on up to two threads, bit for bit the serial result: the groups
     (support_groups) level by level (solve_schedule.shock_levels), claimed a few at a time by
@@ -779,7 +779,7 @@ def shock_propagation_shared(contacts, bodies, threads, group_start, groups, vie
     return True
 
 
-@njit(cache=True, nogil=True, fastmath=SOLVER_MATH, parallel=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH, parallel=True)
 def run_shock_workers(workers, velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
                       shock_friction, support_mass, order, velocity_a, velocity_b, support_body,
                       group_start, by_level, need, groups, sync, view):
@@ -789,7 +789,7 @@ def run_shock_workers(workers, velocity, rows, row_inv_mass, target, mu, impulse
                      group_start, by_level, need, groups, sync, view)
 
 
-@njit(cache=True, nogil=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
 def shock_worker(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
                  shock_friction, support_mass, order, velocity_a, velocity_b, support_body,
                  group_start, by_level, need, groups, sync, view):
@@ -829,7 +829,7 @@ def shock_worker(velocity, rows, row_inv_mass, target, mu, impulse, friction, sh
                 place += 1
 
 
-@njit(cache=True, nogil=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
 def contact_pass(contacts, bodies, iterations, gravity, threads):
     """Velocities (zero elasticity, friction), shock propagation, then the split-impulse
     position pass on the pseudo velocities; keeps the friction as a world vector for the next

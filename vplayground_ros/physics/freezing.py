@@ -10,7 +10,7 @@ from numba import njit
 from .constants import WAKE_SPEED_FACTOR
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
 def wake_body(bodies, i):
     """Wakes body i (in a step, or between steps by the World). Returns True when it leaves a
     stale entry in the static index (skipped by queries, counted towards the next rebuild); an
@@ -24,7 +24,7 @@ def wake_body(bodies, i):
     return True
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
 def wake_touched(contacts, bodies, linear_threshold):
     """Wakes frozen bodies that an awake body touches fast enough. Returns how many woke and how
     many of them left stale static-index entries."""
@@ -50,7 +50,7 @@ def wake_touched(contacts, bodies, linear_threshold):
     return woken, stale
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
 def update_freezing(bodies, live, enabled, time_to_freeze, linear_threshold, angular_threshold, dt):
     """Advances the freeze timers of the awake bodies among `live` and freezes those that stayed
     slow long enough. Returns how many froze."""

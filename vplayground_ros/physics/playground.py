@@ -57,7 +57,7 @@ def make_playground(vertices, faces):
 EMPTY_PLAYGROUND_ARGS = (np.zeros((0, 3)), np.zeros((0, 3), np.int64))
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
 def index_playground(playground, root_min, root_size, depth):
     """(Re)builds the triangles' octree index for the given root cube and depth."""
     for t in range(len(playground.triangles)):
@@ -68,7 +68,7 @@ def index_playground(playground, root_min, root_size, depth):
                        playground.octree_level, root_min, root_size)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
 def find_playground_pairs(playground, moving_ids, bodies, root_min, root_size, pair_body,
                           pair_triangle):
     """(awake body, triangle) pairs whose bounds overlap, from the triangles' octree. Returns the

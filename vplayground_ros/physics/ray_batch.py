@@ -60,7 +60,7 @@ RayGrid = namedtuple("RayGrid", [
 ])
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
 def filed_range(lo, hi, lower, cell, dims):
     """Inclusive cell ranges (x0, x1, y0, y1, z0, z1) an AABB (grown by the filing margin)
     overlaps, clamped to the grid, and whether that is too many cells to file it in (it is then
@@ -73,7 +73,7 @@ def filed_range(lo, hi, lower, cell, dims):
     return r, (r[1] - r[0] + 1) * (r[3] - r[2] + 1) * (r[5] - r[4] + 1) > MAX_CELLS_PER_ITEM
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
 def separated_on(ax, ay, az, v0, v1, v2, half):
     """Whether axis a separates the triangle (vertices v, relative to the box centre) from the
     cube of half edge `half` centred on the origin."""
@@ -84,7 +84,7 @@ def separated_on(ax, ay, az, v0, v1, v2, half):
     return min(p0, p1, p2) > radius or max(p0, p1, p2) < -radius
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
 def triangle_meets_cell(triangles, t, centre, half):
     """Separating-axis test of triangle t against the cube (centre, half edge): the cube's axes,
     the triangle's normal and the nine edge-by-axis cross products (Akenine-Moeller)."""
@@ -109,7 +109,7 @@ def triangle_meets_cell(triangles, t, centre, half):
     return True
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
 def file_items(used, item_min, item_max, capacity, triangles, lower, cell, dims, counts, items, fill,
                wide, write):
     """One filing pass over the used items: with write False it counts each cell's items into
@@ -146,7 +146,7 @@ def file_items(used, item_min, item_max, capacity, triangles, lower, cell, dims,
     return wide_count
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
 def build_ray_grid(active, position, orientation, half_extents, triangles, tri_min, tri_max):
     """The RayGrid of the active bodies (at their current poses) and the playground triangles."""
     n, capacity = len(active), len(active)
@@ -214,7 +214,7 @@ def build_ray_grid(active, position, orientation, half_extents, triangles, tri_m
 ASK_HULL = -1.0  # test_item's answer for a convex body: ask ray_body with the hull table
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
 def test_item(item, o, d, limit, excluded, geometry, triangles, normals):
     """(t, what, normal) of grid item `item` (a body slot, or capacity + a triangle) if the ray
     hits it nearer than `limit`, else t NO_HIT; t ASK_HULL for a convex body the ray may hit,
@@ -242,7 +242,7 @@ def test_item(item, o, d, limit, excluded, geometry, triangles, normals):
     return t, PLAYGROUND, (normals[tri, 0], normals[tri, 1], normals[tri, 2])
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
 def boundary_t(c, step, lower, cell, o, inverse_d):
     """t at which the ray leaves cell c along one axis (NO_HIT when it does not move along it);
     inverse_d is 1 / the direction's component (multiplying: the walk is mostly this)."""
@@ -253,7 +253,7 @@ def boundary_t(c, step, lower, cell, o, inverse_d):
     return NO_HIT
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
 def clip_slab(o, step, inverse_d, lo, hi, t0, t1):
     """[t0, t1] narrowed to where the ray lies between lo and hi along one axis (empty: t0 > t1)."""
     if step == 0:
@@ -262,14 +262,14 @@ def clip_slab(o, step, inverse_d, lo, hi, t0, t1):
     return max(t0, min(a, b)), min(t1, max(a, b))
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
 def axis_step(d):
     return 1 if d > 1e-12 else (-1 if d < -1e-12 else 0)
 
 
 # error_model "numpy": no zero-division checks (every division here is guarded or meant to give
 # inf), which cost the walk a branch each.
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, error_model="numpy")
 def cast_chunk(start, stop, origins, directions, max_range, excluded, grid, geometry, hulls,
                triangles, normals, ground_enabled, ground_height, row_of_slot, distance, point, normal, hit):
     """cast_ray_batch for rays start..stop; returns how many of them were invalid (a zero or
@@ -397,7 +397,7 @@ def cast_chunk(start, stop, origins, directions, max_range, excluded, grid, geom
     return invalid
 
 
-@njit(cache=True, nogil=True, parallel=True, error_model="numpy")
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, parallel=True, error_model="numpy")
 def cast_ray_batch(origins, directions, max_range, excluded, grid, geometry, hulls, triangles,
                    normals, ground_enabled, ground_height, row_of_slot, distance, point, normal,
                    hit):

@@ -19,7 +19,7 @@ RayBodies = namedtuple("RayBodies", "position rotation half_extents shape dimens
 # The exact tests take the arrays and an index rather than one body's rows, and are inlined
 # where they are called: a scan runs them millions of times a second, and every row view handed
 # to a call costs Numba reference counting that would outweigh the test itself.
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
 def ray_body(origin, direction, reach, geometry, hulls, j):
     """The ray against body j of RayBodies `geometry` (and the hull table): (distance, outward
     normal in the world), NO_HIT when it misses or starts inside. Every shape is asked in its
@@ -29,7 +29,7 @@ def ray_body(origin, direction, reach, geometry, hulls, j):
     return world_normal(shapes.ray(geometry.shape[j], dims, hulls, j, o, d, reach), geometry.rotation, j)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
 def ray_body_without_hull(origin, direction, reach, geometry, j):
     """ray_body for a body that is not convex (see shapes.ray_without_hull)."""
     o, d = body_frame_ray(origin, direction, geometry, j)
@@ -37,7 +37,7 @@ def ray_body_without_hull(origin, direction, reach, geometry, j):
     return world_normal(shapes.ray_without_hull(geometry.shape[j], dims, o, d, reach), geometry.rotation, j)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
 def body_frame_ray(origin, direction, geometry, j):
     p, r = geometry.position, geometry.rotation
     v = (origin[0] - p[j, 0], origin[1] - p[j, 1], origin[2] - p[j, 2])
@@ -50,7 +50,7 @@ def body_frame_ray(origin, direction, geometry, j):
     return o, d
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
 def world_normal(hit, r, j):
     """(t, the body-frame normal) -> (t, the world normal); a miss stays NO_HIT."""
     t, n = hit
@@ -61,7 +61,7 @@ def world_normal(hit, r, j):
                r[j, 2, 0] * n[0] + r[j, 2, 1] * n[1] + r[j, 2, 2] * n[2])
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
 def ray_triangle(origin, direction, reach, triangles, normals, j):
     """Moeller-Trumbore against triangle j's front face only (playground triangles are
     one-sided): the distance, or NO_HIT."""
@@ -88,7 +88,7 @@ def ray_triangle(origin, direction, reach, triangles, normals, j):
     return t if 0.0 <= t <= reach else NO_HIT
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
 def cast_ray(origin, direction, reach, exclude, query_id, bodies, hulls, broad, playground, s):
     """Nearest hit of the segment origin + t direction, 0 <= t <= reach (direction unit), with
     anything in the world of the StepContext's parts (`s` its Settings) but body `exclude`: (t,

@@ -38,7 +38,7 @@ NO_WAIT = -(1 << 62)
 CUT_BINS = 128
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
 def split_chains(points, count, contacts, position, gravity, items, chain_start, need_up,
                  need_down, publish_up, publish_down):
     """Puts points[:count] (a pass's points in sweep order) into the two chains: chain c is
@@ -168,7 +168,7 @@ def split_chains(points, count, contacts, position, gravity, items, chain_start,
     return waiting
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
 def support_groups(order, supports, support_body, group_start):
     """Shock propagation's groups: order[:supports] holds each upper body's support points
     together (contact_solver.order_supports). Fills group_start[:groups + 1] (each group's
@@ -186,7 +186,7 @@ def support_groups(order, supports, support_body, group_start):
     return groups
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
 def shock_levels(order, support_body, velocity_a, velocity_b, rows, group_start, groups, by_level,
                  level_start):
     """Shock propagation's schedule on two threads (its own, not the chains above): the groups
