@@ -36,12 +36,13 @@ WRAPPERS = ("cpython.", "cfunc.")
 def child(modules):
     """Compiles the engine into the (empty) cache directory that VPLAYGROUND_JIT_CACHE names and
     returns the measurements as a dict."""
-    from numba.core import codegen, config, event
+    from numba.core import codegen, config, cpu, event
 
     kernels = defaultdict(lambda: {"specialisations": set(), "inclusive": 0.0, "exclusive": 0.0,
                                    "llvm": 0.0, "function passes": 0.0, "module passes": 0.0,
-                                   "machine code": 0.0, "instructions": 0, "linked instructions": 0,
-                                   "wrapper instructions": 0, "passes": defaultdict(float)})
+                                   "machine code": 0.0, "wrappers": 0.0, "instructions": 0, "linked instructions": 0,
+                                   "wrapper instructions": 0, "passes": defaultdict(float),
+                                   "callers": set()})
     frames = []  # the compiles under way, outermost first
 
     def innermost():
@@ -52,6 +53,8 @@ def child(modules):
             dispatcher = ev.data["dispatcher"]
             name = f"{dispatcher.py_func.__module__.rsplit('.', 1)[-1]}.{dispatcher.py_func.__qualname__}"
             kernels[name]["specialisations"].add(str(ev.data["args"]))
+            if frames:
+                kernels[name]["callers"].add(frames[-1]["key"])
             frames.append({"key": name, "start": time.perf_counter(), "children": 0.0})
 
         def on_end(self, ev):
@@ -100,9 +103,9 @@ def child(modules):
     def timed(cls, method, field, after=None):
         original = getattr(cls, method)
 
-        def wrapper(self, *args):
+        def wrapper(self, *args, **kwargs):
             start = time.perf_counter()
-            result = original(self, *args)
+            result = original(self, *args, **kwargs)
             innermost()[field] += time.perf_counter() - start
             if after:
                 after(self, *args)
@@ -131,6 +134,10 @@ def child(modules):
     timed(codegen.CPUCodeLibrary, "_optimize_final_module", "module passes",
           after=count_instructions if modules else None)
     timed(codegen.JITCodeLibrary, "_finalize_specific", "machine code")
+    # Building each wrapper's IR and its function passes (its share of the module passes and
+    # machine code is in those columns).
+    timed(cpu.CPUContext, "create_cpython_wrapper", "wrappers")
+    timed(cpu.CPUContext, "create_cfunc_wrapper", "wrappers")
     if modules:
         original_add = codegen.CPUCodeLibrary.add_llvm_module
 
@@ -147,8 +154,8 @@ def child(modules):
     if not (jit_cache.cache_directory() / jit_cache.COMPLETE_MARKER).exists():
         raise SystemExit("the warm-up did not complete the cache")
     return {"wall": wall, "cpu": cpu, "import": imported, "numba_opt": config.OPT,
-            "kernels": {name: {**k, "specialisations": sorted(k["specialisations"])}
-                        for name, k in kernels.items()}}
+            "kernels": {name: {**k, "specialisations": sorted(k["specialisations"]),
+                               "callers": sorted(k["callers"])} for name, k in kernels.items()}}
 
 
 def report(result, top, modules):
@@ -165,7 +172,9 @@ def report(result, top, modules):
     print("  Numba's passes (own seconds; native_lowering includes LLVM): " + ", ".join(
         f"{name} {seconds:.1f}" for name, seconds in sorted(passes.items(), key=lambda p: -p[1])[:8]))
     phases = ("function passes", "module passes", "machine code")
-    print("  LLVM: " + ", ".join(f"{p} {sum(k[p] for k in kernels.values()):.1f} s" for p in phases))
+    print("  LLVM: " + ", ".join(f"{p} {sum(k[p] for k in kernels.values()):.1f} s" for p in phases)
+          + f"; the kernels' wrappers (for calls from Python and C) built and passed over in "
+          f"{sum(k['wrappers'] for k in kernels.values()):.1f} s")
     if modules:
         total = sum(k["instructions"] for k in kernels.values())
         linked = sum(k["linked instructions"] for k in kernels.values())
@@ -173,7 +182,7 @@ def report(result, top, modules):
         print(f"  final modules: {total} instructions optimised, {linked} ({linked / max(total, 1):.0%}) "
               f"of them in callees' functions linked in, {wrappers} ({wrappers / max(total, 1):.0%}) in "
               "the kernels' own wrappers (for calls from Python and C)")
-    columns = ("exclusive", "inclusive", "llvm", "module passes", "machine code")
+    columns = ("exclusive", "inclusive", "llvm", "module passes", "machine code", "wrappers")
     for order in ("exclusive", "inclusive"):
         print(f"\ntop {top} by {order} seconds:")
         print(f"  {'kernel':<48} {'n':>3} " + " ".join(f"{c[:12]:>12}" for c in columns)
