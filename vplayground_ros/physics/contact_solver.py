@@ -203,7 +203,11 @@ def prepare_contacts(contacts, bodies, ground_material, gravity, dt):
     for c in range(count):
         p = contacts.point[c]
         heights[c] = -(p[0] * gravity[0] + p[1] * gravity[1] + p[2] * gravity[2])
-    contacts.solve_order[:count] = np.argsort(heights, kind="mergesort")
+    # Copied point by point, as build_ray_grid copies its rows: an array assigned to a slice or a
+    # row compiles Numba's shape-mismatch message (number formatting, 2-3.5 s of a cold compile).
+    by_height = np.argsort(heights, kind="mergesort")
+    for k in range(count):
+        contacts.solve_order[k] = by_height[k]
     order_supports(contacts, bodies, gravity)
 
 

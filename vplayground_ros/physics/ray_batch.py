@@ -167,7 +167,8 @@ def build_ray_grid(active, position, orientation, half_extents, triangles, tri_m
             item_min[i, k], item_max[i, k] = position[i, k] - e, position[i, k] + e
         used[i] = True
     for t in range(len(triangles)):
-        item_min[capacity + t], item_max[capacity + t] = tri_min[t], tri_max[t]
+        for k in range(3):  # not row by row: see prepare_contacts' solve_order
+            item_min[capacity + t, k], item_max[capacity + t, k] = tri_min[t, k], tri_max[t, k]
         used[capacity + t] = True
     sizes = np.empty(len(used))
     count = 0
