@@ -573,7 +573,7 @@ def shock_propagation(contacts, bodies, threads):
             g += 1
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH, inline="always")
 def shock_start(velocity, rows, row_inv_mass, shock, shock_friction, support_mass, order,
                 velocity_a, velocity_b, group_start, group_end, upper, view):
     """Fills one group's view (what the supports below do is final, so their part of each
@@ -613,7 +613,7 @@ def shock_start(velocity, rows, row_inv_mass, shock, shock_friction, support_mas
     return u0, u1, u2, u3, u4, u5
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH, inline="always")
 def view_speed(view, k, r, start, u):
     """start + row r of support point k's view (LINEAR, ANGULAR) . u, u = (linear, angular):
     with start = the row's BIAS, the row's relative velocity."""
@@ -684,9 +684,9 @@ def finish_group(velocity, body, u, order, group_start, group_end, view, shock, 
         for k in range(group_start, group_end):
             c = order[k]
             shock[c] = shock_friction[c, 0] = shock_friction[c, 1] = 0.0
-    else:
-        velocity[body, 0], velocity[body, 1], velocity[body, 2] = u[0], u[1], u[2]
-        velocity[body, 3], velocity[body, 4], velocity[body, 5] = u[3], u[4], u[5]
+        return
+    velocity[body, 0], velocity[body, 1], velocity[body, 2] = u[0], u[1], u[2]
+    velocity[body, 3], velocity[body, 4], velocity[body, 5] = u[3], u[4], u[5]
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH, inline="always")
