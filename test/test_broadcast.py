@@ -261,6 +261,16 @@ def test_a_world_at_rest_wakes_at_its_publish_times_and_still_clocks_every_step(
     assert 25 <= per_second <= 36, per_second  # 30 publish rounds a second (64 batches moving)
 
 
+def test_a_world_at_rest_runs_in_real_time_with_no_publisher():
+    """Without a Broadcaster nothing is due (next_publish_time inf): the batches of a world at
+    rest stop at RESTING_BATCH_PERIOD rather than asking for infinitely many steps."""
+    sim = Simulation(load_world({"version": 1, "bodies": [{"name": "sleeper", "position": [0, 0, 0.5],
+                                                           "frozen": True}]}), real_time_factor=1.0, duration=0.5)
+    sim.start()
+    assert sim.wait(30)
+    assert sim.world.time == pytest.approx(0.5) and sim.fault_count == 0
+
+
 def test_the_publisher_never_reads_the_world_it_only_reads_snapshots():
     # simulation.py's rule: nothing outside the simulation thread touches the World while it
     # steps. Scenery (scene markers) and wheels (car markers) come with the snapshots.

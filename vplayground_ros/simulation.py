@@ -283,8 +283,8 @@ class Simulation:
                     batch, longest = steps_per_batch(speed), BATCH_PERIOD
                     if self._resting(world):
                         longest = RESTING_BATCH_PERIOD
-                        to_due = math.ceil((self._next_due_time(world) - world.time) * rate - 1e-6)
-                        batch = max(batch, min(to_due, steps_per_batch(speed, longest)))
+                        to_due = (self._next_due_time(world) - world.time) * rate  # inf: no publisher
+                        batch = max(batch, math.ceil(min(to_due, steps_per_batch(speed, longest)) - 1e-6))
                     wait = origin_wall + (done + batch) / speed - time.perf_counter()
                     if wait > 0.0:
                         self._wait_for_work(min(wait, longest))
