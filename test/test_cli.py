@@ -53,6 +53,28 @@ def test_a_simulation_thread_that_dies_ends_the_run_with_a_failure_status(caplog
     assert threading.excepthook is hook  # the run's watch on its threads ended with it
 
 
+class WaitWatch(threading.Event):
+    """A stop event that notes the threads waiting on it."""
+
+    def __init__(self):
+        super().__init__()
+        self.waiters = set()
+
+    def wait(self, timeout=None):
+        self.waiters.add(threading.current_thread().name)
+        return super().wait(timeout)
+
+
+def test_the_main_thread_never_waits_on_the_event_its_signal_handler_sets():
+    """SIGTERM's handler sets the stop event on the main thread; a signal that lands while the
+    main thread is inside Event.wait (holding its Lock, which is not reentrant) deadlocked the
+    handler against it: a node that ignored SIGTERM for good (seen once in make test)."""
+    stop = WaitWatch()
+    sim = Simulation(load_world(SCENE), real_time_factor=0.0, duration=0.5)
+    assert cli.run(sim, cli.parse_args(["--no-record", "--no-ros"]), None, None, stop) == 0
+    assert threading.main_thread().name not in stop.waiters
+
+
 class FlakyExecutor:
     """An executor whose spin() raises each of `errors` in turn (a callback failing), then
     returns (shut down)."""

@@ -249,7 +249,9 @@ def run_until_stopped(sim, options, recorder, ros_args, stop, deaths):
             spinner.start()
         status_due = time.monotonic() + STATUS_PERIOD
         while not stop.is_set() and not sim.wait(0):
-            stop.wait(0.1)
+            # Not stop.wait: the SIGINT/SIGTERM handler sets `stop` on this thread, and a signal
+            # landing inside Event.wait, whose lock is not reentrant, hung the run for good.
+            time.sleep(0.1)
             if time.monotonic() >= status_due:
                 status_due += STATUS_PERIOD
                 starting = sim.snapshot.step == 0 and not sim.paused
