@@ -665,7 +665,7 @@ class Broadcaster:
         world_frame = self.frames.world
         ids, poses = self.marker_ids_of(snap.names), self.pose_block(snap)
         if self.wanted("body_markers") and not self._repeats_empty(
-                "body_markers", len(self.body_markers.layout(snap, ids)[2]) == 0):
+                "body_markers", self.body_markers.draws_nothing(snap, ids)):
             self.send("body_markers", self.body_markers.encode(snap, world_frame, ids, poses), snap.time)
         self._publish_resting_markers(snap, ids, poses)
         for r in self.robots(snap):

@@ -152,6 +152,12 @@ def shape_markers(shape_codes, dimensions, poses, ids):
     return layout.rows, layout.types, layout.ids, shape_marker_poses(layout, poses), layout.scales
 
 
+# What one body-marker topic draws, kept while the layout and the bodies at rest stay: `key` the
+# layout's arrays (by identity), `at_rest` the flags it was made for and `frozen` the array they
+# came from (a settled world's snapshots share it), `rows` the bodies drawn.
+MarkerLayout = namedtuple("MarkerLayout", "key at_rest frozen rows namespaces markers colours points")
+
+
 class BodyMarkers:
     """One of the two topics that draw the bodies: DELETEALL, then each body's shape
     (shape_markers; ns = category, ids stable per name, frozen grey). `resting` draws the bodies
@@ -168,9 +174,7 @@ class BodyMarkers:
     def __init__(self, resting):
         self.resting = resting
         self.encoder = cdr.BodyMarkerEncoder()
-        # (key, at rest flags, rows drawn, namespaces, ShapeMarkerLayout, colours, points, the frozen
-        # flags they were made from: a settled world's snapshots share that array)
-        self._layout = None
+        self._layout = None  # MarkerLayout
         self._drawn = None   # (layout, the pose block, the poses of the rows drawn) last encoded
 
     def layout(self, snapshot, ids):
@@ -178,8 +182,8 @@ class BodyMarkers:
         key = (snapshot.names, s["immovable"], s["shapes"], s["dimensions"], s["hull_triangles"], ids,
                tuple(snapshot.vehicles))
         cached = self._layout
-        if cached is not None and all(a is b for a, b in zip(key[:6], cached[0][:6])) and key[6:] == cached[0][6:]:
-            if s["frozen"] is cached[7] or np.array_equal(s["frozen"] | s["immovable"], cached[1]):
+        if cached is not None and all(a is b for a, b in zip(key[:6], cached.key[:6])) and key[6:] == cached.key[6:]:
+            if s["frozen"] is cached.frozen or np.array_equal(s["frozen"] | s["immovable"], cached.at_rest):
                 return cached
         at_rest = s["frozen"] | s["immovable"]
         drawn = at_rest.copy() if self.resting else ~at_rest
@@ -195,8 +199,11 @@ class BodyMarkers:
         points = None if hulls is None else tuple(
             b"" if hulls[row] is None else np.ascontiguousarray(hulls[row], "<f8").tobytes()
             for row in markers.rows.tolist())
-        self._layout = (key, at_rest, rows, namespaces, markers, colours, points, s["frozen"])
+        self._layout = MarkerLayout(key, at_rest, s["frozen"], rows, namespaces, markers, colours, points)
         return self._layout
+
+    def draws_nothing(self, snapshot, ids):
+        return len(self.layout(snapshot, ids).rows) == 0
 
     def draws_the_same(self, snapshot, ids, poses):
         """Whether encode would draw what it drew last: the same bodies, shapes and colours at
@@ -204,16 +211,16 @@ class BodyMarkers:
         last = self._drawn
         if last is None or self.layout(snapshot, ids) is not last[0]:
             return False
-        return poses is last[1] or np.array_equal(poses[last[0][2]], last[2])
+        return poses is last[1] or np.array_equal(poses[last[0].rows], last[2])
 
     def encode(self, snapshot, frame, ids, poses):
         """ids (N,) the bodies' marker ids, poses (N, 7) xyz + xyzw of every body."""
         layout = self.layout(snapshot, ids)
-        _, _, rows, namespaces, markers, colours, points, _ = layout
-        drawn = poses[rows]
+        drawn = poses[layout.rows]
         self._drawn = (layout, poses, drawn)
-        return self.encoder.encode(snapshot.time, frame, namespaces, markers.types, markers.ids,
-                                   shape_marker_poses(markers, drawn), markers.scales, colours, points)
+        markers = layout.markers
+        return self.encoder.encode(snapshot.time, frame, layout.namespaces, markers.types, markers.ids,
+                                   shape_marker_poses(markers, drawn), markers.scales, layout.colours, layout.points)
 
 
 def hull_points(hull_triangles):
