@@ -23,6 +23,7 @@ from vplayground_ros.recorder import Recorder
 from vplayground_ros.runtime import Runtime
 from vplayground_ros.scene import load_world
 from vplayground_ros.simulation import Simulation
+from vplayground_ros.standard_services import StandardServices, standard_service_table
 from helpers import wait_for
 
 SCENE = {"version": 1, "bodies": [{"name": "victim", "position": [0, 0, 0.5]},
@@ -357,12 +358,21 @@ def test_every_service_answers_a_handler_that_raises(sim, monkeypatch, caplog):
     for method in ("spawn", "edit", "remove", "get_entity", "save_scene", "entities", "pause", "set_freezing",
                    "step", "reset", "wake_all", "features", "load_scene"):
         monkeypatch.setattr(Requests, method, broken)
+    standard = [service.handler.__name__ for service in standard_service_table(SimpleNamespace(requests=None))]
+    for method in standard:  # the simulation_interfaces rows: their handlers raise too
+        monkeypatch.setattr(StandardServices, method, broken)
     runtime = Runtime(sim, parse_args(["--no-record"]), logging.getLogger("test_faults"))
-    failure = {"success": False, "message": "RESULT_OPERATION_FAILED: internal error (ZeroDivisionError: a bug)"}
+    text = "RESULT_OPERATION_FAILED: internal error (ZeroDivisionError: a bug)"
+    failure = {"success": False, "message": text}
     expected = {"diagnostic_msgs/srv/AddDiagnostics": failure, "std_srvs/srv/SetBool": failure,
                 "std_srvs/srv/Trigger": failure, "nav_msgs/srv/LoadMap": {"result": api.UNDEFINED_FAILURE},
                 "visualization_msgs/srv/GetInteractiveMarkers": {"markers": []}}
+    for service in runtime.services:
+        if service.type.startswith("simulation_interfaces/"):  # RESULT_OPERATION_FAILED, in the Result
+            expected[service.type] = ({"features": {"custom_info": text}} if service.type.endswith("/GetSimulatorFeatures")
+                                      else {"result": {"result": 4, "error_message": text}})
     assert {service.type for service in runtime.services} == set(expected)
+    assert sum(service.type.startswith("simulation_interfaces/") for service in runtime.services) == len(standard) == 18
     faults = sim.fault_count
     with caplog.at_level(logging.ERROR, logger="vplayground_ros.simulation"):
         for service in runtime.services:

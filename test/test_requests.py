@@ -1,6 +1,7 @@
 """The SPEC 6.3 request handlers, ROS-free (the node and the Foxglove server share them)."""
 import json
 import re
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -11,9 +12,10 @@ import yaml
 from numba.core.compiler_lock import global_compiler_lock
 
 from vplayground_ros.api import (INVALID_MAP_DATA, MAP_DOES_NOT_EXIST, MAP_SUCCESS, Requests)
+from vplayground_ros.api.entity_queries import BOUNDS_BOX, OBJECT, ROBOT, category_of
 from vplayground_ros.broadcast import TOPICS
 from vplayground_ros.scene import load_world
-from vplayground_ros.simulation import PAUSED, PLAYING, Simulation
+from vplayground_ros.simulation import NO_WORLD, PAUSED, PLAYING, STOPPED, Simulation
 
 SCENE = {"version": 1, "bodies": [{"name": "a", "position": [0, 0, 0.5]},
                                   {"name": "b", "position": [3, 0, 0.5]}]}
@@ -176,13 +178,47 @@ HONOURED = {
                                            and "d" not in r.sim.world.body_names()),
     "SIMULATION_RESET_TIME": lambda r: (r.sim.world.step(3) or True) and r.reset(1)[0] and r.sim.world.time == 0.0,
     "SIMULATION_RESET": lambda r: r.remove("{entity: a}")[0] and r.reset(255)[0] and r.sim.world.body_names() == ["a", "b"],
+    "ENTITY_BOUNDS": lambda r: r.entity("b")["bounds"]["size"] == r.sim.world.state()["sizes"][1].tolist(),
+    "ENTITY_INFO_GETTING": lambda r: category_of(r.entity("a")) == OBJECT,
+    "ENTITY_CATEGORIES": lambda r: selected(r, categories=[OBJECT]) == ["a", "b"] and selected(r, categories=[ROBOT]) == [],
+    "ENTITY_BOUNDS_BOX": lambda r: selected(r, bounds_type=BOUNDS_BOX, points=[(2.5, -1, 0), (3.5, 1, 1)]) == ["b"],
+    "SPAWNING_RESOURCE_STRING": lambda r: (r.spawn_entities({"name": "e", "position": [0, 6, 0.5]})[0]
+                                           and "e" in r.sim.world.body_names()),
+    "SPAWNING_ENTITIES": lambda r: (r.spawn("[{name: f, position: [0, 9, 0.5]}, {name: g, position: [0, 12, 0.5]}]")[0]
+                                    and {"f", "g"} <= set(r.sim.world.body_names())),
+    "AVAILABLE_WORLDS": lambda r: [scene_file(r)] == [path for path, _ in r.available_worlds()],
+    "WORLD_LOADING": lambda r: (r.load_scene(str(scene_file(r)), stopped=True)[0] == MAP_SUCCESS
+                                and r.sim.world.body_names() == ["a", "b"] and r.sim.state == STOPPED),
+    "WORLD_INFO_GETTING": lambda r: r.current_world() == str(scene_file(r)),
+    "WORLD_UNLOADING": lambda r: r.unload_world()[0] and r.sim.state == NO_WORLD and r.current_world() is None,
+    "WORLD_RESOURCE_STRING": lambda r: (r.load_scene_text(yaml.safe_dump(SCENE))[0] == MAP_SUCCESS
+                                        and r.sim.world.body_names() == ["a", "b"]),
+    # ROS only (Foxglove has no actions): through rclpy in test_standard_services.py.
+    "STEP_SIMULATION_ACTION": lambda r: "def test_simulate_steps_action_feedback_result_and_cancel(" in (
+        Path(__file__).parent / "test_standard_services.py").read_text(),
 }
 
 
+def selected(requests, **filters):
+    table, rows = requests.entities_filtered(**filters)
+    return [table.names[k] for k in rows]
+
+
+def scene_file(requests):
+    """SCENE as the one scene file of a scene directory of the test's own."""
+    if not hasattr(requests, "test_scene"):
+        directory = Path(tempfile.mkdtemp(prefix="vplayground_worlds_"))
+        requests.test_scene = (directory / "two.yaml").resolve()
+        requests.test_scene.write_text(yaml.safe_dump(SCENE))
+        requests.scene_directories = [directory]
+    return requests.test_scene
+
+
 def test_features_are_listed_by_their_simulation_interfaces_numbers_and_honoured(requests):
-    """The numbers ~/get_simulator_features lists are the simulation_interfaces 2.1.0 ones (its
-    SimulatorFeatures.msg, copied in test/) of exactly the features the handlers honour."""
-    constants = msg_constants(Path(__file__).parent / "simulation_interfaces-2.1.0" / "msg" / "SimulatorFeatures.msg")
+    """The numbers ~/get_simulator_features lists are simulation_interfaces' (its
+    SimulatorFeatures.msg, vendored in interfaces/) of exactly the features the handlers honour."""
+    constants = msg_constants(Path(__file__).parent.parent / "interfaces" / "simulation_interfaces" / "msg"
+                              / "SimulatorFeatures.msg")
     assert len(constants) == 32 and constants["SPAWNING_RESOURCE_STRING"] == 9  # the whole table was read
     names = {number: name for name, number in constants.items()}
     ok, text = requests.features()

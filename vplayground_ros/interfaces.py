@@ -5,7 +5,8 @@ here (or by cdr.py for the big arrays).
 Definitions are read from `<prefix>/share/<package>/{msg,srv}/<Type>.{msg,srv}`: first a ROS
 install's (AMENT_PREFIX_PATH) or the Jazzy wheels' (sys.prefix), then this package's own
 copies in msg_definitions/ (every type the node uses, so the Foxglove server and the bags work
-where no interface package is installed; a test checks they equal the installed ones).
+where no interface package is installed; a test checks they equal the installed ones), and in
+a source checkout the vendored simulation_interfaces (interfaces/).
 
 A schema (`ros2msg`) is the type's definition followed by every type it depends on, each after
 a line of 80 '=' and `MSG: package/Type`, spelled as the .msg fields spell it (Foxglove's parser
@@ -22,6 +23,7 @@ from pathlib import Path
 from mcap_ros2._dynamic import generate_dynamic, serialize_dynamic
 
 OWN_DEFINITIONS = Path(__file__).resolve().parent / "msg_definitions"
+VENDORED = Path(__file__).resolve().parent.parent / "interfaces"
 PRIMITIVES = {"bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16",
               "int32", "uint32", "int64", "uint64", "string", "wstring"}
 SEPARATOR = "=" * 80
@@ -31,6 +33,8 @@ def search_roots():
     roots = [Path(p) / "share" for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
     roots.append(Path(sys.prefix) / "share")
     roots.append(OWN_DEFINITIONS)
+    if VENDORED.is_dir():  # a source checkout: simulation_interfaces even where it is not built
+        roots.append(VENDORED)
     return roots
 
 

@@ -11,15 +11,18 @@ import array
 import importlib
 import logging
 import threading
+import time
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.task import Future
 
 from .broadcast import NODE_NAME, TOPICS
 from .inputs import subscriptions
+from .standard_services import StandardServices
 
 
 def reliable(depth, durability=DurabilityPolicy.VOLATILE):
@@ -181,8 +184,22 @@ class SimulatorNode(Node):
         self._commands = {}  # absolute topic -> subscription of a namespaced robot's cmd_vel
         self._follow_robots()
         self.create_timer(ROBOT_POLL_PERIOD, self._follow_robots)
+        missing = []
         for service in runtime.services:
-            self.create_service(interface_class(service.type), service.name, self._serve(service.handler))
+            try:
+                kind = interface_class(service.type)
+            except ImportError:  # simulation_interfaces not installed: the YAML services stay
+                missing.append(service.name)
+                continue
+            blocking = service.name == "step_simulation"  # answers once its steps have run
+            self.create_service(kind, service.name, self._serve_aside(service.handler) if blocking
+                                else self._serve(service.handler))
+        if missing:
+            self.get_logger().warning(
+                f"simulation_interfaces is not installed: {len(missing)} standard services are not served "
+                "(make builds it into the venv; in a ROS install: apt install ros-$ROS_DISTRO-simulation-interfaces)")
+        else:
+            self._simulate_steps = simulate_steps_action(self, runtime)
 
     def _follow_robots(self):
         """Each namespaced robot's cmd_vel, subscribed as robots come (a spawn, another scene)
@@ -200,6 +217,26 @@ class SimulatorNode(Node):
         def callback(request, response):
             return fill(response, handler(request))
         return callback
+
+    def _serve_aside(self, handler):
+        """A handler that waits (step_simulation) runs on a thread of its own: the executor
+        serves everything else meanwhile and sends the reply when it is done."""
+        async def callback(request, response):
+            return fill(response, await self.aside(handler, request))
+        return callback
+
+    def aside(self, fn, *args):
+        """An awaitable of fn(*args) run on a new thread; its end wakes the executor."""
+        future = Future(executor=self.executor)
+        future.add_done_callback(lambda _: None)  # a done callback is what wakes the executor
+
+        def run():
+            try:
+                future.set_result(fn(*args))
+            except Exception as error:  # noqa: BLE001 - handed to the awaiting callback
+                future.set_exception(error)
+        threading.Thread(target=run, name="vplayground-aside", daemon=True).start()
+        return future
 
     # ------------------------------------------------------------------ parameters
     # The Runtime's Parameters own the values; rclpy holds a copy so that `ros2 param get` and
@@ -249,3 +286,46 @@ class SimulatorNode(Node):
             self._copying.active = False
         if not result.successful:
             self.get_logger().warning(f"parameters {', '.join(changed)} not copied into rclpy: {result.reason}")
+
+
+def simulate_steps_action(node, runtime):
+    """simulation_interfaces' SimulateSteps action (relative name `simulate_steps`): the steps of
+    ~/step followed with feedback as they run, cancel withdrawing those not yet run."""
+    from rclpy.action import ActionServer, CancelResponse
+    from simulation_interfaces.action import SimulateSteps
+
+    standard = StandardServices(runtime)
+
+    def advance(progress):
+        """The next (completed, remaining), None after a pause, or ("end", Result)."""
+        try:
+            tick = next(progress)
+        except StopIteration as end:  # not raised through a Future: await would make it a RuntimeError
+            return "end", end.value
+        if tick is None:
+            time.sleep(ACTION_POLL)
+        return tick
+
+    async def execute(goal_handle):
+        progress = standard.stepping(int(goal_handle.request.steps))
+        outcome = SimulateSteps.Result()
+        while True:
+            tick = await node.aside(advance, progress)
+            if tick is not None and tick[0] == "end":
+                fill(outcome.result, tick[1])
+                break
+            if goal_handle.is_cancel_requested:
+                progress.close()  # withdraws the steps not yet run
+                fill(outcome.result, {"result": 4, "error_message": "cancelled"})
+                goal_handle.canceled()
+                return outcome
+            if tick is not None:
+                goal_handle.publish_feedback(SimulateSteps.Feedback(completed_steps=tick[0], remaining_steps=tick[1]))
+        (goal_handle.succeed if outcome.result.result == 1 else goal_handle.abort)()
+        return outcome
+
+    return ActionServer(node, SimulateSteps, "simulate_steps", execute_callback=execute,
+                        cancel_callback=lambda _goal: CancelResponse.ACCEPT)
+
+
+ACTION_POLL = 0.005  # s between looks at the steps a SimulateSteps goal has run

@@ -57,8 +57,9 @@ SCOPE_TIME, SCOPE_STATE, SCOPE_SPAWNED, SCOPE_ALL = 1, 2, 4, 255
 
 
 def reset_scope(value, path):
-    """A reset scope: 255 ALL or a combination of 1 TIME, 2 STATE, 4 SPAWNED; SpecError otherwise."""
-    scope = specs.integer(value, path, 1, SCOPE_ALL)
+    """A reset scope: 255 ALL (0, simulation_interfaces' SCOPE_DEFAULT, is ALL too) or a
+    combination of 1 TIME, 2 STATE, 4 SPAWNED; SpecError otherwise."""
+    scope = specs.integer(value, path, 0, SCOPE_ALL) or SCOPE_ALL
     if scope != SCOPE_ALL and scope & ~(SCOPE_TIME | SCOPE_STATE | SCOPE_SPAWNED):
         raise specs.SpecError(path, f"{scope} is not a combination of 1 TIME, 2 STATE, 4 SPAWNED (or 255 ALL)")
     return scope

@@ -9,7 +9,8 @@ from .api import DEFAULT_MAX_BODIES, Requests, default_scene_directories
 from .broadcast import BagSink, Broadcaster, resolve
 from .inputs import Inputs
 from .parameters import FRAMES, PHYSICS, Parameters, frames, parameter_table, settings_from
-from .services import service_table
+from .services import guarded, service_table
+from .standard_services import standard_service_table
 
 
 class Runtime:
@@ -31,7 +32,7 @@ class Runtime:
         if recorder is not None:
             self.broadcaster.add_sink(BagSink(recorder))
         self.inputs = Inputs(sim, self.requests, self.parameters, log, self.broadcaster.robots, resolve_name)
-        self.services = service_table(self)
+        self.services = service_table(self) + [guarded(self, s) for s in standard_service_table(self)]
         self.sim.real_time_factor = self.parameters["real_time_factor"]
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._publish, name="vplayground-publisher", daemon=True)

@@ -26,6 +26,14 @@ FAILURES = {
 }
 
 
+def standard_failure(service_type):
+    """The failure of a simulation_interfaces service: RESULT_OPERATION_FAILED (GetSimulatorFeatures
+    has no result: no features, the text in custom_info)."""
+    if service_type.endswith("/GetSimulatorFeatures"):
+        return lambda text: {"features": {"custom_info": text}}
+    return lambda text: {"result": {"result": 4, "error_message": text}}
+
+
 def carriable(message):
     """A reply text every transport carries whole: what it repeats from a request (an unknown
     key, a name) may hold characters UTF-8 cannot encode (a lone surrogate from a JSON escape),
@@ -91,7 +99,7 @@ def guarded(runtime, service):
     type's failure with `RESULT_OPERATION_FAILED: internal error (...)`, and is logged with its
     traceback once and counted on /diagnostics (Simulation.fault). Unanswered, the caller waited
     out its own timeout."""
-    failure = FAILURES[service.type]
+    failure = FAILURES[service.type] if service.type in FAILURES else standard_failure(service.type)
 
     def serve(request):
         try:

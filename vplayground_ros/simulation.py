@@ -36,7 +36,9 @@ MAX_DEBT_BATCHES = 5
 # The achieved real-time factor is measured over this much wall time.
 RTF_WINDOW = 0.5
 
-STOPPED, PLAYING, PAUSED = 0, 1, 2  # simulation_interfaces SimulationState
+# simulation_interfaces SimulationState: STOPPED is paused at the loaded scene's start (and a
+# run that ended), NO_WORLD after UnloadWorld, QUITTING once asked to end.
+STOPPED, PLAYING, PAUSED, QUITTING, NO_WORLD = 0, 1, 2, 3, 4
 
 log = logging.getLogger(__name__)
 
@@ -86,6 +88,9 @@ class Simulation:
         self.duration = duration
         self.with_contacts = with_contacts
         self.paused = start_paused
+        self.stopped = False       # paused at the scene's start by SetSimulationState STOPPED or LoadWorld
+        self.world_loaded = True   # False after UnloadWorld: an empty world, paused
+        self.quitting = False      # SetSimulationState QUITTING: the run ends in a moment
         self.late_ticks = 0
         # Wall time inside world.step and the steps it ran, each world's first batch left out
         # (Numba's cache load or compile, up to minutes, is no step time): mean_step_ms.
@@ -133,8 +138,12 @@ class Simulation:
 
     @property
     def state(self):
-        if self._finished.is_set():
+        if self.quitting:
+            return QUITTING
+        if self._finished.is_set() or (self.stopped and self.paused):
             return STOPPED
+        if not self.world_loaded:
+            return NO_WORLD
         return PAUSED if self.paused else PLAYING
 
     def submit(self, fn):
@@ -186,6 +195,11 @@ class Simulation:
     def request_steps(self, count):
         """While paused: advance exactly `count` steps (the ~/step service)."""
         self._pending_steps += count
+
+    def withdraw_steps(self, count):
+        """Takes back up to `count` of the steps asked for and not yet run (a cancelled
+        SimulateSteps)."""
+        self._pending_steps = max(0, self._pending_steps - count)
 
     @property
     def pending_steps(self):

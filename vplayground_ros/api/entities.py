@@ -72,7 +72,11 @@ class EntityRequests:
 
     @handled
     def spawn(self, text):
-        request = parse(text)
+        return self.spawn_entities(parse(text))
+
+    @handled
+    def spawn_entities(self, request):
+        """~/spawn of a request already parsed: one entity spec (a mapping) or a list of them."""
         items = request if isinstance(request, list) else [request]
         if not items:
             raise RequestError(FAILED, "nothing to spawn")
@@ -110,6 +114,7 @@ class EntityRequests:
         return path, vehicle, spec, rename, frame
 
     def _spawn(self, world, prepared, cap, frames):
+        self._check_world("spawning")
         existing = world.body_names()
         if len(existing) + len(prepared) > cap:
             raise RequestError(FAILED, f"spawn of {len(prepared)} entities: the world has {len(existing)} "
@@ -177,7 +182,12 @@ class EntityRequests:
 
     @handled
     def edit(self, text):
-        request = dict(as_mapping(parse(text), "edit"))
+        return self.edit_entity(parse(text))
+
+    @handled
+    def edit_entity(self, request):
+        """~/edit of a request already parsed."""
+        request = dict(as_mapping(request, "edit"))
         name = request.pop("entity", None)
         if not isinstance(name, str):
             raise RequestError(FAILED, "edit.entity: the name of the entity to edit is missing")
@@ -228,6 +238,9 @@ class EntityRequests:
             fields = {**fields, **in_world(world, frame, {key: fields[key] for key in stamped}, "edit.state", frames)}
         if "position" in fields:
             check_inside(world, fields["position"], f"{label}.position")
+        moving = [key for key in ("linear_velocity", "angular_velocity") if any(fields.get(key, ()))]
+        if moving and fields.get("immovable", world.body(name)["immovable"]):
+            raise RequestError(FAILED, f"{label}.{moving[0]}: an immovable body cannot move (immovable: false first)")
         if fields:
             world.edit_body(name, **fields)
         if vehicle_edit:
@@ -264,10 +277,7 @@ class EntityRequests:
         if len(request) != 1:
             raise RequestError(FAILED, "remove takes exactly one of entity, filter, all")
         if "entity" in request:
-            name = request["entity"]
-            if not isinstance(name, str):
-                raise RequestError(NOT_FOUND, f"no entity named {specs.quote(name)}")
-            return self.sim.call(lambda world: self._remove(world, [name], strict=True))
+            return self.remove_entity(request["entity"])
         if "filter" in request:
             pattern = request["filter"]
             if not isinstance(pattern, str) or not pattern or len(pattern) > MAX_FILTER:
@@ -283,6 +293,13 @@ class EntityRequests:
         # Every entity: the sensors too (~/get_entities lists them), fixed ones included.
         return self.sim.call(lambda world: self._remove(
             world, world.body_names() + [s["name"] for s in world.sensor_specs], strict=True))
+
+    @handled
+    def remove_entity(self, name):
+        """~/remove of one entity by name (its sensors go with it)."""
+        if not isinstance(name, str):
+            raise RequestError(NOT_FOUND, f"no entity named {specs.quote(name)}")
+        return self.sim.call(lambda world: self._remove(world, [name], strict=True))
 
     @staticmethod
     def _remove(world, doomed, strict):

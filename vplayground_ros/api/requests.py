@@ -1,8 +1,9 @@
 """Requests: the handlers of every service, bound to one Simulation, and the state they share.
 Each group of services lives in its own file and is mixed in here:
-entities.py (spawn, edit, remove, get_entity, get_entities), simulation_control.py (pause, step,
-reset, set_freezing, wake_all, get_simulator_features), scene_files.py (load_scene,
-save_scene).
+entities.py (spawn, edit, remove, get_entity, get_entities), entity_queries.py (the
+simulation_interfaces entity queries and filters), simulation_control.py (pause, step, reset,
+set_freezing, wake_all, get_simulator_features, simulation states), scene_files.py (load_scene,
+save_scene and the worlds).
 """
 import copy
 import logging
@@ -11,6 +12,7 @@ from pathlib import Path
 from ..parameters import WorldSettings, frames
 from ..scene import world_to_scene
 from .entities import EntityRequests
+from .entity_queries import QueryRequests
 from .file_access import default_scene_directories
 from .scene_files import SceneRequests
 from .simulation_control import ControlRequests
@@ -20,7 +22,7 @@ DEFAULT_MAX_BODIES = 10_000  # bodies (vehicles included) the world may hold; ~r
 log = logging.getLogger(__name__)
 
 
-class Requests(EntityRequests, ControlRequests, SceneRequests):
+class Requests(EntityRequests, QueryRequests, ControlRequests, SceneRequests):
     """The SPEC 6.3 handlers, bound to a Simulation. Each public method runs on the caller's
     thread and hands the work to the simulation thread.
 

@@ -1,6 +1,9 @@
 """The scene-file services: ~/load_scene (LoadMap) and ~/save_scene, within the scene
-directories (file_access.py)."""
+directories (file_access.py); the worlds of simulation_interfaces (load_world from a file or
+YAML text, unload_world, get_current_world, get_available_worlds) are the same scene files.
+"""
 import copy
+from pathlib import Path
 
 import yaml
 
@@ -8,23 +11,41 @@ from ..physics import specs
 from ..scene import SceneError, load_world, world_to_scene
 from .file_access import allowed_directories, confine, write_file
 from .payload import YAML_DUMPER, as_mapping, parse
-from .results import (FAILED, INVALID_MAP_DATA, MAP_DOES_NOT_EXIST, MAP_SUCCESS, NOT_FOUND, OK,
-                      UNDEFINED_FAILURE, RequestError, handled, reply)
+from .results import (FAILED, INVALID_MAP_DATA, MAP_DOES_NOT_EXIST, MAP_SUCCESS, NO_WORLD_LOADED, NOT_FOUND, OK,
+                      UNDEFINED_FAILURE, UNSUPPORTED_FORMAT, RequestError, handled, reply)
+
+SCENE_SUFFIXES = (".yaml", ".yml")
+MAX_LISTED_WORLDS = 1000  # scene files get_available_worlds lists
 
 
 class SceneRequests:
     """Requests' scene-file handlers (see requests.py for the state they share)."""
 
-    def load_scene(self, path):
-        """(LoadMap result code, message). The old world stays on any failure."""
+    def load_scene(self, path, stopped=False):
+        """(LoadMap result code, message). The old world stays on any failure. `stopped`: the
+        new world waits paused at its start (simulation_interfaces LoadWorld)."""
         try:
             target = confine(path, "load_scene", self.scene_directories)
         except RequestError as error:
             return MAP_DOES_NOT_EXIST, str(error)
         if not target.is_file():
             return MAP_DOES_NOT_EXIST, f"{NOT_FOUND}: no scene file at {specs.quote(path)}"
+        return self._load(target, str(target), stopped)
+
+    def load_scene_text(self, text, stopped=False):
+        """load_scene of a scene given as YAML text (meshes from the scene directories)."""
         try:
-            world = load_world(target, max_bodies=int(self.max_bodies),
+            scene = parse(text, "resource_string")
+        except RequestError as error:
+            return INVALID_MAP_DATA, str(error)
+        if not isinstance(scene, dict):
+            return INVALID_MAP_DATA, (f"{UNSUPPORTED_FORMAT}: a world is this package's scene YAML (a mapping "
+                                      f"of settings, bodies, vehicles...), got {type(scene).__name__}")
+        return self._load(scene, "", stopped)
+
+    def _load(self, source, label, stopped):
+        try:
+            world = load_world(source, max_bodies=int(self.max_bodies),
                                directories=allowed_directories(self.scene_directories), frames=self.frames())
             initial = copy.deepcopy(world_to_scene(world))
         except SceneError as error:
@@ -33,13 +54,58 @@ class SceneRequests:
         def install(_):
             self.sim.world = world
             self.initial = initial
-            self.scene_label = str(target)
+            self.scene_label = label
+            self.sim.world_loaded = True
+            if stopped:
+                self.sim.paused = self.sim.stopped = True
         try:
             self.sim.call(install)
         except TimeoutError as error:
             return UNDEFINED_FAILURE, f"{FAILED}: {error}"
         self._follow_scene_settings()
-        return MAP_SUCCESS, f"{OK}: loaded {target} ({len(world.body_names())} bodies)"
+        return MAP_SUCCESS, f"{OK}: loaded {label or 'a scene from text'} ({len(world.body_names())} bodies)"
+
+    @handled
+    def unload_world(self):
+        """An empty world, paused, until a scene is loaded (simulation_interfaces NO_WORLD)."""
+        empty = load_world({"version": 1})
+
+        def unload(world):
+            if not self.sim.world_loaded:
+                raise RequestError(NO_WORLD_LOADED, "no world is loaded")
+            self.sim.world = empty
+            self.initial = copy.deepcopy(world_to_scene(empty))
+            self.scene_label = ""
+            self.sim.world_loaded, self.sim.paused, self.sim.stopped = False, True, False
+            return reply(OK, "unloaded: every entity removed")
+        return self.sim.call(unload)
+
+    def current_world(self):
+        """(file of the loaded scene, '' for one from text or the built-in default), or None
+        when no world is loaded."""
+        return self.sim.call(lambda world: self.scene_label if self.sim.world_loaded else None)
+
+    def available_worlds(self, sources=()):
+        """The scene files (.yaml, .yml) directly inside the scene directories and inside
+        `sources` (directories, each within a scene directory): [(path, description)], the
+        description being the file's first comment line. FAILED naming a source outside."""
+        roots = allowed_directories(self.scene_directories)
+        folders = list(roots)
+        for source in sources:
+            raw = source[len("file://"):] if source.startswith("file://") else source
+            folder = Path(raw).resolve() if raw else None
+            if folder is None or not folder.is_dir() or not any(folder == r or r in folder.parents for r in roots):
+                raise RequestError(FAILED, f"additional_sources: {specs.quote(source)} is not a directory inside "
+                                           "the scene directories (the scene_directories parameter)")
+            folders.append(folder)
+        found = {}
+        for folder in folders:
+            for path in sorted(folder.iterdir()):
+                if path.suffix in SCENE_SUFFIXES and path.is_file() and path not in found:
+                    found[path] = first_comment(path)
+                    if len(found) >= MAX_LISTED_WORLDS:
+                        return list(found.items())
+        return list(found.items())
 
     @handled
     def save_scene(self, text):
@@ -66,3 +132,13 @@ class SceneRequests:
             raise RequestError(FAILED, f"cannot write {target}: {error.strerror or error}") from None
         return reply(OK, str(target))
 
+
+
+def first_comment(path):
+    """A scene file's first line if it is a comment, without the '#': its description."""
+    try:
+        with open(path, encoding="utf-8", errors="replace") as f:
+            line = f.readline(500).strip()
+    except OSError:
+        return ""
+    return line.lstrip("#").strip() if line.startswith("#") else ""

@@ -1,37 +1,57 @@
 """The simulation-state services: ~/pause, ~/step, ~/reset, ~/set_freezing, ~/wake_all,
-~/get_simulator_features.
+~/get_simulator_features, and the states of simulation_interfaces SetSimulationState.
+
+States (simulation.py): PLAYING and PAUSED; STOPPED is paused at the loaded scene's start (a
+SetSimulationState STOPPED resets everything, LoadWorld leaves the new world there); playing or
+pausing leaves it. NO_WORLD after UnloadWorld: nothing plays, steps, spawns or resets until a
+scene is loaded. QUITTING ends the run a moment after the reply.
 """
 import copy
+import threading
 
 import yaml
 
 from ..parameters import SCOPE_ALL, SCOPE_SPAWNED, SCOPE_STATE, SCOPE_TIME, reset_scope
 from ..physics import specs
 from ..scene import load_world
-from ..simulation import PAUSED
+from ..simulation import NO_WORLD, PAUSED, PLAYING, QUITTING, STOPPED
 from .entities import drop_sensors_of
-from .results import ALREADY, FAILED, INCORRECT_STATE, OK, handled, reply
+from .results import (ALREADY, FAILED, INCORRECT_STATE, INCORRECT_TRANSITION, OK, RequestError, handled,
+                      reply)
 
 # Reset scopes (simulation_interfaces ResetSimulation): SCOPE_*, and the rule reset_scope()
 # that the `reset_scope` parameter is checked by too, live in ../parameters.py.
 # The features this simulator honours, as ~/get_simulator_features lists them: names and
-# numbers copied from simulation_interfaces 2.1.0 msg/SimulatorFeatures.msg (the tests check
-# them against the copy in test/simulation_interfaces-2.1.0/), each with what honours it.
+# numbers as simulation_interfaces msg/SimulatorFeatures.msg has them (the tests check them
+# against interfaces/simulation_interfaces/), each with the services that honour it.
 SIMULATOR_FEATURES = {
-    "SPAWNING": 0,                   # ~/spawn
-    "DELETING": 1,                   # ~/remove
-    "ENTITY_STATE_GETTING": 10,      # ~/get_entity: pose and twist
-    "ENTITY_STATE_SETTING": 11,      # ~/edit: state.pose, state.twist
-    "SIMULATION_RESET": 20,          # ~/reset
-    "SIMULATION_RESET_TIME": 21,     # reset_scope 1
-    "SIMULATION_RESET_STATE": 22,    # reset_scope 2
-    "SIMULATION_RESET_SPAWNED": 23,  # reset_scope 4
-    "SIMULATION_STATE_GETTING": 24,  # ~/state
-    "SIMULATION_STATE_SETTING": 25,  # ~/pause false: playing
-    "SIMULATION_STATE_PAUSE": 26,    # ~/pause true: paused
-    "STEP_SIMULATION_SINGLE": 31,    # ~/step with step_count 1
-    "STEP_SIMULATION_MULTIPLE": 32,  # ~/step with step_count n
+    "SPAWNING": 0,                   # ~/spawn, spawn_entity
+    "DELETING": 1,                   # ~/remove, delete_entity
+    "ENTITY_BOUNDS": 5,              # get_entity_bounds: the box in the entity's frame
+    "ENTITY_BOUNDS_BOX": 6,          # filters.bounds TYPE_BOX (and TYPE_SPHERE, which every simulator has)
+    "ENTITY_CATEGORIES": 8,          # filters.categories, get_entity_info: robot, static object, object
+    "SPAWNING_RESOURCE_STRING": 9,   # spawn_entity resource_string: this package's YAML entity spec
+    "ENTITY_STATE_GETTING": 10,      # ~/get_entity, get_entity_state, get_entities_states
+    "ENTITY_STATE_SETTING": 11,      # ~/edit, set_entity_state: pose and twist
+    "ENTITY_INFO_GETTING": 12,       # get_entity_info
+    "SIMULATION_RESET": 20,          # ~/reset, reset_simulation
+    "SIMULATION_RESET_TIME": 21,     # scope 1
+    "SIMULATION_RESET_STATE": 22,    # scope 2
+    "SIMULATION_RESET_SPAWNED": 23,  # scope 4
+    "SIMULATION_STATE_GETTING": 24,  # ~/state, get_simulation_state
+    "SIMULATION_STATE_SETTING": 25,  # ~/pause false, set_simulation_state
+    "SIMULATION_STATE_PAUSE": 26,    # ~/pause true, set_simulation_state PAUSED
+    "STEP_SIMULATION_SINGLE": 31,    # ~/step with step_count 1, step_simulation
+    "STEP_SIMULATION_MULTIPLE": 32,  # ~/step with step_count n, step_simulation, simulate_steps
+    "STEP_SIMULATION_ACTION": 33,    # the simulate_steps action (ROS only: Foxglove has no actions)
+    "WORLD_LOADING": 40,             # ~/load_scene, load_world
+    "WORLD_RESOURCE_STRING": 41,     # load_world resource_string: a scene as YAML text
+    "WORLD_UNLOADING": 43,           # unload_world
+    "WORLD_INFO_GETTING": 44,        # get_current_world
+    "AVAILABLE_WORLDS": 45,          # get_available_worlds: the scene files of scene_directories
+    "SPAWNING_ENTITIES": 50,         # ~/spawn with a list, spawn_entities
 }
+QUIT_DELAY = 0.5  # s from SetSimulationState QUITTING's reply to the end of the run
 MAX_STEPS = 1_000_000  # steps one ~/step may queue (~2 h of simulated time at 128 Hz)
 
 
@@ -44,10 +64,48 @@ class ControlRequests:
         return self.sim.call(lambda world: self._pause(paused))
 
     def _pause(self, paused):
+        self._check_world("playing or pausing")
         if self.sim.paused == paused:
             return reply(ALREADY, "already paused" if paused else "already playing")
-        self.sim.paused = paused
+        self.sim.paused, self.sim.stopped = paused, False
         return reply(OK, "paused" if paused else "playing")
+
+    def _check_world(self, what):
+        if not self.sim.world_loaded:
+            raise RequestError(INCORRECT_STATE, f"{what} needs a world: none is loaded since unload_world "
+                                                "(load_world or ~/load_scene loads one)")
+
+    @handled
+    def set_simulation_state(self, target):
+        """simulation_interfaces SetSimulationState: PLAYING, PAUSED, STOPPED (paused at the
+        loaded scene's start: everything reset) or QUITTING (the run ends just after the
+        reply). NO_WORLD and LOADING_WORLD are reached through unload_world and load_world."""
+        target = specs.integer(target, "state.state", 0, 255)
+        names = {STOPPED: "stopped", PLAYING: "playing", PAUSED: "paused", QUITTING: "quitting"}
+        if target not in names:
+            raise RequestError(INCORRECT_TRANSITION, f"state.state: {target} cannot be set (0 STOPPED, 1 PLAYING, "
+                                                     "2 PAUSED, 3 QUITTING; unload_world and load_world reach 4 and 5)")
+        if target == QUITTING:  # paused now, and the run ends (as Ctrl-C ends it) once the reply is out
+            self.sim.call(lambda world: setattr(self.sim, "paused", True))
+            self.sim.quitting = True
+            threading.Timer(QUIT_DELAY, self.sim.stop).start()
+            return reply(OK, f"quitting in {QUIT_DELAY:g} s")
+        ok, message = self.sim.call(lambda world: self._set_state(target, names[target]))
+        if ok and target == STOPPED:
+            self._follow_scene_settings()
+        return ok, message
+
+    def _set_state(self, target, name):
+        if not self.sim.world_loaded:
+            return reply(INCORRECT_TRANSITION, f"no world is loaded: nothing can be {name} (load_world first)")
+        if self.sim.state == target:
+            return reply(ALREADY, f"already {name}")
+        if self.sim.state == STOPPED and target == PAUSED:  # the standard's own example of one
+            return reply(INCORRECT_TRANSITION, "a stopped simulation cannot be paused: play it first")
+        if target == STOPPED:
+            self._reset(self.sim.world, SCOPE_ALL)
+        self.sim.paused, self.sim.stopped = target != PLAYING, target == STOPPED
+        return reply(OK, name)
 
     @handled
     def step(self, count):
@@ -55,6 +113,7 @@ class ControlRequests:
         return self.sim.call(lambda world: self._step(count))
 
     def _step(self, count):
+        self._check_world("stepping")
         if self.sim.state != PAUSED:
             return reply(INCORRECT_STATE, "stepping needs the simulation paused (~/pause true)")
         if self.sim.pending_steps + count > MAX_STEPS:
@@ -71,6 +130,7 @@ class ControlRequests:
         return ok, message
 
     def _reset(self, world, scope):
+        self._check_world("a reset")
         if scope == SCOPE_ALL:
             self.sim.world = load_world(copy.deepcopy(self.initial))
             return reply(OK, "reset everything to the loaded scene")

@@ -1,0 +1,342 @@
+"""The standard simulation_interfaces services and the SimulateSteps action, through a client
+built only from the simulation_interfaces types (as a scenario test written for Gazebo would
+be): every service, the result codes the standard defines for each, and a scenario."""
+import subprocess
+import sys
+import time
+
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+si = pytest.importorskip("simulation_interfaces")
+
+from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion, Vector3  # noqa: E402
+from rclpy.action import ActionClient  # noqa: E402
+from simulation_interfaces.action import SimulateSteps  # noqa: E402
+from simulation_interfaces.msg import (Bounds, EntityCategory, EntityFilters, EntityState,  # noqa: E402
+                                       Resource, Result, SimulationState, SimulatorFeatures, TagsFilter)
+from simulation_interfaces.msg import SpawnEntity as SpawnEntityMessage  # noqa: E402
+from simulation_interfaces.srv import (DeleteEntity, GetAvailableWorlds, GetCurrentWorld,  # noqa: E402
+                                       GetEntities, GetEntitiesStates, GetEntityBounds, GetEntityInfo,
+                                       GetEntityState, GetSimulationState, GetSimulatorFeatures, LoadWorld,
+                                       ResetSimulation, SetEntityState, SetSimulationState, SpawnEntities,
+                                       SpawnEntity, StepSimulation, UnloadWorld)
+
+from helpers import wait_for  # noqa: E402
+from test_node import Harness  # noqa: E402
+
+OK, NOT_FOUND, INCORRECT_STATE, FAILED, UNSUPPORTED = (Result.RESULT_OK, Result.RESULT_NOT_FOUND,
+                                                        Result.RESULT_INCORRECT_STATE,
+                                                        Result.RESULT_OPERATION_FAILED,
+                                                        Result.RESULT_FEATURE_UNSUPPORTED)
+BOX = "{shape: box, size: [0.5, 0.5, 0.5], mass: 2.0}"
+
+
+@pytest.fixture(scope="module")
+def ros():
+    harness = Harness()
+    yield harness
+    harness.close()
+
+
+def call(ros, kind, service, **fields):
+    return ros.call(kind, f"/{service}", kind.Request(**fields))
+
+
+def pose(x=0.0, y=0.0, z=0.0, frame=""):
+    stamped = PoseStamped(pose=Pose(position=Point(x=x, y=y, z=z), orientation=Quaternion(w=1.0)))
+    stamped.header.frame_id = frame
+    return stamped
+
+
+def spawn(ros, name, z=3.0, resource=BOX, **fields):
+    return call(ros, SpawnEntity, "spawn_entity", name=name, resource_string=resource, initial_pose=pose(0.0, 5.0, z),
+                **fields)
+
+
+def state(ros):
+    return call(ros, GetSimulationState, "get_simulation_state").state.state
+
+
+def set_state(ros, target):
+    return call(ros, SetSimulationState, "set_simulation_state", state=SimulationState(state=target)).result
+
+
+def play(ros):
+    if state(ros) != SimulationState.STATE_PLAYING:
+        assert set_state(ros, SimulationState.STATE_PLAYING).result == OK
+
+
+def test_features_name_only_what_is_served(ros):
+    features = call(ros, GetSimulatorFeatures, "get_simulator_features").features
+    listed = set(features.features)
+    assert {SimulatorFeatures.SPAWNING, SimulatorFeatures.DELETING, SimulatorFeatures.ENTITY_STATE_GETTING,
+            SimulatorFeatures.STEP_SIMULATION_ACTION, SimulatorFeatures.WORLD_LOADING} <= listed
+    # What is not honoured is not listed: tags, convex-hull filters, named poses, spawnables.
+    assert not listed & {SimulatorFeatures.ENTITY_TAGS, SimulatorFeatures.ENTITY_BOUNDS_CONVEX,
+                         SimulatorFeatures.NAMED_POSES, SimulatorFeatures.SPAWNABLES,
+                         SimulatorFeatures.ENTITY_INFO_SETTING, SimulatorFeatures.WORLD_TAGS}
+    assert list(features.spawn_formats) == ["yaml"]
+
+
+def test_spawn_entity_and_its_result_codes(ros):
+    play(ros)
+    reply = spawn(ros, "si_box")
+    assert reply.result.result == OK, reply.result.error_message
+    assert reply.entity_name == "si_box"
+    taken = spawn(ros, "si_box")
+    assert taken.result.result == SpawnEntity.Response.NAME_NOT_UNIQUE and "si_box" in taken.result.error_message
+    renamed = spawn(ros, "si_box", allow_renaming=True)
+    assert renamed.result.result == OK and renamed.entity_name not in ("", "si_box")
+    assert spawn(ros, "bad name!").result.result == SpawnEntity.Response.NAME_INVALID
+    assert spawn(ros, "").result.result == SpawnEntity.Response.NAME_INVALID  # no name, no renaming
+    assert spawn(ros, "", allow_renaming=True).result.result == OK
+    assert spawn(ros, "nothing", resource="").result.result == SpawnEntity.Response.NO_RESOURCE
+    assert spawn(ros, "broken", resource="{shape: [").result.result == SpawnEntity.Response.RESOURCE_PARSE_ERROR
+    urdf = spawn(ros, "robot", resource="<robot name='r'><link name='a'/></robot>")
+    assert urdf.result.result == SpawnEntity.Response.UNSUPPORTED_FORMAT
+    far = call(ros, SpawnEntity, "spawn_entity", name="far", resource_string=BOX, initial_pose=pose(1e7, 0, 0))
+    assert far.result.result == SpawnEntity.Response.INVALID_POSE
+    unknown_frame = call(ros, SpawnEntity, "spawn_entity", name="lost", resource_string=BOX,
+                         initial_pose=pose(0, 0, 2, frame="no_such_frame"))
+    assert unknown_frame.result.result == SpawnEntity.Response.INVALID_POSE
+    assert spawn(ros, "ns_box", entity_namespace="a b").result.result == SpawnEntity.Response.NAMESPACE_INVALID
+    missing = call(ros, SpawnEntity, "spawn_entity", name="from_file", uri="no_such_file.yaml")
+    assert missing.result.result == NOT_FOUND
+    names = call(ros, GetEntities, "get_entities").entities
+    assert "si_box" in names and renamed.entity_name in names
+    for refused in ("far", "lost", "robot", "broken", "ns_box"):
+        assert refused not in names
+
+
+def test_spawn_from_a_file_in_the_scene_directories_and_relative_to_a_frame(ros):
+    (ros.scene_directory / "crate.yaml").write_text("shape: box\nsize: [0.4, 0.4, 0.4]\nmass: 1.0\n")
+    assert set_state(ros, SimulationState.STATE_PAUSED).result == OK  # si_box stays where it is read
+    reply = call(ros, SpawnEntity, "spawn_entity", name="crate", uri=str(ros.scene_directory / "crate.yaml"),
+                 initial_pose=pose(0.0, 0.0, 1.0, frame="si_box"))
+    assert reply.result.result == OK, reply.result.error_message
+    crate = call(ros, GetEntityState, "get_entity_state", entity="crate").state
+    box = call(ros, GetEntityState, "get_entity_state", entity="si_box").state
+    assert abs(crate.pose.position.z - box.pose.position.z - 1.0) < 1e-6  # placed in si_box's frame
+    play(ros)
+
+
+def test_spawn_entities_reports_each(ros):
+    def entry(name, text, x=0.0):  # SpawnEntities takes the SpawnEntity message: its resource a Resource
+        return SpawnEntityMessage(name=name, entity_resource=Resource(resource_string=text), initial_pose=pose(x, 5.0, 3.0))
+    reply = call(ros, SpawnEntities, "spawn_entities", spawn_requests=[entry("batch_a", BOX, 2.0), entry("batch_b", "")])
+    assert reply.result.result == SpawnEntities.Response.ENTITIES_SPAWN_FAILED
+    assert [r.result.result for r in reply.results] == [OK, SpawnEntity.Response.NO_RESOURCE]
+    assert reply.results[0].entity_name == "batch_a"
+    assert call(ros, SpawnEntities, "spawn_entities", spawn_requests=[entry("batch_c", BOX, -2.0)]).result.result == OK
+
+
+def test_entity_state_info_bounds_and_delete(ros):
+    reply = spawn(ros, "probe", z=0.25)
+    assert reply.result.result == OK
+    got = call(ros, GetEntityState, "get_entity_state", entity="probe")
+    assert got.result.result == OK and got.state.header.frame_id == "world"
+    assert abs(got.state.pose.position.y - 5.0) < 0.1
+    info = call(ros, GetEntityInfo, "get_entity_info", entity="probe")
+    assert info.result.result == OK and info.info.category.category == EntityCategory.CATEGORY_OBJECT
+    assert "2 kg" in info.info.description
+    car = call(ros, GetEntityInfo, "get_entity_info", entity="car")
+    assert car.info.category.category == EntityCategory.CATEGORY_ROBOT
+    bounds = call(ros, GetEntityBounds, "get_entity_bounds", entity="probe")
+    assert bounds.result.result == OK and bounds.bounds.type == Bounds.TYPE_BOX
+    low, high = bounds.bounds.points
+    assert (low.x, low.y, low.z) == pytest.approx((-0.25,) * 3) and (high.x, high.y, high.z) == pytest.approx((0.25,) * 3)
+    for kind, name in ((GetEntityState, "get_entity_state"), (GetEntityInfo, "get_entity_info"),
+                       (GetEntityBounds, "get_entity_bounds"), (DeleteEntity, "delete_entity")):
+        assert call(ros, kind, name, entity="no_such_entity").result.result == NOT_FOUND, name
+    assert call(ros, DeleteEntity, "delete_entity", entity="probe").result.result == OK
+    assert "probe" not in call(ros, GetEntities, "get_entities").entities
+
+
+def test_set_entity_state_moves_and_refuses(ros):
+    assert spawn(ros, "mover", z=0.25).result.result == OK
+    target = EntityState(pose=Pose(position=Point(x=3.0, y=-4.0, z=2.0), orientation=Quaternion(w=1.0)),
+                         twist=__import__("geometry_msgs.msg").msg.Twist(linear=Vector3(x=1.0)))
+    reply = call(ros, SetEntityState, "set_entity_state", entity="mover", state=target)
+    assert reply.result.result == OK, reply.result.error_message
+    moved = call(ros, GetEntityState, "get_entity_state", entity="mover").state
+    assert abs(moved.pose.position.y + 4.0) < 0.2 and moved.pose.position.x > 2.9
+    bad = EntityState(pose=Pose(orientation=Quaternion(w=0.0)))  # not a rotation
+    assert call(ros, SetEntityState, "set_entity_state", entity="mover",
+                state=bad).result.result == SetEntityState.Response.INVALID_POSE
+    accelerating = EntityState(pose=target.pose)
+    accelerating.acceleration.linear.x = 1.0
+    assert call(ros, SetEntityState, "set_entity_state", entity="mover", state=accelerating).result.result == FAILED
+    assert call(ros, SetEntityState, "set_entity_state", entity="nobody",
+                state=EntityState(pose=target.pose)).result.result == NOT_FOUND
+
+
+def test_filters(ros):
+    for k in range(3):
+        assert spawn(ros, f"filtered_{k}", z=0.25 + 0.6 * k).result.result == OK
+    names = call(ros, GetEntities, "get_entities", filters=EntityFilters(filter="^filtered_[02]$")).entities
+    assert sorted(names) == ["filtered_0", "filtered_2"]
+    robots = call(ros, GetEntities, "get_entities", filters=EntityFilters(
+        categories=[EntityCategory(category=EntityCategory.CATEGORY_ROBOT)])).entities
+    assert list(robots) == ["car"]
+    car = call(ros, GetEntityState, "get_entity_state", entity="car").state.pose.position
+    near_car = Bounds(type=Bounds.TYPE_SPHERE, points=[Vector3(x=car.x, y=car.y, z=car.z), Vector3(x=0.5)])
+    assert "car" in call(ros, GetEntities, "get_entities", filters=EntityFilters(bounds=near_car)).entities
+    box = Bounds(type=Bounds.TYPE_BOX, points=[Vector3(x=-0.1, y=4.9, z=-1.0), Vector3(x=0.1, y=5.1, z=0.4)])
+    states = call(ros, GetEntitiesStates, "get_entities_states",
+                  filters=EntityFilters(filter="^filtered_", bounds=box))
+    assert states.result.result == OK
+    assert len(states.entities) == len(states.states) >= 1 and "filtered_0" in states.entities
+    for entity, entity_state in zip(states.entities, states.states):
+        assert entity_state.pose.position.z < 1.0, entity
+    convex = Bounds(type=Bounds.TYPE_CONVEX_HULL, points=[Vector3(), Vector3(x=1.0), Vector3(y=1.0)])
+    assert call(ros, GetEntities, "get_entities", filters=EntityFilters(bounds=convex)).result.result == UNSUPPORTED
+    tags = EntityFilters(tags=TagsFilter(tags=["red"]))
+    assert call(ros, GetEntities, "get_entities", filters=tags).result.result == UNSUPPORTED
+    assert call(ros, GetEntities, "get_entities", filters=EntityFilters(filter="(unclosed")).result.result == FAILED
+    one_point = Bounds(type=Bounds.TYPE_BOX, points=[Vector3()])
+    assert call(ros, GetEntities, "get_entities", filters=EntityFilters(bounds=one_point)).result.result == FAILED
+
+
+def test_simulation_states_and_stepping(ros):
+    play(ros)
+    assert set_state(ros, SimulationState.STATE_PLAYING).result == SetSimulationState.Response.ALREADY_IN_TARGET_STATE
+    assert call(ros, StepSimulation, "step_simulation", steps=3).result.result == FAILED  # not paused
+    assert set_state(ros, SimulationState.STATE_PAUSED).result == OK
+    assert state(ros) == SimulationState.STATE_PAUSED
+    before = ros.sim.world.step_count
+    assert call(ros, StepSimulation, "step_simulation", steps=5).result.result == OK
+    assert ros.sim.world.step_count == before + 5  # answered once they had run
+    assert call(ros, StepSimulation, "step_simulation", steps=0).result.result == FAILED
+    assert spawn(ros, "stopped_away").result.result == OK
+    assert set_state(ros, SimulationState.STATE_STOPPED).result == OK  # paused at the scene's start
+    assert state(ros) == SimulationState.STATE_STOPPED
+    assert "stopped_away" not in call(ros, GetEntities, "get_entities").entities
+    assert ros.sim.world.step_count == 0
+    assert set_state(ros, SimulationState.STATE_STOPPED).result == SetSimulationState.Response.ALREADY_IN_TARGET_STATE
+    assert set_state(ros, SimulationState.STATE_PAUSED).result == SetSimulationState.Response.INCORRECT_TRANSITION
+    assert call(ros, StepSimulation, "step_simulation", steps=1).result.result == FAILED  # stopped is not paused
+    assert set_state(ros, SimulationState.STATE_NO_WORLD).result == SetSimulationState.Response.INCORRECT_TRANSITION
+    assert set_state(ros, 77).result == SetSimulationState.Response.INCORRECT_TRANSITION
+    play(ros)
+    assert state(ros) == SimulationState.STATE_PLAYING
+
+
+def test_simulate_steps_action_feedback_result_and_cancel(ros):
+    play(ros)
+    assert set_state(ros, SimulationState.STATE_PAUSED).result == OK
+    client = ActionClient(ros.client, SimulateSteps, "/simulate_steps")
+    assert client.wait_for_server(timeout_sec=10)
+    feedback = []
+    before = ros.sim.world.step_count
+    sent = client.send_goal_async(SimulateSteps.Goal(steps=40), feedback_callback=lambda f: feedback.append(f.feedback))
+    assert wait_for(sent.done)
+    handle = sent.result()
+    assert handle.accepted
+    outcome = handle.get_result_async()
+    assert wait_for(outcome.done, 30)
+    assert outcome.result().result.result.result == OK
+    assert ros.sim.world.step_count == before + 40
+    assert feedback and feedback[-1].completed_steps == 40 and feedback[-1].remaining_steps == 0
+    done = [f.completed_steps for f in feedback]
+    assert done == sorted(done) and all(f.completed_steps + f.remaining_steps == 40 for f in feedback)
+    # Cancelled: the steps not yet run are withdrawn.
+    ros.sim.real_time_factor = 0.5  # (paused steps run as fast as they can: a long goal to catch)
+    sent = client.send_goal_async(SimulateSteps.Goal(steps=1_000_000))
+    assert wait_for(sent.done)
+    handle = sent.result()
+    time.sleep(0.2)
+    cancel = handle.cancel_goal_async()
+    assert wait_for(cancel.done)
+    outcome = handle.get_result_async()
+    assert wait_for(outcome.done, 30)
+    assert outcome.result().status == 5  # GoalStatus.STATUS_CANCELED
+    assert wait_for(lambda: ros.sim.pending_steps == 0)
+    assert ros.sim.world.step_count - before < 1_000_000
+    # Not paused: aborted with the standard's RESULT_OPERATION_FAILED.
+    play(ros)
+    sent = client.send_goal_async(SimulateSteps.Goal(steps=3))
+    assert wait_for(sent.done)
+    outcome = sent.result().get_result_async()
+    assert wait_for(outcome.done, 30)
+    assert outcome.result().result.result.result == FAILED
+    ros.sim.real_time_factor = 4.0
+    client.destroy()
+
+
+def test_worlds_load_unload_and_list(ros):
+    scene = ros.scene_directory / "two_boxes.yaml"
+    scene.write_text("# Two boxes on the ground\nversion: 1\nbodies:\n"
+                     "  - {name: left, shape: box, size: [0.5, 0.5, 0.5], mass: 1.0, position: [-1, 0, 0.25]}\n"
+                     "  - {name: right, shape: box, size: [0.5, 0.5, 0.5], mass: 1.0, position: [1, 0, 0.25]}\n")
+    listed = call(ros, GetAvailableWorlds, "get_available_worlds")
+    assert listed.result.result == OK
+    mine = [w for w in listed.worlds if w.world_resource.uri == str(scene)]
+    assert len(mine) == 1 and mine[0].name == "two_boxes" and mine[0].description == "Two boxes on the ground"
+    assert call(ros, GetAvailableWorlds, "get_available_worlds",
+                additional_sources=["/etc"]).result.result == FAILED  # outside the scene directories
+    assert call(ros, GetAvailableWorlds, "get_available_worlds",
+                filter=TagsFilter(tags=["indoor"])).result.result == UNSUPPORTED
+    loaded = call(ros, LoadWorld, "load_world", uri=str(scene))
+    assert loaded.result.result == OK, loaded.result.error_message
+    assert loaded.world.name == "two_boxes"
+    assert state(ros) == SimulationState.STATE_STOPPED  # the standard: a loaded world waits stopped
+    assert sorted(call(ros, GetEntities, "get_entities").entities) == ["left", "right"]
+    current = call(ros, GetCurrentWorld, "get_current_world")
+    assert current.result.result == OK and current.world.world_resource.uri == str(scene)
+    assert call(ros, LoadWorld, "load_world").result.result == LoadWorld.Response.NO_RESOURCE
+    assert call(ros, LoadWorld, "load_world", uri=str(ros.scene_directory / "none.yaml")).result.result == NOT_FOUND
+    assert call(ros, LoadWorld, "load_world",
+                resource_string="version: 1\nbodies: [{shape: box, mass: -1}]").result.result == LoadWorld.Response.RESOURCE_PARSE_ERROR
+    assert call(ros, LoadWorld, "load_world",
+                resource_string="<sdf version='1.9'/>").result.result == LoadWorld.Response.UNSUPPORTED_FORMAT
+    assert sorted(call(ros, GetEntities, "get_entities").entities) == ["left", "right"]  # failures change nothing
+    assert call(ros, UnloadWorld, "unload_world").result.result == OK
+    assert state(ros) == SimulationState.STATE_NO_WORLD
+    assert list(call(ros, GetEntities, "get_entities").entities) == []
+    assert call(ros, UnloadWorld, "unload_world").result.result == UnloadWorld.Response.NO_WORLD_LOADED
+    assert call(ros, GetCurrentWorld, "get_current_world").result.result == GetCurrentWorld.Response.NO_WORLD_LOADED
+    assert spawn(ros, "nowhere").result.result == INCORRECT_STATE
+    assert call(ros, ResetSimulation, "reset_simulation").result.result == INCORRECT_STATE
+    assert set_state(ros, SimulationState.STATE_PLAYING).result == SetSimulationState.Response.INCORRECT_TRANSITION
+    text = call(ros, LoadWorld, "load_world", resource_string=scene.read_text())
+    assert text.result.result == OK, text.result.error_message
+    assert state(ros) == SimulationState.STATE_STOPPED
+    play(ros)
+    assert wait_for(lambda: ros.sim.world.step_count > 10)
+
+
+def test_reset_scopes(ros):
+    play(ros)
+    assert spawn(ros, "spawned_then_reset").result.result == OK
+    assert call(ros, ResetSimulation, "reset_simulation", scope=ResetSimulation.Request.SCOPE_SPAWNED).result.result == OK
+    assert "spawned_then_reset" not in call(ros, GetEntities, "get_entities").entities
+    assert call(ros, ResetSimulation, "reset_simulation", scope=ResetSimulation.Request.SCOPE_TIME).result.result == OK
+    assert call(ros, ResetSimulation, "reset_simulation", scope=3).result.result == OK  # TIME | STATE
+    assert call(ros, ResetSimulation, "reset_simulation", scope=8).result.result == FAILED  # no such scope
+    assert call(ros, ResetSimulation, "reset_simulation").result.result == OK  # SCOPE_DEFAULT: all
+
+
+def test_quitting_ends_the_node_cleanly_with_its_bag(ros, tmp_path):
+    """SetSimulationState QUITTING answers, then the run ends as Ctrl-C ends it: exit 0, the
+    bag closed whole (its summary written). A node of its own, under a namespace of its own."""
+    from mcap.reader import make_reader
+
+    bag = tmp_path / "quit.mcap"
+    process = subprocess.Popen([sys.executable, "-m", "vplayground_ros.cli", "--record", str(bag),
+                                "--ros-args", "-r", "__ns:=/quitter"],
+                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        reply = ros.call(GetSimulationState, "/quitter/get_simulation_state", GetSimulationState.Request(), timeout=120)
+        assert reply.state.state == SimulationState.STATE_PLAYING
+        reply = ros.call(SetSimulationState, "/quitter/set_simulation_state",
+                         SetSimulationState.Request(state=SimulationState(state=SimulationState.STATE_QUITTING)))
+        assert reply.result.result == OK, reply.result.error_message
+        output, _ = process.communicate(timeout=60)
+    finally:
+        process.kill()
+    assert process.returncode == 0, output
+    assert "stopped:" in output
+    with open(bag, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None and summary.statistics.message_count > 0

@@ -1,0 +1,391 @@
+"""The standard simulation_interfaces services (ros-simulation/simulation_interfaces, the 1.5
+series ROS 2 Jazzy ships; the 2.x field layout is read too), ROS-free like services.py: rows of
+(name, type, handler), names relative so that a namespace applies. The ROS node serves them
+where the types import; the Foxglove server always (it encodes from the .srv definitions).
+
+Every handler maps the standard request onto the same Requests handler as the YAML services
+(api/), so validation, limits and what changes are one code path; the reply's code becomes the
+standard's number for that service (Result.result), its text the error_message.
+"""
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .api import MAP_DOES_NOT_EXIST, MAP_SUCCESS, INVALID_MAP_DATA, SIMULATOR_FEATURES
+from .api.entity_queries import category_of
+from .api.file_access import confine
+from .api.payload import MAX_PAYLOAD, parse
+from .api.results import NOT_FOUND, OK, RequestError, handled
+from .physics import specs
+from .services import Service, carriable
+
+PACKAGE = "simulation_interfaces"
+# Result.result, and the numbers each service adds above 100, by the code names of api/results.py.
+FEATURE_UNSUPPORTED, RESULT_OK, RESULT_NOT_FOUND, INCORRECT_STATE, OPERATION_FAILED = 0, 1, 2, 3, 4
+COMMON = {"RESULT_FEATURE_UNSUPPORTED": 0, "RESULT_OK": 1, "RESULT_NOT_FOUND": 2, "RESULT_INCORRECT_STATE": 3,
+          "RESULT_OPERATION_FAILED": 4}
+SPAWN_CODES = {"NAME_NOT_UNIQUE": 101, "NAME_INVALID": 102, "UNSUPPORTED_FORMAT": 103, "NO_RESOURCE": 104,
+               "NAMESPACE_INVALID": 105, "RESOURCE_PARSE_ERROR": 106, "MISSING_ASSETS": 107,
+               "UNSUPPORTED_ASSETS": 108, "INVALID_POSE": 109}
+SET_STATE_CODES = {"INVALID_POSE": 101}
+SIMULATION_STATE_CODES = {"ALREADY_IN_TARGET_STATE": 101, "STATE_TRANSITION_ERROR": 102, "INCORRECT_TRANSITION": 103}
+LOAD_WORLD_CODES = {"UNSUPPORTED_FORMAT": 101, "NO_RESOURCE": 102, "RESOURCE_PARSE_ERROR": 103,
+                    "MISSING_ASSETS": 104, "UNSUPPORTED_ASSETS": 105, "UNSUPPORTED_ELEMENTS": 106}
+NO_WORLD_CODES = {"NO_WORLD_LOADED": 101}
+ENTITIES_SPAWN_FAILED = 150
+SPAWN_FORMATS = ["yaml"]  # this package's entity spec (README, "Scene files"); URDF comes with robots
+STEP_POLL = 0.002  # s between looks at the step count while step_simulation waits
+STEPS_LAPSE = 2.0  # s without progress or queued steps after which stepping has stopped
+
+
+def result(reply, codes=None):
+    """Result {result, error_message} of a handler's (success, "CODE: message") reply."""
+    _, text = reply
+    code, _, message = text.partition(": ")
+    number = {**COMMON, **(codes or {})}.get(code)
+    if number is None:  # a code this service does not define: the text keeps it
+        return {"result": OPERATION_FAILED, "error_message": carriable(text)}
+    return {"result": number, "error_message": "" if number == RESULT_OK else carriable(message)}
+
+
+def failed(code, message, codes=None):
+    return result((False, f"{code}: {message}"), codes)
+
+
+def plain_pose(pose):
+    """{position: [x y z], orientation: [x y z w]} of a geometry_msgs Pose."""
+    return {"position": [pose.position.x, pose.position.y, pose.position.z],
+            "orientation": [pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w]}
+
+
+def resource_of(request, resource="entity_resource"):
+    """(uri, resource_string) of a 1.x request (fields of its own) or a 2.x one (a Resource)."""
+    if hasattr(request, resource):
+        request = getattr(request, resource)
+    return str(request.uri), str(request.resource_string)
+
+
+def state_message(table_or_entity, frame, row=None):
+    """simulation_interfaces EntityState of an entity_table row or an entity() description."""
+    if row is None:
+        e = table_or_entity
+        position, orientation = e["pose"]["position"], e["pose"]["orientation"]
+        twist = e.get("twist", {"linear": [0.0] * 3, "angular": [0.0] * 3})
+        linear, angular, seconds = twist["linear"], twist["angular"], e["time"]
+    else:
+        t = table_or_entity
+        position, orientation, linear, angular = t.positions[row], t.quaternions[row], t.linear[row], t.angular[row]
+        seconds = t.time
+    xyz = lambda v: dict(zip("xyz", map(float, v)))  # noqa: E731
+    return {"header": {"stamp": stamp(seconds), "frame_id": frame},
+            "pose": {"position": xyz(position), "orientation": dict(zip("xyzw", map(float, orientation)))},
+            "twist": {"linear": xyz(linear), "angular": xyz(angular)}}
+
+
+def stamp(seconds):
+    nanoseconds = int(round(seconds * 1e9))
+    return {"sec": nanoseconds // 1_000_000_000, "nanosec": nanoseconds % 1_000_000_000}
+
+
+class StandardServices:
+    """The handlers, bound to a Runtime (its requests, parameters and simulation)."""
+
+    def __init__(self, runtime):
+        self.runtime = runtime
+        self.requests = runtime.requests
+
+    def table(self):
+        s = f"{PACKAGE}/srv/"
+        return [Service(name, s + kind, handler) for name, kind, handler in [
+            ("get_simulator_features", "GetSimulatorFeatures", self.features),
+            ("spawn_entity", "SpawnEntity", self.spawn_entity),
+            ("spawn_entities", "SpawnEntities", self.spawn_entities),
+            ("delete_entity", "DeleteEntity", self.delete_entity),
+            ("get_entities", "GetEntities", self.get_entities),
+            ("get_entities_states", "GetEntitiesStates", self.get_entities_states),
+            ("get_entity_state", "GetEntityState", self.get_entity_state),
+            ("set_entity_state", "SetEntityState", self.set_entity_state),
+            ("get_entity_info", "GetEntityInfo", self.get_entity_info),
+            ("get_entity_bounds", "GetEntityBounds", self.get_entity_bounds),
+            ("get_simulation_state", "GetSimulationState", self.get_simulation_state),
+            ("set_simulation_state", "SetSimulationState", self.set_simulation_state),
+            ("reset_simulation", "ResetSimulation", self.reset_simulation),
+            ("step_simulation", "StepSimulation", self.step_simulation),
+            ("load_world", "LoadWorld", self.load_world),
+            ("unload_world", "UnloadWorld", self.unload_world),
+            ("get_current_world", "GetCurrentWorld", self.get_current_world),
+            ("get_available_worlds", "GetAvailableWorlds", self.get_available_worlds),
+        ]]
+
+    # ------------------------------------------------------------------ features
+    def features(self, _request):
+        return {"features": {
+            "features": sorted(SIMULATOR_FEATURES.values()), "spawn_formats": SPAWN_FORMATS,
+            "custom_info": "vplayground_ros: resource_string and uri hold this package's YAML entity spec (spawn) "
+                           "or scene (load_world); see its README"}}
+
+    # ------------------------------------------------------------------ entities
+    def spawn_entity(self, request):
+        reply = self._spawn(request)
+        name = reply[1].partition(": ")[2] if reply[0] else ""
+        return {"result": result(reply, SPAWN_CODES), "entity_name": name}
+
+    def spawn_entities(self, request):
+        results = [self.spawn_entity(item) for item in request.spawn_requests]
+        failures = sum(r["result"]["result"] != RESULT_OK for r in results)
+        overall = ({"result": RESULT_OK, "error_message": ""} if not failures else
+                   {"result": ENTITIES_SPAWN_FAILED, "error_message": f"{failures} of {len(results)} spawn "
+                                                                      "requests failed (see results)"})
+        return {"result": overall, "results": results}
+
+    @handled
+    def _spawn(self, request):
+        """~/spawn of one entity from a SpawnEntity request: the resource (uri, a file in the
+        scene directories, or resource_string) is this package's YAML spec of a body, vehicle
+        or sensor; name, allow_renaming, entity_namespace (a vehicle's) and initial_pose (unless
+        it is the default, the origin in no frame, which leaves the spec's pose) override it."""
+        uri, text = resource_of(request)
+        if uri:
+            text = self._read_resource(uri)
+        elif not text:
+            raise RequestError("NO_RESOURCE", "both uri and resource_string are empty")
+        try:
+            spec = parse(text, "resource_string" if not uri else uri)
+        except RequestError as error:
+            raise RequestError("RESOURCE_PARSE_ERROR", str(error).partition(": ")[2]) from None
+        if not isinstance(spec, dict):
+            raise RequestError("UNSUPPORTED_FORMAT", f"the resource is {type(spec).__name__}, not this package's "
+                                                     "YAML entity spec (a mapping: shape, size, mass...; spawn_formats "
+                                                     f"{SPAWN_FORMATS})")
+        spec = dict(spec)
+        name = str(request.name)
+        if name:
+            spec["name"] = name
+        elif not spec.get("name") and not request.allow_renaming:
+            raise RequestError("NAME_INVALID", "name: empty, and the resource names no entity (allow_renaming: true "
+                                               "picks one)")
+        spec["allow_renaming"] = bool(request.allow_renaming)
+        namespace = str(request.entity_namespace)
+        if namespace:
+            if not valid_namespace(namespace):
+                raise RequestError("NAMESPACE_INVALID", f"entity_namespace: {specs.quote(namespace)} is not a ROS "
+                                                        "namespace (letters, digits, _ and /)")
+            if "wheels" not in spec and "chassis" not in spec:
+                raise RequestError("RESULT_OPERATION_FAILED", "entity_namespace: only a vehicle has interfaces to "
+                                                              "put under a namespace")
+            spec["namespace"] = namespace.strip("/")
+        pose = request.initial_pose
+        frame = str(pose.header.frame_id)
+        plain = plain_pose(pose.pose)
+        if frame or plain != {"position": [0.0, 0.0, 0.0], "orientation": [0.0, 0.0, 0.0, 1.0]}:
+            spec["initial_pose"] = {"header": {"frame_id": frame}, "pose": plain}
+        return self.requests.spawn_entities(spec)
+
+    def _read_resource(self, uri):
+        path = uri[len("file://"):] if uri.startswith("file://") else uri
+        try:
+            target = confine(path, "uri", self.requests.scene_directories)
+        except RequestError as error:
+            raise RequestError("RESULT_NOT_FOUND", str(error).partition(": ")[2]) from None
+        if not target.is_file():
+            raise RequestError("RESULT_NOT_FOUND", f"uri: no file at {specs.quote(uri)}")
+        try:
+            with open(target, "rb") as f:
+                data = f.read(MAX_PAYLOAD + 1)
+            return data.decode("utf-8")
+        except (OSError, UnicodeDecodeError) as error:
+            raise RequestError("RESOURCE_PARSE_ERROR", f"uri: cannot read {target}: {error}") from None
+
+    def delete_entity(self, request):
+        return {"result": result(self.requests.remove_entity(str(request.entity)))}
+
+    def get_entities(self, request):
+        reply = self._filtered(request.filters)
+        if isinstance(reply, dict):
+            return {"result": reply, "entities": []}
+        table, rows = reply
+        return {"result": result((True, f"{OK}: ")), "entities": [table.names[k] for k in rows]}
+
+    def get_entities_states(self, request):
+        reply = self._filtered(request.filters)
+        if isinstance(reply, dict):
+            return {"result": reply, "entities": [], "states": []}
+        table, rows = reply
+        frame = self.runtime.parameters["world_frame"]
+        return {"result": result((True, f"{OK}: ")), "entities": [table.names[k] for k in rows],
+                "states": [state_message(table, frame, k) for k in rows]}
+
+    def _filtered(self, filters):
+        try:
+            return self.requests.entities_filtered(
+                str(filters.filter), [int(c.category) for c in filters.categories], list(filters.tags.tags),
+                int(filters.bounds.type), [(p.x, p.y, p.z) for p in filters.bounds.points])
+        except RequestError as error:
+            return failed(error.code, str(error).partition(": ")[2])
+
+    def get_entity_state(self, request):
+        try:
+            entity = self.requests.entity(str(request.entity))
+        except RequestError as error:
+            return {"result": failed(error.code, str(error).partition(": ")[2])}
+        return {"result": result((True, f"{OK}: ")),
+                "state": state_message(entity, self.runtime.parameters["world_frame"])}
+
+    def set_entity_state(self, request):
+        """~/edit with the state: pose and twist in state.header.frame_id (the world when empty),
+        set_pose/set_twist choosing what is set (2.x; 1.x sets both); a non-zero acceleration
+        is refused (forces make it)."""
+        state = request.state
+        set_pose, set_twist = getattr(request, "set_pose", True), getattr(request, "set_twist", True)
+        accel = state.acceleration
+        asked = getattr(request, "set_acceleration", any(
+            (accel.linear.x, accel.linear.y, accel.linear.z, accel.angular.x, accel.angular.y, accel.angular.z)))
+        edit = {"entity": str(request.entity), "set_pose": bool(set_pose), "set_twist": bool(set_twist),
+                "set_acceleration": bool(asked),
+                "state": {"header": {"frame_id": str(state.header.frame_id)}, "pose": plain_pose(state.pose),
+                          "twist": {"linear": [state.twist.linear.x, state.twist.linear.y, state.twist.linear.z],
+                                    "angular": [state.twist.angular.x, state.twist.angular.y, state.twist.angular.z]}}}
+        return {"result": result(self.requests.edit_entity(edit), SET_STATE_CODES)}
+
+    def get_entity_info(self, request):
+        try:
+            entity = self.requests.entity(str(request.entity))
+        except RequestError as error:
+            return {"result": failed(error.code, str(error).partition(": ")[2])}
+        return {"result": result((True, f"{OK}: ")),
+                "info": {"category": {"category": category_of(entity)}, "description": entity_text(entity), "tags": []}}
+
+    def get_entity_bounds(self, request):
+        """The box around the entity in its own frame (Bounds TYPE_BOX: lower, then upper corner)."""
+        try:
+            entity = self.requests.entity(str(request.entity))
+        except RequestError as error:
+            return {"result": failed(error.code, str(error).partition(": ")[2])}
+        half = 0.5 * np.asarray(entity["bounds"]["size"], float)
+        return {"result": result((True, f"{OK}: ")),
+                "bounds": {"type": 1, "points": [dict(zip("xyz", map(float, -half))), dict(zip("xyz", map(float, half)))]}}
+
+    # ------------------------------------------------------------------ simulation
+    def get_simulation_state(self, _request):
+        return {"state": {"state": self.runtime.sim.state}, "result": result((True, f"{OK}: "))}
+
+    def set_simulation_state(self, request):
+        return {"result": result(self.requests.set_simulation_state(int(request.state.state)), SIMULATION_STATE_CODES)}
+
+    def reset_simulation(self, request):
+        return {"result": result(self.requests.reset(int(request.scope)))}
+
+    def step_simulation(self, request):
+        """~/step of `steps`, answered once they have run (the standard's service blocks)."""
+        progress = self.stepping(int(request.steps))
+        try:
+            while True:
+                next(progress)
+                time.sleep(STEP_POLL)
+        except StopIteration as end:
+            return {"result": end.value}
+
+    def stepping(self, steps):
+        """~/step of `steps`, followed: yields (completed, remaining) as they change and
+        returns the Result once they have all run (or why not: stepping refused, the world
+        reset or replaced, the run ended). Closing it early withdraws the steps not yet run
+        (SimulateSteps' cancel)."""
+        sim = self.runtime.sim
+        world = sim.world
+        start = world.step_count
+        reply = self.requests.step(steps)
+        if not reply[0]:  # the standard: RESULT_OPERATION_FAILED when not paused
+            return result(reply, {"RESULT_INCORRECT_STATE": OPERATION_FAILED})
+        done, idle_since = -1, None
+        try:
+            while True:
+                now = min(max(world.step_count - start, 0), steps)
+                if now != done:
+                    done, idle_since = now, None
+                    yield done, steps - done
+                if done >= steps:
+                    return result(reply)
+                # None queued and none coming (the batch that took the last ones ends within
+                # a second): played (the queue lapses), a failed step, or a withdrawal.
+                if not sim.pending_steps:
+                    idle_since = idle_since or time.monotonic()
+                if (sim.world is not world or sim.wait(0) or not sim.paused
+                        or (idle_since and time.monotonic() - idle_since > STEPS_LAPSE)):
+                    return failed("RESULT_OPERATION_FAILED", f"stepping stopped after {done} of {steps} steps (the "
+                                                             "world was replaced, the simulation played or ended)")
+                yield None
+        finally:
+            if done < steps:
+                remaining = steps - max(done, 0)
+                sim.submit(lambda _: sim.withdraw_steps(remaining))
+
+    # ------------------------------------------------------------------ worlds
+    def load_world(self, request):
+        """~/load_scene of a scene file (uri, in the scene directories) or of scene YAML text
+        (resource_string); the new world waits STOPPED, as the standard says."""
+        uri, text = resource_of(request, "world_resource")
+        if uri:
+            code, message = self.requests.load_scene(uri[len("file://"):] if uri.startswith("file://") else uri,
+                                                     stopped=True)
+        elif text:
+            code, message = self.requests.load_scene_text(text, stopped=True)
+        else:
+            return {"result": failed("NO_RESOURCE", "both uri and resource_string are empty", LOAD_WORLD_CODES)}
+        if code != MAP_SUCCESS:
+            name = {MAP_DOES_NOT_EXIST: "RESULT_NOT_FOUND", INVALID_MAP_DATA: "RESOURCE_PARSE_ERROR"}.get(
+                code, "RESULT_OPERATION_FAILED")
+            detail = message.partition(": ")[2]
+            if message.startswith("UNSUPPORTED_FORMAT"):
+                name = "UNSUPPORTED_FORMAT"
+            return {"result": failed(name, detail, LOAD_WORLD_CODES)}
+        self.runtime.broadcaster.scene_changed()
+        return {"result": result((True, f"{OK}: ")), "world": self._world_resource(self.requests.current_world())}
+
+    def unload_world(self, _request):
+        reply = self.requests.unload_world()
+        if reply[0]:
+            self.runtime.broadcaster.scene_changed()
+        return {"result": result(reply, NO_WORLD_CODES)}
+
+    def get_current_world(self, _request):
+        label = self.requests.current_world()
+        if label is None:
+            return {"result": failed("NO_WORLD_LOADED", "no world is loaded (unload_world)", NO_WORLD_CODES)}
+        return {"result": result((True, f"{OK}: ")), "world": self._world_resource(label)}
+
+    def get_available_worlds(self, request):
+        if list(request.filter.tags):
+            return {"result": failed("RESULT_FEATURE_UNSUPPORTED", "filter.tags: worlds have no tags here (WORLD_TAGS "
+                                                                   "is not among get_simulator_features)"), "worlds": []}
+        try:
+            found = self.requests.available_worlds([str(s) for s in request.additional_sources])
+        except RequestError as error:
+            return {"result": failed(error.code, str(error).partition(": ")[2]), "worlds": []}
+        return {"result": result((True, f"{OK}: ")),
+                "worlds": [self._world_resource(str(path), description) for path, description in found]}
+
+    @staticmethod
+    def _world_resource(label, description=""):
+        """WorldResource of a scene file (1.x: `world_resource` is a Resource in both)."""
+        name = Path(label).stem if label else "scene"
+        return {"name": name, "world_resource": {"uri": label, "resource_string": ""},
+                "description": description, "tags": []}
+
+
+def valid_namespace(namespace):
+    parts = namespace.strip("/").split("/")
+    return all(p and (p[0].isalpha() or p[0] == "_") and all(c.isalnum() or c == "_" for c in p) and p.isascii()
+               for p in parts)
+
+
+def entity_text(entity):
+    """GetEntityInfo's description: what the entity is, in a line."""
+    if entity["category"] == "sensor":
+        return f"{entity['properties']['type']} sensor on {entity['properties']['parent']}"
+    kind = {"vehicle": "vehicle", "immovable": "immovable body"}.get(entity["category"], "body")
+    return f"{entity['shape']} {kind}, {entity['mass']:g} kg"
+
+
+def standard_service_table(runtime):
+    return StandardServices(runtime).table()
