@@ -37,6 +37,12 @@ TOPICS = {
 }
 SERVICES = {"spawn", "edit", "remove", "get_entity", "save_scene", "get_entities", "pause", "set_freezing",
             "step", "reset", "wake_all", "get_simulator_features", "load_scene"}
+# simulation_interfaces' (standard_services.py), relative names: at the root here.
+STANDARD = {"get_simulator_features", "spawn_entity", "spawn_entities", "delete_entity", "get_entities",
+            "get_entities_states", "get_entity_state", "set_entity_state", "get_entity_info", "get_entity_bounds",
+            "get_simulation_state", "set_simulation_state", "reset_simulation", "step_simulation", "load_world",
+            "unload_world", "get_current_world", "get_available_worlds"}
+ADVERTISED = {f"{NS}/{name}" for name in SERVICES} | {f"/{name}" for name in STANDARD}
 ROS_MODULES = ["rclpy", "rosidl_runtime_py", "builtin_interfaces", "rcl_interfaces", "rosgraph_msgs", "std_msgs",
                "std_srvs", "geometry_msgs", "nav_msgs", "sensor_msgs", "visualization_msgs", "diagnostic_msgs",
                "tf2_msgs"]
@@ -76,7 +82,7 @@ def server():
 @pytest.fixture
 def client(server):
     c = FoxgloveClient(server[0])
-    assert c.wait(lambda: len(c.channels) >= len(TOPICS) and len(c.services) >= len(SERVICES))
+    assert c.wait(lambda: len(c.channels) >= len(TOPICS) and len(c.services) >= len(ADVERTISED))
     yield c
     c.close()
 
@@ -85,7 +91,7 @@ def test_runs_without_ros_and_advertises_every_topic_and_service(client, server)
     assert "no ROS node" in "".join(server[1])
     assert {t: c["schemaName"] for t, c in client.channels.items()} == TOPICS
     assert all(c["encoding"] == "cdr" and c["schemaEncoding"] == "ros2msg" for c in client.channels.values())
-    assert set(client.services) == {f"{NS}/{name}" for name in SERVICES}
+    assert set(client.services) == ADVERTISED
     for service in client.services.values():
         assert service["request"]["encoding"] == service["response"]["encoding"] == "cdr"
         assert service["request"]["schemaName"] == service["type"] + "_Request"
@@ -243,6 +249,23 @@ def test_service_call_spawns_a_body_that_get_entities_then_lists(client):
     missing = client.call(f"{NS}/load_scene", {"map_url": "/nonexistent/scene.yaml"})
     assert missing.result == 1  # MAP_DOES_NOT_EXIST, the old world stays
     assert "socket_crate" in [m.name for m in client.call(f"{NS}/get_entities", {}).markers]
+
+
+def test_the_standard_services_are_offered_with_their_types(client):
+    """simulation_interfaces over the Foxglove WebSocket too (a viewer's Call Service panel), with
+    the same handlers: its definitions from the vendored package where it is not installed."""
+    assert client.services["/spawn_entity"]["type"] == "simulation_interfaces/srv/SpawnEntity"
+    features = client.call("/get_simulator_features", {}).features
+    assert 0 in features.features and list(features.spawn_formats) == ["yaml"]
+    spawned = client.call("/spawn_entity", {"name": "si_crate", "resource_string": "{shape: box, size: [0.4, 0.4, 0.4]}",
+                                            "initial_pose": {"pose": {"position": {"x": 3.0, "y": 6.0, "z": 2.0},
+                                                                      "orientation": {"w": 1.0}}}})
+    assert spawned.result.result == 1 and spawned.entity_name == "si_crate", spawned.result.error_message
+    state = client.call("/get_entity_state", {"entity": "si_crate"})
+    assert state.result.result == 1 and abs(state.state.pose.position.y - 6.0) < 0.1
+    assert client.call("/get_entity_state", {"entity": "nobody"}).result.result == 2  # RESULT_NOT_FOUND
+    assert "si_crate" in client.call("/get_entities", {}).entities
+    assert client.call("/delete_entity", {"entity": "si_crate"}).result.result == 1
 
 
 def test_malformed_service_request_fails_cleanly(client):
@@ -429,7 +452,9 @@ def test_hostile_client_changes_nothing_and_the_server_keeps_serving(client):
                 client.publish(channel, junk)
                 tried += 1
     for name, service in client.services.items():
-        if name.endswith(("/pause", "/step", "/reset", "/wake_all", "/set_freezing", "/load_scene")):
+        if name.endswith(("/pause", "/step", "/reset", "/wake_all", "/set_freezing", "/load_scene",
+                          "/set_simulation_state", "/reset_simulation", "/step_simulation", "/load_world",
+                          "/unload_world")):
             continue  # well-formed calls of these change state by design; their bad input is tested above
         for _ in range(10):
             encoding = rng.choice([b"cdr", b"json", b"protobuf"])

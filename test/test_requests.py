@@ -563,11 +563,11 @@ def test_the_reset_scope_parameter_takes_what_reset_takes(requests):
     options = argparse.Namespace(scene="", real_time_factor=1.0, start_paused=False, duration=None, record=None,
                                  record_split_size=0, foxglove=None)
     parameters = Parameters(parameter_table(requests.sim.world.settings, options, [], 10))
-    for scope in (8, 100, 254, 0, 256):
+    for scope in (8, 100, 254, -1, 256):
         ok, reason = parameters.set({"reset_scope": scope})
         assert not ok and reason.startswith("reset_scope: ") and parameters["reset_scope"] == 255, (scope, reason)
         assert not requests.reset(scope)[0]
-    for scope in (1, 2, 3, 4, 5, 6, 7, 255):
+    for scope in (1, 2, 3, 4, 5, 6, 7, 255, 0):  # 0: simulation_interfaces' SCOPE_DEFAULT, ALL
         assert parameters.set({"reset_scope": scope}) == (True, "") and parameters["reset_scope"] == scope
         assert requests.reset(scope)[0], scope
     assert "8 is not a combination of 1 TIME, 2 STATE, 4 SPAWNED" in parameters.set({"reset_scope": 8})[1]

@@ -138,7 +138,8 @@ def test_an_explicit_python_without_rclpy_or_wheels_is_an_error(tmp_path):
 
 def test_make_builds_the_venv_with_the_chosen_python_and_remakes_it_when_the_choice_changes(tmp_path):
     repo = tmp_path / "repo"
-    for name in ("Makefile", "setup.py", "setup.cfg", "package.xml", "tools/choose_python"):
+    for name in ("Makefile", "setup.py", "setup.cfg", "package.xml", "tools/choose_python", "tools/build_interfaces.py",
+                 "interfaces/simulation_interfaces/package.xml"):
         (repo / name).parent.mkdir(parents=True, exist_ok=True)
         shutil.copy(ROOT / name, repo / name)
     bin_dir = tmp_path / "bin"
@@ -167,6 +168,8 @@ def test_make_builds_the_venv_with_the_chosen_python_and_remakes_it_when_the_cho
     assert f"executable = {python3}" in (venv / "pyvenv.cfg").read_text()
     assert '-m pip install --quiet -e .[test]' in calls()
     assert not any(".[ros]" in call for call in calls())
+    # simulation_interfaces: the distro's package is looked for, nothing is built.
+    assert "-c import simulation_interfaces" in calls() and "tools/build_interfaces.py" not in calls()
     assert (venv / ".installed").exists()
 
     made = calls()
@@ -183,3 +186,4 @@ def test_make_builds_the_venv_with_the_chosen_python_and_remakes_it_when_the_cho
     cfg = (venv / "pyvenv.cfg").read_text()
     assert f"executable = {python311}" in cfg and "include-system-site-packages = false" in cfg
     assert "-m pip install --quiet -e .[ros]" in calls()
+    assert "tools/build_interfaces.py" in calls()  # the wheels' venv builds the types

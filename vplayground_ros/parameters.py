@@ -131,7 +131,7 @@ def parameter_table(settings, options, scene_directories, max_bodies, solver_thr
         P("publish_body_frames", False, "publish world -> every body on /tf and ~/transforms (bodies that carry "
           "sensors always are)", "bool"),
         P("step_count", 1, "steps one ~/step call advances", "int", 1, 1000000),
-        P("reset_scope", SCOPE_ALL, "~/reset scope bits: 1 TIME, 2 STATE, 4 SPAWNED, 255 ALL", "int", 1, SCOPE_ALL,
+        P("reset_scope", SCOPE_ALL, "~/reset scope bits: 1 TIME, 2 STATE, 4 SPAWNED, 255 ALL (0 too)", "int", 0, SCOPE_ALL,
           rule=reset_scope),
         P("click_spawn_size", 0.5, "edge of the box a clicked_point drops, m", "float", 0.01, 100),
         P("click_spawn_height", 2.0, "height above the clicked point it drops from, m", "float", 0, 1000),

@@ -14,8 +14,10 @@ Anyone on the ROS domain can call these, so every handler:
 Where things are:
 - requests.py          Requests, the handlers' shared state (simulation, limits, settings owner)
 - entities.py          ~/spawn, ~/edit, ~/remove, ~/get_entity, ~/get_entities
-- simulation_control.py  ~/pause, ~/step, ~/reset, ~/set_freezing, ~/wake_all, features
-- scene_files.py       ~/load_scene, ~/save_scene
+- entity_queries.py    entities with categories and world bounds, their filters (simulation_interfaces)
+- simulation_control.py  ~/pause, ~/step, ~/reset, ~/set_freezing, ~/wake_all, features, the
+                       simulation states (STOPPED, NO_WORLD, QUITTING)
+- scene_files.py       ~/load_scene, ~/save_scene, and the worlds (load from text, unload, list)
 - results.py           result codes, RequestError, the coded reply of every failure
 - payload.py           request text -> plain data (size and depth limits), poses
 - frames.py            the frames the node publishes, in the world: frame_ids, reserved names
@@ -24,7 +26,7 @@ Where things are:
 - naming.py            free names for allow_renaming
 - descriptions.py      entities as plain data
 A new service is a handler in the file of its group (or a new group mixed into Requests) and
-a row in ../services.py.
+a row in ../services.py (the YAML services) or ../standard_services.py (simulation_interfaces).
 """
 from .file_access import default_scene_directories
 from .payload import MAX_PAYLOAD

@@ -64,7 +64,7 @@ def filtered(table, pattern="", categories=(), tags=(), bounds_type=BOUNDS_EMPTY
     if pattern:
         if not isinstance(pattern, str) or len(pattern) > 1000:
             raise RequestError(FAILED, "filters.filter: expected a regular expression of at most 1000 characters")
-        matched = set(match_names(pattern, table.names))
+        matched = set(match_names(pattern, table.names, what="filters.filter"))
         keep &= np.array([name in matched for name in table.names], bool)
     if len(categories):
         keep &= np.isin(table.categories, list(categories))
