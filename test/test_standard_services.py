@@ -214,7 +214,6 @@ def test_simulation_states_and_stepping(ros):
     assert "stopped_away" not in call(ros, GetEntities, "get_entities").entities
     assert ros.sim.world.step_count == 0
     assert set_state(ros, SimulationState.STATE_STOPPED).result == SetSimulationState.Response.ALREADY_IN_TARGET_STATE
-    assert set_state(ros, SimulationState.STATE_PAUSED).result == SetSimulationState.Response.INCORRECT_TRANSITION
     assert call(ros, StepSimulation, "step_simulation", steps=1).result.result == FAILED  # stopped is not paused
     assert set_state(ros, SimulationState.STATE_NO_WORLD).result == SetSimulationState.Response.INCORRECT_TRANSITION
     assert set_state(ros, 77).result == SetSimulationState.Response.INCORRECT_TRANSITION
@@ -340,3 +339,31 @@ def test_quitting_ends_the_node_cleanly_with_its_bag(ros, tmp_path):
     with open(bag, "rb") as f:
         summary = make_reader(f).get_summary()
     assert summary is not None and summary.statistics.message_count > 0
+
+
+def test_a_scenario_as_a_test_written_for_gazebo_would_run_it(ros):
+    """Load a world, pause it, spawn, step N, read the states against the analytic fall, reset,
+    load the world again: only standard calls."""
+    scene = ros.scene_directory / "drop.yaml"
+    scene.write_text("version: 1\nbodies:\n  - {name: dropper, shape: sphere, radius: 0.2, mass: 1.0, "
+                     "position: [0, 0, 10]}\n")
+    assert call(ros, LoadWorld, "load_world", uri=str(scene)).result.result == OK
+    assert set_state(ros, SimulationState.STATE_PAUSED).result == OK  # from STOPPED, without a step
+    assert spawn(ros, "probe", z=20.0, resource="{shape: sphere, radius: 0.2, mass: 3.0}").result.result == OK
+    steps, rate, g = 64, 128.0, 9.81
+    assert call(ros, StepSimulation, "step_simulation", steps=steps).result.result == OK
+    states = call(ros, GetEntitiesStates, "get_entities_states", filters=EntityFilters(filter="^(dropper|probe)$"))
+    assert states.result.result == OK and sorted(states.entities) == ["dropper", "probe"]
+    fallen = g * steps * (steps + 1) / 2 / rate ** 2  # semi-implicit Euler, exactly
+    for name, entity_state in zip(states.entities, states.states):
+        start = 10.0 if name == "dropper" else 20.0
+        assert entity_state.pose.position.z == pytest.approx(start - fallen, abs=1e-6), name
+        assert entity_state.twist.linear.z == pytest.approx(-g * steps / rate, abs=1e-6), name
+        assert entity_state.header.stamp.sec == 0 and entity_state.header.stamp.nanosec == 500_000_000
+    assert call(ros, ResetSimulation, "reset_simulation").result.result == OK
+    assert list(call(ros, GetEntities, "get_entities").entities) == ["dropper"]
+    back = call(ros, GetEntityState, "get_entity_state", entity="dropper").state
+    assert back.pose.position.z == 10.0 and back.twist.linear.z == 0.0
+    assert call(ros, LoadWorld, "load_world", uri=str(scene)).result.result == OK
+    assert state(ros) == SimulationState.STATE_STOPPED
+    play(ros)

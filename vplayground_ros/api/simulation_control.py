@@ -3,7 +3,8 @@
 
 States (simulation.py): PLAYING and PAUSED; STOPPED is paused at the loaded scene's start (a
 SetSimulationState STOPPED resets everything, LoadWorld leaves the new world there); playing or
-pausing leaves it. NO_WORLD after UnloadWorld: nothing plays, steps, spawns or resets until a
+pausing leaves it (SimulationState.msg: a stopped simulation "can also be paused", so a scenario
+loads a world, pauses and steps). NO_WORLD after UnloadWorld: nothing plays, steps, spawns or resets until a
 scene is loaded. QUITTING ends the run a moment after the reply.
 """
 import copy
@@ -100,8 +101,6 @@ class ControlRequests:
             return reply(INCORRECT_TRANSITION, f"no world is loaded: nothing can be {name} (load_world first)")
         if self.sim.state == target:
             return reply(ALREADY, f"already {name}")
-        if self.sim.state == STOPPED and target == PAUSED:  # the standard's own example of one
-            return reply(INCORRECT_TRANSITION, "a stopped simulation cannot be paused: play it first")
         if target == STOPPED:
             self._reset(self.sim.world, SCOPE_ALL)
         self.sim.paused, self.sim.stopped = target != PLAYING, target == STOPPED
