@@ -36,7 +36,8 @@ FUZZ = settings(max_examples=FUZZ_EXAMPLES, deadline=None, database=None,
                 derandomize="VPLAYGROUND_FUZZ_EXAMPLES" not in os.environ,
                 suppress_health_check=list(HealthCheck))
 CODES = ("RESULT_OK:", "RESULT_NOT_FOUND:", "RESULT_INCORRECT_STATE:", "RESULT_OPERATION_FAILED:",
-         "NAME_NOT_UNIQUE:", "NAME_INVALID:", "INVALID_POSE:", "ALREADY_IN_TARGET_STATE:")
+         "NAME_NOT_UNIQUE:", "NAME_INVALID:", "INVALID_POSE:", "ALREADY_IN_TARGET_STATE:", "MISSING_ASSETS:",
+         "UNSUPPORTED_ASSETS:", "UNSUPPORTED_ELEMENTS:")
 MAX_MESSAGE = 4000  # characters: an error names the problem, it does not echo a 1 MiB request
 TRIED = collections.Counter()     # handler -> requests tried
 ACCEPTED = collections.Counter()  # handler -> requests that (legitimately) succeeded

@@ -6,6 +6,7 @@ byte-identical to before, and the simulation still stepping. Queries change noth
 """
 import json
 import math
+import time
 from types import SimpleNamespace
 
 import pytest
@@ -164,3 +165,13 @@ def test_load_world_refuses_the_scene_corpus_and_escaping_uris(harness, standard
     else:
         request = LoadWorld.Request(resource_string=data.draw(scene_text()))
     check(harness, standard, "load_world", request)
+
+
+def test_spawn_entities_beyond_max_bodies_fail_at_once(harness, standard):
+    from simulation_interfaces.msg import SpawnEntity as Entry
+    from simulation_interfaces.srv import SpawnEntities
+
+    entries = [Entry() for _ in range(int(harness.requests.max_bodies) + 1)]
+    started = time.perf_counter()
+    code, message = check(harness, standard, "spawn_entities", SpawnEntities.Request(spawn_requests=entries))
+    assert code == 4 and "max_bodies" in message and time.perf_counter() - started < 5.0

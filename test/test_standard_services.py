@@ -103,6 +103,11 @@ def test_spawn_entity_and_its_result_codes(ros):
     assert spawn(ros, "ns_box", entity_namespace="a b").result.result == SpawnEntity.Response.NAMESPACE_INVALID
     missing = call(ros, SpawnEntity, "spawn_entity", name="from_file", uri="no_such_file.yaml")
     assert missing.result.result == NOT_FOUND
+    no_mesh = spawn(ros, "hull", resource="{shape: convex, mesh: no_such_mesh.obj}")
+    assert no_mesh.result.result == SpawnEntity.Response.MISSING_ASSETS and "no_such_mesh.obj" in no_mesh.result.error_message
+    (ros.scene_directory / "rock.gltf").write_text("{}")
+    gltf = spawn(ros, "rock", resource=f"{{shape: convex, mesh: {ros.scene_directory / 'rock.gltf'}}}")
+    assert gltf.result.result == SpawnEntity.Response.UNSUPPORTED_ASSETS, gltf.result.error_message
     names = call(ros, GetEntities, "get_entities").entities
     assert "si_box" in names and renamed.entity_name in names
     for refused in ("far", "lost", "robot", "broken", "ns_box"):
@@ -289,6 +294,13 @@ def test_worlds_load_unload_and_list(ros):
                 resource_string="version: 1\nbodies: [{shape: box, mass: -1}]").result.result == LoadWorld.Response.RESOURCE_PARSE_ERROR
     assert call(ros, LoadWorld, "load_world",
                 resource_string="<sdf version='1.9'/>").result.result == LoadWorld.Response.UNSUPPORTED_FORMAT
+    (ros.scene_directory / "yard.gltf").write_text("{}")
+    for text, code in (("version: 1\nplayground: {mesh: gone.obj}", LoadWorld.Response.MISSING_ASSETS),
+                       (f"version: 1\nplayground: {{mesh: {ros.scene_directory / 'yard.gltf'}}}",
+                        LoadWorld.Response.UNSUPPORTED_ASSETS),
+                       ("version: 1\nweather: rain", LoadWorld.Response.UNSUPPORTED_ELEMENTS)):
+        refused = call(ros, LoadWorld, "load_world", resource_string=text)
+        assert refused.result.result == code, (text, refused.result.error_message)
     assert sorted(call(ros, GetEntities, "get_entities").entities) == ["left", "right"]  # failures change nothing
     assert call(ros, UnloadWorld, "unload_world").result.result == OK
     assert state(ros) == SimulationState.STATE_NO_WORLD

@@ -50,7 +50,25 @@ log = logging.getLogger(__name__)
 
 
 class SceneError(ValueError):
-    """A scene that cannot be loaded: the message names the file, the key path and the problem."""
+    """A scene that cannot be loaded: the message names the file, the key path and the problem;
+    `code` the simulation_interfaces result of a missing or unsupported mesh or an unknown key
+    (MISSING_ASSETS, UNSUPPORTED_ASSETS, UNSUPPORTED_ELEMENTS), else None."""
+
+    def __init__(self, message, cause=None):
+        super().__init__(message)
+        self.code = next((code for kind, code in ASSET_CODES if isinstance(cause, kind)), None)
+
+
+class MissingMesh(specs.SpecError):
+    """A mesh file that is not there (or not where a request may read)."""
+
+
+class UnsupportedMesh(specs.SpecError):
+    """A mesh file of a type no reader here takes."""
+
+
+ASSET_CODES = ((MissingMesh, "MISSING_ASSETS"), (UnsupportedMesh, "UNSUPPORTED_ASSETS"),
+               (specs.UnknownKey, "UNSUPPORTED_ELEMENTS"))
 
 
 def read_capped(path, limit, what):
@@ -107,22 +125,21 @@ def resolve_mesh(name, base, directories=None, key="playground.mesh"):
         file_name = name[len(PACKAGE_MESHES):]
         shared = find_shared(f"meshes/{file_name}") if file_name and Path(file_name).name == file_name else None
         if shared is None:
-            raise specs.SpecError(key, f"mesh file {specs.quote(name)}: the package has no mesh {specs.quote(file_name)}")
+            raise MissingMesh(key, f"mesh file {specs.quote(name)}: the package has no mesh {specs.quote(file_name)}")
         return shared
     candidate = Path(name)
     tried = [candidate] if candidate.is_absolute() else [base / candidate]
     if tried[0].is_file():
         if directories is not None and not inside(tried[0], directories):
-            raise specs.SpecError(key, f"mesh file {specs.quote(name)} resolves outside the "
-                                                     "allowed directories")
+            raise MissingMesh(key, f"mesh file {specs.quote(name)} resolves outside the allowed directories")
         return tried[0]
     if not candidate.is_absolute():
         shared = find_shared(f"meshes/{name}")
         if shared is not None:
             return shared
         tried.append(Path("<package>/meshes") / name)
-    raise specs.SpecError(key, f"mesh file {specs.quote(name)} not found (looked in: "
-                                             f"{', '.join(str(p) for p in tried)})")
+    raise MissingMesh(key, f"mesh file {specs.quote(name)} not found (looked in: "
+                           f"{', '.join(str(p) for p in tried)})")
 
 
 def inside(path, directories):
@@ -154,8 +171,8 @@ def read_mesh(path, key="playground.mesh"):
     `key`, the scene key that gave the path."""
     file_type = MESH_TYPES.get(Path(path).suffix.lower())
     if file_type is None:
-        raise specs.SpecError(key, f"mesh {path}: unsupported file type (supported: "
-                                                 f"{', '.join(sorted(MESH_TYPES))})")
+        raise UnsupportedMesh(key, f"mesh {path}: unsupported file type (supported: "
+                                   f"{', '.join(sorted(MESH_TYPES))})")
     try:
         data = read_capped(Path(path), MAX_MESH_BYTES, "mesh file")
     except ValueError as error:
@@ -311,7 +328,7 @@ def load_world(path_or_dict, max_bodies=None, directories=None, frames=DEFAULT_F
         settings, ground, playground, bodies, vehicles, sensor_specs = validate_scene(
             scene, base, max_bodies, directories, frames)
     except specs.SpecError as error:
-        raise SceneError(f"{label}: {error}") from None
+        raise SceneError(f"{label}: {error}", error) from None
     world = World(settings, ground, capacity=max(64, len(bodies) + len(vehicles)))
     if playground is not None:
         spec, vertices, faces = playground

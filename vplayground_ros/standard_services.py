@@ -16,15 +16,15 @@ from .api import MAP_DOES_NOT_EXIST, MAP_SUCCESS, INVALID_MAP_DATA, SIMULATOR_FE
 from .api.entity_queries import category_of
 from .api.file_access import confine
 from .api.payload import MAX_PAYLOAD, parse
-from .api.results import NOT_FOUND, OK, RequestError, handled
+from .api.results import RequestError, handled
 from .physics import specs
 from .services import Service, carriable
 
 PACKAGE = "simulation_interfaces"
 # Result.result, and the numbers each service adds above 100, by the code names of api/results.py.
-FEATURE_UNSUPPORTED, RESULT_OK, RESULT_NOT_FOUND, INCORRECT_STATE, OPERATION_FAILED = 0, 1, 2, 3, 4
 COMMON = {"RESULT_FEATURE_UNSUPPORTED": 0, "RESULT_OK": 1, "RESULT_NOT_FOUND": 2, "RESULT_INCORRECT_STATE": 3,
           "RESULT_OPERATION_FAILED": 4}
+RESULT_OK, OPERATION_FAILED = COMMON["RESULT_OK"], COMMON["RESULT_OPERATION_FAILED"]
 SPAWN_CODES = {"NAME_NOT_UNIQUE": 101, "NAME_INVALID": 102, "UNSUPPORTED_FORMAT": 103, "NO_RESOURCE": 104,
                "NAMESPACE_INVALID": 105, "RESOURCE_PARSE_ERROR": 106, "MISSING_ASSETS": 107,
                "UNSUPPORTED_ASSETS": 108, "INVALID_POSE": 109}
@@ -49,8 +49,20 @@ def result(reply, codes=None):
     return {"result": number, "error_message": "" if number == RESULT_OK else carriable(message)}
 
 
+SUCCESS = {"result": RESULT_OK, "error_message": ""}
+
+
 def failed(code, message, codes=None):
     return result((False, f"{code}: {message}"), codes)
+
+
+def refused(error, codes=None):
+    """The Result of a RequestError."""
+    return result((False, str(error)), codes)
+
+
+def vector(values):
+    return dict(zip("xyz", map(float, values)))
 
 
 def plain_pose(pose):
@@ -77,10 +89,9 @@ def state_message(table_or_entity, frame, row=None):
         t = table_or_entity
         position, orientation, linear, angular = t.positions[row], t.quaternions[row], t.linear[row], t.angular[row]
         seconds = t.time
-    xyz = lambda v: dict(zip("xyz", map(float, v)))  # noqa: E731
     return {"header": {"stamp": stamp(seconds), "frame_id": frame},
-            "pose": {"position": xyz(position), "orientation": dict(zip("xyzw", map(float, orientation)))},
-            "twist": {"linear": xyz(linear), "angular": xyz(angular)}}
+            "pose": {"position": vector(position), "orientation": dict(zip("xyzw", map(float, orientation)))},
+            "twist": {"linear": vector(linear), "angular": vector(angular)}}
 
 
 def stamp(seconds):
@@ -132,9 +143,15 @@ class StandardServices:
         return {"result": result(reply, SPAWN_CODES), "entity_name": name}
 
     def spawn_entities(self, request):
+        """Each entry spawned on its own (the standard answers a result per entry), after a
+        count check: more entries than max_bodies fail at once."""
+        cap = int(self.requests.max_bodies)
+        if len(request.spawn_requests) > cap:
+            return {"result": failed("RESULT_OPERATION_FAILED", f"spawn_requests: {len(request.spawn_requests)} "
+                                                                f"entries, more than max_bodies ({cap})")}
         results = [self.spawn_entity(item) for item in request.spawn_requests]
         failures = sum(r["result"]["result"] != RESULT_OK for r in results)
-        overall = ({"result": RESULT_OK, "error_message": ""} if not failures else
+        overall = (SUCCESS if not failures else
                    {"result": ENTITIES_SPAWN_FAILED, "error_message": f"{failures} of {len(results)} spawn "
                                                                       "requests failed (see results)"})
         return {"result": overall, "results": results}
@@ -201,36 +218,36 @@ class StandardServices:
         return {"result": result(self.requests.remove_entity(str(request.entity)))}
 
     def get_entities(self, request):
-        reply = self._filtered(request.filters)
-        if isinstance(reply, dict):
-            return {"result": reply, "entities": []}
-        table, rows = reply
-        return {"result": result((True, f"{OK}: ")), "entities": [table.names[k] for k in rows]}
+        try:
+            table, rows = self._filtered(request.filters)
+        except RequestError as error:
+            return {"result": refused(error)}
+        return {"result": SUCCESS, "entities": [table.names[k] for k in rows]}
 
     def get_entities_states(self, request):
-        reply = self._filtered(request.filters)
-        if isinstance(reply, dict):
-            return {"result": reply, "entities": [], "states": []}
-        table, rows = reply
+        try:
+            table, rows = self._filtered(request.filters)
+        except RequestError as error:
+            return {"result": refused(error)}
         frame = self.runtime.parameters["world_frame"]
-        return {"result": result((True, f"{OK}: ")), "entities": [table.names[k] for k in rows],
+        return {"result": SUCCESS, "entities": [table.names[k] for k in rows],
                 "states": [state_message(table, frame, k) for k in rows]}
 
     def _filtered(self, filters):
-        try:
-            return self.requests.entities_filtered(
-                str(filters.filter), [int(c.category) for c in filters.categories], list(filters.tags.tags),
-                int(filters.bounds.type), [(p.x, p.y, p.z) for p in filters.bounds.points])
-        except RequestError as error:
-            return failed(error.code, str(error).partition(": ")[2])
+        return self.requests.entities_filtered(
+            str(filters.filter), [int(c.category) for c in filters.categories], list(filters.tags.tags),
+            int(filters.bounds.type), [(p.x, p.y, p.z) for p in filters.bounds.points])
 
     def get_entity_state(self, request):
+        return self._about(request, lambda e: {"state": state_message(e, self.runtime.parameters["world_frame"])})
+
+    def _about(self, request, answer):
+        """SUCCESS and answer(entity() of request.entity), or why not (RESULT_NOT_FOUND)."""
         try:
             entity = self.requests.entity(str(request.entity))
         except RequestError as error:
-            return {"result": failed(error.code, str(error).partition(": ")[2])}
-        return {"result": result((True, f"{OK}: ")),
-                "state": state_message(entity, self.runtime.parameters["world_frame"])}
+            return {"result": refused(error)}
+        return {"result": SUCCESS, **answer(entity)}
 
     def set_entity_state(self, request):
         """~/edit with the state: pose and twist in state.header.frame_id (the world when empty),
@@ -249,26 +266,19 @@ class StandardServices:
         return {"result": result(self.requests.edit_entity(edit), SET_STATE_CODES)}
 
     def get_entity_info(self, request):
-        try:
-            entity = self.requests.entity(str(request.entity))
-        except RequestError as error:
-            return {"result": failed(error.code, str(error).partition(": ")[2])}
-        return {"result": result((True, f"{OK}: ")),
-                "info": {"category": {"category": category_of(entity)}, "description": entity_text(entity), "tags": []}}
+        return self._about(request, lambda e: {"info": {"category": {"category": category_of(e)},
+                                                        "description": entity_text(e), "tags": []}})
 
     def get_entity_bounds(self, request):
         """The box around the entity in its own frame (Bounds TYPE_BOX: lower, then upper corner)."""
-        try:
-            entity = self.requests.entity(str(request.entity))
-        except RequestError as error:
-            return {"result": failed(error.code, str(error).partition(": ")[2])}
-        half = 0.5 * np.asarray(entity["bounds"]["size"], float)
-        return {"result": result((True, f"{OK}: ")),
-                "bounds": {"type": 1, "points": [dict(zip("xyz", map(float, -half))), dict(zip("xyz", map(float, half)))]}}
+        def bounds(entity):
+            half = 0.5 * np.asarray(entity["bounds"]["size"], float)
+            return {"bounds": {"type": 1, "points": [vector(-half), vector(half)]}}  # TYPE_BOX
+        return self._about(request, bounds)
 
     # ------------------------------------------------------------------ simulation
     def get_simulation_state(self, _request):
-        return {"state": {"state": self.runtime.sim.state}, "result": result((True, f"{OK}: "))}
+        return {"state": {"state": self.runtime.sim.state}, "result": SUCCESS}
 
     def set_simulation_state(self, request):
         return {"result": result(self.requests.set_simulation_state(int(request.state.state)), SIMULATION_STATE_CODES)}
@@ -335,12 +345,12 @@ class StandardServices:
         if code != MAP_SUCCESS:
             name = {MAP_DOES_NOT_EXIST: "RESULT_NOT_FOUND", INVALID_MAP_DATA: "RESOURCE_PARSE_ERROR"}.get(
                 code, "RESULT_OPERATION_FAILED")
-            detail = message.partition(": ")[2]
-            if message.startswith("UNSUPPORTED_FORMAT"):
-                name = "UNSUPPORTED_FORMAT"
+            code, _, detail = message.partition(": ")
+            if code in LOAD_WORLD_CODES:  # a format, asset or element the scene reader refused
+                name = code
             return {"result": failed(name, detail, LOAD_WORLD_CODES)}
         self.runtime.broadcaster.scene_changed()
-        return {"result": result((True, f"{OK}: ")), "world": self._world_resource(self.requests.current_world())}
+        return {"result": SUCCESS, "world": self._world_resource(self.requests.current_world())}
 
     def unload_world(self, _request):
         reply = self.requests.unload_world()
@@ -352,7 +362,7 @@ class StandardServices:
         label = self.requests.current_world()
         if label is None:
             return {"result": failed("NO_WORLD_LOADED", "no world is loaded (unload_world)", NO_WORLD_CODES)}
-        return {"result": result((True, f"{OK}: ")), "world": self._world_resource(label)}
+        return {"result": SUCCESS, "world": self._world_resource(label)}
 
     def get_available_worlds(self, request):
         if list(request.filter.tags):
@@ -361,8 +371,8 @@ class StandardServices:
         try:
             found = self.requests.available_worlds([str(s) for s in request.additional_sources])
         except RequestError as error:
-            return {"result": failed(error.code, str(error).partition(": ")[2]), "worlds": []}
-        return {"result": result((True, f"{OK}: ")),
+            return {"result": refused(error)}
+        return {"result": SUCCESS,
                 "worlds": [self._world_resource(str(path), description) for path, description in found]}
 
     @staticmethod

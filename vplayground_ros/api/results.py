@@ -7,6 +7,7 @@ in their text.
 import functools
 
 from ..physics import specs
+from ..scene import MissingMesh, UnsupportedMesh
 
 OK = "RESULT_OK"
 NOT_FOUND = "RESULT_NOT_FOUND"
@@ -22,6 +23,8 @@ UNSUPPORTED_FORMAT = "UNSUPPORTED_FORMAT"
 RESOURCE_PARSE_ERROR = "RESOURCE_PARSE_ERROR"
 FEATURE_UNSUPPORTED = "RESULT_FEATURE_UNSUPPORTED"
 NO_WORLD_LOADED = "NO_WORLD_LOADED"
+MISSING_ASSETS = "MISSING_ASSETS"
+UNSUPPORTED_ASSETS = "UNSUPPORTED_ASSETS"
 
 # nav_msgs/srv/LoadMap result codes.
 MAP_SUCCESS, MAP_DOES_NOT_EXIST, INVALID_MAP_DATA, UNDEFINED_FAILURE = 0, 1, 2, 255
@@ -48,8 +51,7 @@ def handled(fn):
         except RequestError as error:
             return False, str(error)
         except specs.SpecError as error:
-            code = NAME_INVALID if isinstance(error, specs.InvalidName) else FAILED
-            return False, f"{code}: {error}"
+            return False, f"{spec_error_code(error)}: {error}"
         except KeyError as error:
             return False, f"{NOT_FOUND}: {error.args[0] if error.args else 'no such entity'}"
         except TimeoutError as error:
@@ -57,6 +59,18 @@ def handled(fn):
         except ValueError as error:
             return False, f"{FAILED}: {str(error)[:500]}"
     return wrapper
+
+
+def spec_error_code(error):
+    """The code of a refused value, by its type: a bad name, a mesh file missing or of a type
+    no reader takes, else FAILED."""
+    if isinstance(error, specs.InvalidName):
+        return NAME_INVALID
+    if isinstance(error, MissingMesh):
+        return MISSING_ASSETS
+    if isinstance(error, UnsupportedMesh):
+        return UNSUPPORTED_ASSETS
+    return FAILED
 
 
 def internal_error(error):

@@ -49,7 +49,7 @@ class SceneRequests:
                                directories=allowed_directories(self.scene_directories), frames=self.frames())
             initial = copy.deepcopy(world_to_scene(world))
         except SceneError as error:
-            return INVALID_MAP_DATA, f"{FAILED}: {str(error)[:1000]}"
+            return INVALID_MAP_DATA, f"{error.code or FAILED}: {str(error)[:1000]}"
 
         def install(_):
             self.sim.world = world

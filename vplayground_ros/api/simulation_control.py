@@ -15,7 +15,7 @@ import yaml
 from ..parameters import SCOPE_ALL, SCOPE_SPAWNED, SCOPE_STATE, SCOPE_TIME, reset_scope
 from ..physics import specs
 from ..scene import load_world
-from ..simulation import NO_WORLD, PAUSED, PLAYING, QUITTING, STOPPED
+from ..simulation import PAUSED, PLAYING, QUITTING, STOPPED
 from .entities import drop_sensors_of
 from .results import (ALREADY, FAILED, INCORRECT_STATE, INCORRECT_TRANSITION, OK, RequestError, handled,
                       reply)

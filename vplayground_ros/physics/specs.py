@@ -68,6 +68,11 @@ class InvalidName(SpecError):
     codes (the requests' NAME_INVALID) tell it from other bad values without reading the text."""
 
 
+class UnknownKey(SpecError):
+    """A key the schema does not have: its own type, so that a scene refused for one answers
+    simulation_interfaces' UNSUPPORTED_ELEMENTS (LoadWorld) without its text being read."""
+
+
 def child(path, key):
     if isinstance(key, int):
         return f"{path}[{key}]"
@@ -124,8 +129,8 @@ def mapping(value, path, allowed):
     for key in value:
         if key not in allowed:
             short = isinstance(key, (int, str)) and not isinstance(key, bool) and len(str(key)) <= 64
-            raise SpecError(child(path, key if short else quote(key)),
-                            f"unknown key (allowed: {', '.join(sorted(allowed))})")
+            raise UnknownKey(child(path, key if short else quote(key)),
+                             f"unknown key (allowed: {', '.join(sorted(allowed))})")
     return value
 
 
