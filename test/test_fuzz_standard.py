@@ -175,3 +175,35 @@ def test_spawn_entities_beyond_max_bodies_fail_at_once(harness, standard):
     started = time.perf_counter()
     code, message = check(harness, standard, "spawn_entities", SpawnEntities.Request(spawn_requests=entries))
     assert code == 4 and "max_bodies" in message and time.perf_counter() - started < 5.0
+
+
+def test_the_2x_field_layout_is_read_too(harness, standard):
+    """simulation_interfaces 2.x (Rolling) moved SpawnEntity's and LoadWorld's uri and
+    resource_string into a Resource and gave SetEntityState set_pose/set_twist/set_acceleration:
+    the handlers read either layout (here 2.x-shaped requests, as its types would carry them)."""
+    def vector3(x=0.0, y=0.0, z=0.0):
+        return SimpleNamespace(x=x, y=y, z=z)
+
+    pose = SimpleNamespace(position=vector3(0.0, 9.0, 3.0), orientation=SimpleNamespace(x=0.0, y=0.0, z=0.0, w=1.0))
+    spawn = SimpleNamespace(name="rolling_box", allow_renaming=False, entity_namespace="",
+                            entity_resource=SimpleNamespace(uri="", resource_string=BOX),
+                            initial_pose=SimpleNamespace(header=SimpleNamespace(frame_id=""), pose=pose))
+    try:
+        reply = standard.spawn_entity(spawn)
+        assert reply["result"]["result"] == 1 and reply["entity_name"] == "rolling_box", reply
+        before = harness.requests.entity("rolling_box")
+        # set_pose false, set_twist true: the pose given (far away) is left, the twist is set.
+        state = SimpleNamespace(header=SimpleNamespace(frame_id=""),
+                                pose=SimpleNamespace(position=vector3(50.0, 50.0, 50.0), orientation=pose.orientation),
+                                twist=SimpleNamespace(linear=vector3(z=2.0), angular=vector3()),
+                                acceleration=SimpleNamespace(linear=vector3(), angular=vector3()))
+        edit = SimpleNamespace(entity="rolling_box", state=state, set_pose=False, set_twist=True, set_acceleration=False)
+        assert standard.set_entity_state(edit)["result"]["result"] == 1
+        after = harness.requests.entity("rolling_box")
+        assert after["pose"]["position"] == before["pose"]["position"] and after["twist"]["linear"] == [0.0, 0.0, 2.0]
+        refused = standard.set_entity_state(SimpleNamespace(**{**vars(edit), "set_acceleration": True}))
+        assert refused["result"]["result"] == 4
+        world = SimpleNamespace(world_resource=SimpleNamespace(uri="", resource_string="<sdf/>"))
+        assert standard.load_world(world)["result"]["result"] == LoadWorld.Response.UNSUPPORTED_FORMAT
+    finally:
+        harness.requests.reset(api.SCOPE_ALL)

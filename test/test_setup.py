@@ -2,10 +2,11 @@
 only in its own Python (Jazzy: 3.12), the PyPI Jazzy wheels exist only for 3.11. Run against
 stub interpreters on a PATH made here; the Makefile runs in a copy of its inputs, so its venv is
 made in tmp_path and never touches the checkout's .venv."""
-import os
 import shutil
 import subprocess
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 TOOL = ROOT / "tools" / "choose_python"
@@ -187,3 +188,13 @@ def test_make_builds_the_venv_with_the_chosen_python_and_remakes_it_when_the_cho
     assert f"executable = {python311}" in cfg and "include-system-site-packages = false" in cfg
     assert "-m pip install --quiet -e .[ros]" in calls()
     assert "tools/build_interfaces.py" in calls()  # the wheels' venv builds the types
+
+
+def test_the_wheels_venv_has_the_simulation_interfaces_types():
+    """On the PyPI wheels make builds simulation_interfaces into the venv
+    (tools/build_interfaces.py): its tests would otherwise skip, hiding a failed build."""
+    import importlib.util
+    if importlib.util.find_spec("ros_wheels_bootstrapper") is None:
+        pytest.skip("not the PyPI wheels' venv: a ROS install brings its own package")
+    assert importlib.util.find_spec("simulation_interfaces") is not None, (
+        "simulation_interfaces does not import: make's build failed (make interfaces says why)")

@@ -379,3 +379,18 @@ def test_a_scenario_as_a_test_written_for_gazebo_would_run_it(ros):
     assert call(ros, LoadWorld, "load_world", uri=str(scene)).result.result == OK
     assert state(ros) == SimulationState.STATE_STOPPED
     play(ros)
+
+
+def test_an_immovable_body_takes_a_pose_but_no_velocity(ros):
+    """SetEntityState: a non-zero twist for a static object fails with RESULT_OPERATION_FAILED."""
+    reply = spawn(ros, "pillar", z=0.25, resource="{shape: box, size: [0.5, 0.5, 0.5], immovable: true}")
+    assert reply.result.result == OK, reply.result.error_message
+    info = call(ros, GetEntityInfo, "get_entity_info", entity="pillar").info
+    assert info.category.category == EntityCategory.CATEGORY_STATIC_OBJECT
+    moved = EntityState(pose=Pose(position=Point(x=-3.0, y=5.0, z=0.25), orientation=Quaternion(w=1.0)))
+    assert call(ros, SetEntityState, "set_entity_state", entity="pillar", state=moved).result.result == OK
+    pushed = EntityState(pose=moved.pose)
+    pushed.twist.linear.x = 1.0
+    refused = call(ros, SetEntityState, "set_entity_state", entity="pillar", state=pushed)
+    assert refused.result.result == FAILED and "immovable" in refused.result.error_message
+    assert call(ros, GetEntityState, "get_entity_state", entity="pillar").state.pose.position.x == -3.0

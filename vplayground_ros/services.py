@@ -13,7 +13,9 @@ from .api.results import internal_error
 from .messages import header
 from .physics.shapes import SHAPES, solid
 
-Service = namedtuple("Service", "name type handler")
+# `aside`: the handler may take long (it waits for steps, or answers for every entity): the ROS
+# node runs it on a thread of its own so that its executor serves everything else meanwhile.
+Service = namedtuple("Service", "name type handler aside", defaults=(False,))
 
 # What each service type answers when its handler raises (a bug, never a refused request): the
 # type's own failure. GetInteractiveMarkers has none: no markers, and the log says why.

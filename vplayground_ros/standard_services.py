@@ -34,6 +34,8 @@ LOAD_WORLD_CODES = {"UNSUPPORTED_FORMAT": 101, "NO_RESOURCE": 102, "RESOURCE_PAR
                     "MISSING_ASSETS": 104, "UNSUPPORTED_ASSETS": 105, "UNSUPPORTED_ELEMENTS": 106}
 NO_WORLD_CODES = {"NO_WORLD_LOADED": 101}
 ENTITIES_SPAWN_FAILED = 150
+# What may take long: steps waited for, a message of every entity (10,000: ~0.4 s), a list of spawns.
+ASIDE = {"step_simulation", "get_entities_states", "spawn_entities"}
 SPAWN_FORMATS = ["yaml"]  # this package's entity spec (README, "Scene files"); URDF comes with robots
 STEP_POLL = 0.002  # s between looks at the step count while step_simulation waits
 STEPS_LAPSE = 2.0  # s without progress or queued steps after which stepping has stopped
@@ -108,7 +110,7 @@ class StandardServices:
 
     def table(self):
         s = f"{PACKAGE}/srv/"
-        return [Service(name, s + kind, handler) for name, kind, handler in [
+        return [Service(name, s + kind, handler, name in ASIDE) for name, kind, handler in [
             ("get_simulator_features", "GetSimulatorFeatures", self.features),
             ("spawn_entity", "SpawnEntity", self.spawn_entity),
             ("spawn_entities", "SpawnEntities", self.spawn_entities),
