@@ -382,3 +382,24 @@ def test_every_service_answers_a_handler_that_raises(sim, monkeypatch, caplog):
     logged = [r for r in caplog.records if r.exc_info and r.exc_info[0] is ZeroDivisionError]
     assert len(logged) == len(runtime.services)  # each service's once, with its traceback
     assert all(f"service {service.name}: ZeroDivisionError: a bug" in sim.faults for service in runtime.services)
+
+
+def test_the_foxglove_server_starts_without_the_standard_definitions(sim, monkeypatch, caplog):
+    """An installed package in a ROS install without simulation_interfaces (and without the
+    source checkout's vendored copy): the Foxglove server offers every other service, and says
+    which it leaves out, rather than failing to start."""
+    from vplayground_ros import interfaces
+    from vplayground_ros.foxglove_server import FoxgloveServer
+
+    monkeypatch.setattr(interfaces, "search_roots", lambda: [interfaces.OWN_DEFINITIONS])
+    for cached in (interfaces.definition, interfaces.schema):
+        cached.cache_clear()
+    try:
+        runtime = Runtime(sim, parse_args(["--no-record"]), logging.getLogger("test_faults"))
+        with caplog.at_level(logging.WARNING):
+            server = FoxgloveServer(runtime, port=0)
+        server.stop()
+    finally:
+        for cached in (interfaces.definition, interfaces.schema):
+            cached.cache_clear()
+    assert "18 services not offered, their definitions are not installed: get_simulator_features" in caplog.text

@@ -89,7 +89,7 @@ class FoxgloveServer:
                 name="vplayground", host="127.0.0.1", port=0, context=self.context,
                 capabilities=[Capability.ClientPublish, Capability.Parameters, Capability.Services, Capability.Time],
                 server_listener=self, supported_encodings=["cdr", "json"],
-                services=[self._service(s) for s in runtime.services])
+                services=self._services(runtime))
         except RuntimeError as error:  # the SDK's FoxgloveError
             raise OSError(f"the Foxglove server cannot start: {error}") from None
         try:
@@ -163,6 +163,20 @@ class FoxgloveServer:
                                                         "client_channels": len(self.client_channels)})]
 
     # ------------------------------------------------------------- services
+    def _services(self, runtime):
+        """The services whose definitions are found: simulation_interfaces' may be missing from
+        an installed package (a ROS install without it, the vendored copy not installed)."""
+        served, missing = [], []
+        for service in runtime.services:
+            try:
+                served.append(self._service(service))
+            except LookupError:
+                missing.append(service.name)
+        if missing:
+            runtime.log.warning(f"Foxglove: {len(missing)} services not offered, their definitions are not "
+                                f"installed: {', '.join(missing)}")
+        return served
+
     def _service(self, service):
         request_type, response_type = f"{service.type}_Request", f"{service.type}_Response"
 
