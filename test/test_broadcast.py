@@ -27,6 +27,7 @@ def test_marker_ids_stay_stable_and_bounded():
 # ---------------------------------------------------------------- through a running Runtime
 import logging  # noqa: E402
 import re  # noqa: E402
+import threading  # noqa: E402
 import time  # noqa: E402
 from types import SimpleNamespace  # noqa: E402
 
@@ -515,3 +516,30 @@ def test_a_newcomer_is_welcomed_while_another_keeps_subscribing(running):
         runtime.broadcaster.welcome(newcomer, "scene_markers")
     time.sleep(0.3)
     assert 1 <= len(newcomer.of("scene_markers", MARKERS)) - before <= 2
+
+
+def test_flush_ends_even_if_snapshots_keep_coming(running):
+    """Runtime.stop flushes after joining both threads; a physics thread that outlived its join
+    (5 s) still hands snapshots over: the flush sends at most what can be pending, and ends."""
+    runtime, sink = running(SCENE, "--real-time-factor", "0")
+    broadcaster = runtime.broadcaster
+    assert wait_for(lambda: len(sink.messages) > 0)
+    runtime.sim.stop()
+    runtime._stop.set()
+    runtime._thread.join(5.0)
+    item = (runtime.sim.snapshot, [], None)
+
+    class Endless(list):  # as if the physics thread refilled it at once, for ever
+        def popleft(self):
+            return item
+
+        def __bool__(self):
+            return True
+
+        def __len__(self):
+            return 1
+
+    broadcaster._pending = Endless()
+    done = threading.Event()
+    threading.Thread(target=lambda: (broadcaster.flush(), done.set()), daemon=True).start()
+    assert done.wait(10.0), "flush did not end"

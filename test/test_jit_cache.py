@@ -1,5 +1,6 @@
 """How the kernel cache is filled (physics.jit_cache.compile_once): by one process, start to end,
 and never finished by another. Behaviour with a stand-in warm-up (nothing compiles here)."""
+import os
 import shutil
 import subprocess
 import sys
@@ -142,3 +143,47 @@ def test_every_kernel_is_cached_free_of_the_gil_and_without_a_c_wrapper():
              if isinstance(kernel._cache, NullCache) or not kernel.targetoptions.get("nogil")
              or not kernel.targetoptions.get("no_cfunc_wrapper")]
     assert wrong == []
+
+
+def test_unused_caches_beside_a_new_one_are_pruned(tmp_path):
+    """Each engine edit or checkout makes a cache directory: those unused for two weeks go when
+    a new one is filled, the four most recently used stay whatever their age, and what is not a
+    cache directory is left alone."""
+    from vplayground_ros.physics import jit_cache
+
+    day, now = 86400, 1_000_000_000.0
+    ages = {"a" * 16: 1, "b" * 16: 20, "c" * 16: 30, "d" * 16: 40, "e" * 16: 50, "f" * 16: 60}
+    for name, age in ages.items():
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "kernel.nbc").write_bytes(b"x")
+        marker = tmp_path / name / COMPLETE_MARKER
+        marker.touch()
+        os.utime(marker, (now - age * day, now - age * day))
+        (tmp_path / f"{name}.lock").touch()
+    interrupted = tmp_path / ("9" * 16)  # never marked complete: its own time counts
+    interrupted.mkdir()
+    os.utime(interrupted, (now - 90 * day, now - 90 * day))
+    (tmp_path / "notes").mkdir()  # not a cache directory
+    new = tmp_path / ("0" * 16)
+    new.mkdir()
+    removed = jit_cache.prune(tmp_path, keep=new, now=now)
+    # Kept: the new one and the three most recently used others (a, b, c); d, e, f and the
+    # interrupted one were unused for more than 14 days.
+    assert sorted(removed) == sorted(["d" * 16, "e" * 16, "f" * 16, "9" * 16])
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        ["0" * 16, "a" * 16, "b" * 16, "c" * 16, "notes"] + [f"{n * 16}.lock" for n in "abc"])
+    assert jit_cache.prune(tmp_path, keep=new, now=now + 300 * day) == []  # the newest four stay, however old
+
+
+def test_a_complete_cache_is_marked_used_when_found(tmp_path, monkeypatch):
+    from vplayground_ros.physics import jit_cache
+
+    directory = tmp_path / ("1" * 16)
+    directory.mkdir()
+    marker = directory / COMPLETE_MARKER
+    marker.touch()
+    os.utime(marker, (0, 0))
+    monkeypatch.setattr(jit_cache, "cache_directory", lambda: directory)
+    monkeypatch.setattr(jit_cache, "_marked", set())
+    compile_once(lambda: pytest.fail("a complete cache is not filled again"))
+    assert time.time() - marker.stat().st_mtime < 60

@@ -529,7 +529,11 @@ class Broadcaster:
     def flush(self):
         """After both threads stopped: what is still handed over, then the last state (the
         simulation's too: stopped)."""
-        while self._pending:
+        # At most what can be pending: a physics thread that outlived its join, still handing
+        # snapshots over (or one that died draining), cannot keep this going.
+        for _ in range(PENDING_LIMIT + 1):
+            if not self._pending or self._draining:
+                break
             self.publish_next(0.0)
         snapshot, state = self.sim.snapshot, self._jobs["state"]
         if state.published is None or state.published.time != snapshot.time:

@@ -13,12 +13,20 @@ the directory was deleted (Numba issues #10128, #10486 describe the same names a
 processes). So the first World of a process whose cache is not marked complete takes a lock on
 it, clears what an interrupted process left, compiles the step and the other entry points in
 one go (`warm_up`), and marks it complete; other processes wait for the lock, then load.
+
+Every engine edit, version or checkout path makes a new directory (~15 MB): each process that
+finds its cache complete marks it used (the marker's time), and a process that has just filled
+a new one removes the directories beside it unused for KEEP_UNUSED_DAYS, always keeping the
+KEEP_NEWEST most recently used (a developer's 44 directories had grown to 661 MB).
 """
 import hashlib
 import logging
 import os
+import re
+import shutil
 import sys
 import threading
+import time
 from pathlib import Path
 
 try:
@@ -50,8 +58,11 @@ def source_keyed_directory(engine, base):
     return base / digest.hexdigest()[:16]
 
 
-# The file in a complete cache directory (compile_once wrote it after a whole warm-up).
+# The file in a complete cache directory (compile_once wrote it after a whole warm-up); its
+# modification time is when a process last found the directory complete.
 COMPLETE_MARKER = "complete"
+KEEP_NEWEST = 4          # cache directories kept whatever their age (other checkouts, versions)
+KEEP_UNUSED_DAYS = 14    # ... and the others kept while used this recently
 
 
 def cache_directory():
@@ -84,6 +95,8 @@ event.register("numba:compiler_lock", _activity)
 _compile_lock = threading.Lock()
 _warming = threading.local()
 _uncacheable = set()  # cache directories that could not be created or locked (said once)
+_marked = set()       # cache directories this process marked used
+CACHE_NAME = re.compile(r"[0-9a-f]{16}")  # source_keyed_directory's names
 _log = logging.getLogger(__name__)
 
 
@@ -93,8 +106,10 @@ def compile_once(warm_up):
     activity), empties it and runs `warm_up` (which compiles the kernels it calls), then marks
     it complete. Worlds that `warm_up` itself builds pass straight through."""
     directory = cache_directory()
-    if (getattr(_warming, "active", False) or directory in _uncacheable
-            or (directory / COMPLETE_MARKER).exists()):
+    if getattr(_warming, "active", False) or directory in _uncacheable:
+        return
+    if (directory / COMPLETE_MARKER).exists():
+        mark_used(directory)
         return
     with _compile_lock:
         _activity.on_start(None)
@@ -128,8 +143,46 @@ def compile_once(warm_up):
                 finally:
                     _warming.active = False
                 (directory / COMPLETE_MARKER).touch()
+            prune(directory.parent, keep=directory)
         finally:
             _activity.on_end(None)
+
+
+def mark_used(directory):
+    """Once a process: the marker's time says the directory is in use (prune keeps it)."""
+    if directory in _marked:
+        return
+    _marked.add(directory)
+    try:
+        os.utime(directory / COMPLETE_MARKER)
+    except OSError:  # read-only, or removed meanwhile: only pruning is less informed
+        pass
+
+
+def prune(base, keep, now=None):
+    """Removes the cache directories in `base` (other than `keep`) last used more than
+    KEEP_UNUSED_DAYS ago, beyond the KEEP_NEWEST most recently used; a directory never marked
+    complete counts from its own time (an interrupted fill). Returns the names removed."""
+    now = time.time() if now is None else now
+    entries = []
+    for entry in base.iterdir() if base.is_dir() else ():
+        if entry == keep or not entry.is_dir() or not CACHE_NAME.fullmatch(entry.name):
+            continue
+        marker = entry / COMPLETE_MARKER
+        try:
+            entries.append(((marker if marker.exists() else entry).stat().st_mtime, entry))
+        except OSError:
+            continue
+    entries.sort(reverse=True)
+    removed = []
+    for used, entry in entries[max(KEEP_NEWEST - 1, 0):]:  # `keep` is one of the newest
+        if now - used > KEEP_UNUSED_DAYS * 86400:
+            shutil.rmtree(entry, ignore_errors=True)
+            (base / f"{entry.name}.lock").unlink(missing_ok=True)
+            removed.append(entry.name)
+    if removed:
+        _log.info(f"removed {len(removed)} engine caches unused for {KEEP_UNUSED_DAYS} days from {base}")
+    return removed
 
 
 def compiler_activity():
