@@ -36,22 +36,23 @@ $(VENV)/pyvenv.cfg: FORCE
 	set -- $(VENV); if [ $$site = true ]; then set -- --system-site-packages $(VENV); fi; \
 	echo "$$exe -m venv $$*"; "$$exe" -m venv "$$@"
 
-$(STAMP): setup.py setup.cfg package.xml interfaces/simulation_interfaces/package.xml $(VENV)/pyvenv.cfg
+$(STAMP): setup.py setup.cfg package.xml interfaces/simulation_interfaces/package.xml interfaces/tf2_msgs/package.xml $(VENV)/pyvenv.cfg
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e ".[test]"
 	$(PY) -c "import rclpy" 2>/dev/null || $(PY) -m pip install --quiet -e ".[ros]"
 	@$(MAKE) --no-print-directory interfaces
 	touch $(STAMP)
 
-# The simulation_interfaces types of the standard services (README, "The standard simulation
-# services"). On the PyPI wheels, built from interfaces/ into the venv (~1.5 min, once); with a ROS
-# install sourced, the distro's package. Without them the node serves everything else.
+# The interface packages no wheel brings: simulation_interfaces (the standard services, README
+# "The standard simulation services") and tf2_msgs (/tf over ROS). On the PyPI wheels, built
+# from interfaces/ into the venv (~2 min, once); with a ROS install sourced, the distro's
+# packages. Without them the node serves and publishes everything else.
 interfaces: $(VENV)/pyvenv.cfg
 	@if grep -qx "include-system-site-packages = true" $(VENV)/pyvenv.cfg; then \
-		$(PY) -c "import simulation_interfaces" 2>/dev/null || echo "make: simulation_interfaces is not \
-	installed: apt install ros-$$ROS_DISTRO-simulation-interfaces for the standard services"; \
+		$(PY) -c "import simulation_interfaces, tf2_msgs" 2>/dev/null || echo "make: apt install \
+	ros-$$ROS_DISTRO-simulation-interfaces ros-$$ROS_DISTRO-tf2-msgs for the standard services and /tf"; \
 	else $(PY) tools/build_interfaces.py || echo "make: the node runs without the standard \
-	simulation_interfaces services"; fi
+	simulation_interfaces services or /tf over ROS"; fi
 
 # The built-in Foxglove server is on under make run (FOXGLOVE= turns it off).
 FOXGLOVE ?= --foxglove

@@ -146,6 +146,21 @@ def test_poses_and_clock_carry_sim_time(ros):
     assert 0.0 < stamp <= ros.sim.snapshot.time + 1e-6
 
 
+def test_tf_and_tf_static_go_out_over_ros(ros):
+    """/tf and /tf_static over ROS, as tf2 listeners take them (make builds tf2_msgs into the
+    wheels' venv; a ROS install has it): the car's odom -> base_footprint moving, the static
+    frames latched for a late subscriber."""
+    tf2_msgs = pytest.importorskip("tf2_msgs.msg")
+    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    ros.listen(tf2_msgs.TFMessage, "/tf_static", latched)
+    ros.listen(tf2_msgs.TFMessage, "/tf", QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+    assert wait_for(lambda: "/tf" in ros.latest and "/tf_static" in ros.latest)
+    static = {(t.header.frame_id, t.child_frame_id) for t in ros.latest["/tf_static"].transforms}
+    assert ("base_link", "laser") in static and ("camera", "camera_optical") in static, static
+    assert wait_for(lambda: any((t.header.frame_id, t.child_frame_id) == ("odom", "base_footprint")
+                                for t in ros.latest["/tf"].transforms))
+
+
 def test_pause_and_step_advance_exactly_one_step(ros):
     assert ros.call(SetBool, f"{NS}/pause", SetBool.Request(data=True)).success
     assert ros.call(SetBool, f"{NS}/pause", SetBool.Request(data=True)).message.startswith("ALREADY_IN_TARGET_STATE:")

@@ -140,7 +140,7 @@ def test_an_explicit_python_without_rclpy_or_wheels_is_an_error(tmp_path):
 def test_make_builds_the_venv_with_the_chosen_python_and_remakes_it_when_the_choice_changes(tmp_path):
     repo = tmp_path / "repo"
     for name in ("Makefile", "setup.py", "setup.cfg", "package.xml", "tools/choose_python", "tools/build_interfaces.py",
-                 "interfaces/simulation_interfaces/package.xml"):
+                 "interfaces/simulation_interfaces/package.xml", "interfaces/tf2_msgs/package.xml"):
         (repo / name).parent.mkdir(parents=True, exist_ok=True)
         shutil.copy(ROOT / name, repo / name)
     bin_dir = tmp_path / "bin"
@@ -170,7 +170,7 @@ def test_make_builds_the_venv_with_the_chosen_python_and_remakes_it_when_the_cho
     assert '-m pip install --quiet -e .[test]' in calls()
     assert not any(".[ros]" in call for call in calls())
     # simulation_interfaces: the distro's package is looked for, nothing is built.
-    assert "-c import simulation_interfaces" in calls() and "tools/build_interfaces.py" not in calls()
+    assert "-c import simulation_interfaces, tf2_msgs" in calls() and "tools/build_interfaces.py" not in calls()
     assert (venv / ".installed").exists()
 
     made = calls()
@@ -190,11 +190,12 @@ def test_make_builds_the_venv_with_the_chosen_python_and_remakes_it_when_the_cho
     assert "tools/build_interfaces.py" in calls()  # the wheels' venv builds the types
 
 
-def test_the_wheels_venv_has_the_simulation_interfaces_types():
-    """On the PyPI wheels make builds simulation_interfaces into the venv
-    (tools/build_interfaces.py): its tests would otherwise skip, hiding a failed build."""
+def test_the_wheels_venv_has_the_vendored_interface_types():
+    """On the PyPI wheels make builds simulation_interfaces and tf2_msgs into the venv
+    (tools/build_interfaces.py): their tests would otherwise skip, hiding a failed build."""
     import importlib.util
     if importlib.util.find_spec("ros_wheels_bootstrapper") is None:
         pytest.skip("not the PyPI wheels' venv: a ROS install brings its own package")
-    assert importlib.util.find_spec("simulation_interfaces") is not None, (
-        "simulation_interfaces does not import: make's build failed (make interfaces says why)")
+    for package in ("simulation_interfaces", "tf2_msgs"):
+        assert importlib.util.find_spec(package) is not None, (
+            f"{package} does not import: make's build failed (make interfaces says why)")

@@ -1,14 +1,15 @@
-"""Builds the vendored simulation_interfaces package (interfaces/, the version ROS 2 Jazzy ships)
-into this venv, for machines that run the node on the ROS 2 Jazzy wheels from PyPI: there is no
-simulation_interfaces wheel, so the standard services' types are generated here with the rosidl
+"""Builds the vendored ROS interface packages (interfaces/: simulation_interfaces and tf2_msgs,
+the versions ROS 2 Jazzy ships) into this venv, for machines that run the node on the ROS 2
+Jazzy wheels from PyPI: neither has a wheel, so their types are generated here with the rosidl
 generators and ament_cmake from PyPI, cmake and the C/C++ compilers (as colcon would in a
-workspace). Run by make after the wheels are installed; does nothing when the types of that version import.
+workspace). Run by make after the wheels are installed; a package whose vendored version
+already imports is left alone.
 
-With a ROS install sourced, install the distro's package instead:
-    apt install ros-$ROS_DISTRO-simulation-interfaces
+With a ROS install sourced, install the distro's packages instead:
+    apt install ros-$ROS_DISTRO-simulation-interfaces ros-$ROS_DISTRO-tf2-msgs
 
-Usage: python tools/build_interfaces.py [--force]
-Exit status 0 when the types import afterwards; otherwise one line says what is missing.
+Usage: python tools/build_interfaces.py [--force] [PACKAGE ...]
+Exit status 0 when every package imports afterwards; otherwise the lines say what is missing.
 """
 import importlib.metadata
 import importlib.util
@@ -22,7 +23,8 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-SOURCE = ROOT / "interfaces" / "simulation_interfaces"
+INTERFACES = ROOT / "interfaces"
+PACKAGES = ["tf2_msgs", "simulation_interfaces"]
 FIX_WHEEL_TARGETS = Path(__file__).resolve().parent / "ros_wheel_targets.cmake"
 
 # What rosidl_generate_interfaces needs beyond the rclpy wheels (the wheels' own dependencies
@@ -35,14 +37,20 @@ BUILD_REQUIREMENTS = [
 ]
 
 
-def installed_version():
-    """The simulation_interfaces version this Python imports, or None."""
-    if importlib.util.find_spec("simulation_interfaces") is None:
+def installed_version(package):
+    """The version of `package` this Python imports, "installed" for one without metadata (a
+    sourced ROS install's), or None."""
+    if importlib.util.find_spec(package) is None:
         return None
     try:
-        return importlib.metadata.version("simulation_interfaces")
-    except importlib.metadata.PackageNotFoundError:  # a sourced ROS install's: no metadata
+        return importlib.metadata.version(package)
+    except importlib.metadata.PackageNotFoundError:
         return "installed"
+
+
+def vendored_version(package):
+    text = (INTERFACES / package / "package.xml").read_text()
+    return text.split("<version>", 1)[1].split("</version>", 1)[0]
 
 
 def run(command, log, env):
@@ -55,45 +63,52 @@ def run(command, log, env):
                  f"(exit {status}); the whole log is {log}")
 
 
-def main():
-    installed = installed_version()
-    if installed in (package_version(), "installed") and "--force" not in sys.argv:
-        return
-    missing = [tool for tool in ("cmake", "cc", "c++") if shutil.which(tool) is None]
-    if missing:
-        sys.exit(f"build_interfaces: {', '.join(missing)} not found: the simulation_interfaces types "
-                 "cannot be built (apt install cmake g++); the node runs without the standard services")
-    prefix = Path(sys.prefix)
-    started = time.monotonic()
-    print(f"build_interfaces: building simulation_interfaces "
-          f"{package_version()} into {prefix} (once, ~2 minutes on 2 cores)", flush=True)
-    subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", *BUILD_REQUIREMENTS], check=True)
-    import numpy  # after the install: the generators' C code includes NumPy's headers
+def build(package, prefix, env):
+    """cmake configure, build and install of interfaces/<package> into `prefix`."""
+    import numpy  # after the requirements: the generators' C code includes NumPy's headers
     header_dirs = [sysconfig.get_paths()["include"], numpy.get_include()]
-    env = {**os.environ,
-           "PATH": f"{prefix / 'bin'}{os.pathsep}{os.environ.get('PATH', '')}",
-           "AMENT_PREFIX_PATH": str(prefix), "CMAKE_PREFIX_PATH": str(prefix),
-           # the wheels' libraries, as their bootstrapper sets it for Python
-           "LD_LIBRARY_PATH": os.pathsep.join([str(prefix / "lib"), *map(str, Path(sysconfig.get_paths()["purelib"]).glob("ros_*.libs"))]),
-           "_ROS_WHEELS_BOOTSTRAP_COMPLETE": "1"}
-    with tempfile.TemporaryDirectory(prefix="simulation_interfaces-build-") as build:
-        log = Path(tempfile.gettempdir()) / "vplayground_build_interfaces.log"
-        log.write_text("")
-        run(["cmake", "-S", SOURCE, "-B", build, f"-DCMAKE_INSTALL_PREFIX={prefix}",
+    log = Path(tempfile.gettempdir()) / f"vplayground_build_{package}.log"
+    log.write_text("")
+    with tempfile.TemporaryDirectory(prefix=f"{package}-build-") as directory:
+        run(["cmake", "-S", INTERFACES / package, "-B", directory, f"-DCMAKE_INSTALL_PREFIX={prefix}",
              f"-DPython3_EXECUTABLE={sys.executable}", "-DBUILD_TESTING=OFF", "-DCMAKE_BUILD_TYPE=Release",
              f"-DCMAKE_PROJECT_INCLUDE={FIX_WHEEL_TARGETS}", f"-DPYTHON_HEADER_DIRS={';'.join(header_dirs)}"],
             log, env)
-        run(["cmake", "--build", build, "--parallel", str(os.cpu_count() or 1)], log, env)
-        run(["cmake", "--install", build], log, env)
-    importlib.invalidate_caches()
-    if installed_version() != package_version():
-        sys.exit(f"build_interfaces: built and installed into {prefix}, yet simulation_interfaces does not import")
-    print(f"build_interfaces: done in {time.monotonic() - started:.0f} s", flush=True)
+        run(["cmake", "--build", directory, "--parallel", str(os.cpu_count() or 1)], log, env)
+        run(["cmake", "--install", directory], log, env)
 
 
-def package_version():
-    text = (SOURCE / "package.xml").read_text()
-    return text.split("<version>", 1)[1].split("</version>", 1)[0]
+def main():
+    force = "--force" in sys.argv
+    wanted = [a for a in sys.argv[1:] if not a.startswith("--")] or PACKAGES
+    unknown = set(wanted) - set(PACKAGES)
+    if unknown:
+        sys.exit(f"build_interfaces: no vendored package {', '.join(sorted(unknown))} (have: {', '.join(PACKAGES)})")
+    todo = [p for p in wanted if force or installed_version(p) not in (vendored_version(p), "installed")]
+    if not todo:
+        return
+    missing = [tool for tool in ("cmake", "cc", "c++") if shutil.which(tool) is None]
+    if missing:
+        sys.exit(f"build_interfaces: {', '.join(missing)} not found: {', '.join(todo)} cannot be built "
+                 "(apt install cmake g++); the node runs without them")
+    prefix = Path(sys.prefix)
+    print(f"build_interfaces: building {', '.join(f'{p} {vendored_version(p)}' for p in todo)} into {prefix} "
+          f"(once, ~2 minutes on 2 cores)", flush=True)
+    subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", *BUILD_REQUIREMENTS], check=True)
+    env = {**os.environ,
+           "PATH": f"{prefix / 'bin'}{os.pathsep}{os.environ.get('PATH', '')}",
+           "AMENT_PREFIX_PATH": str(prefix), "CMAKE_PREFIX_PATH": str(prefix),
+           # the wheels' libraries, as their bootstrapper sets them for Python
+           "LD_LIBRARY_PATH": os.pathsep.join([str(prefix / "lib"),
+                                               *map(str, Path(sysconfig.get_paths()["purelib"]).glob("ros_*.libs"))]),
+           "_ROS_WHEELS_BOOTSTRAP_COMPLETE": "1"}
+    for package in todo:
+        started = time.monotonic()
+        build(package, prefix, env)
+        importlib.invalidate_caches()
+        if installed_version(package) != vendored_version(package):
+            sys.exit(f"build_interfaces: {package} built and installed into {prefix}, yet it does not import")
+        print(f"build_interfaces: {package} done in {time.monotonic() - started:.0f} s", flush=True)
 
 
 if __name__ == "__main__":

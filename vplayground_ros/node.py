@@ -85,7 +85,7 @@ def plain(value):
 
 class RosSink:
     """The ROS publishers as a Broadcaster sink. /tf and /tf_static exist only where tf2_msgs
-    imports (a ROS install); everything else always."""
+    imports (a ROS install, or the wheels' venv that make built it into); everything else always."""
 
     def __init__(self, node):
         self.node = node
