@@ -266,6 +266,11 @@ def test_the_standard_services_are_offered_with_their_types(client):
     assert client.call("/get_entity_state", {"entity": "nobody"}).result.result == 2  # RESULT_NOT_FOUND
     assert "si_crate" in client.call("/get_entities", {}).entities
     assert client.call("/delete_entity", {"entity": "si_crate"}).result.result == 1
+    # A call in JSON is refused by the server (the services' schemas are CDR), before any handler.
+    service, call = client.services["/get_entities"], 4242
+    client.ws.send(struct.pack("<BIII", 2, service["id"], call, 4) + b"json" + b"{}")
+    assert client.wait(lambda: call in client.responses)
+    assert client.responses.pop(call) == ("failure", "Unsupported encoding")
 
 
 def test_malformed_service_request_fails_cleanly(client):

@@ -193,9 +193,6 @@ HONOURED = {
     "WORLD_UNLOADING": lambda r: r.unload_world()[0] and r.sim.state == NO_WORLD and r.current_world() is None,
     "WORLD_RESOURCE_STRING": lambda r: (r.load_scene_text(yaml.safe_dump(SCENE))[0] == MAP_SUCCESS
                                         and r.sim.world.body_names() == ["a", "b"]),
-    # ROS only (Foxglove has no actions): through rclpy in test_standard_services.py.
-    "STEP_SIMULATION_ACTION": lambda r: "def test_simulate_steps_action_feedback_result_and_cancel(" in (
-        Path(__file__).parent / "test_standard_services.py").read_text(),
 }
 
 
@@ -227,6 +224,10 @@ def test_features_are_listed_by_their_simulation_interfaces_numbers_and_honoured
     assert {names[number] for number in listed} == set(HONOURED), sorted(names[number] for number in listed)
     for name, honoured in HONOURED.items():
         assert honoured(requests), name
+    # The SimulateSteps action only where a ROS node serves it (through rclpy in
+    # test_standard_services.py): listed once the node says so.
+    requests.actions_served = True
+    assert constants["STEP_SIMULATION_ACTION"] in yaml.safe_load(requests.features()[1])["features"]
 
 
 def test_runner_steps_in_real_time_and_applies_commands_between_batches():

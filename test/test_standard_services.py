@@ -12,6 +12,7 @@ si = pytest.importorskip("simulation_interfaces")
 
 from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion, Vector3  # noqa: E402
 from rclpy.action import ActionClient  # noqa: E402
+from std_srvs.srv import SetBool, Trigger  # noqa: E402
 from simulation_interfaces.action import SimulateSteps  # noqa: E402
 from simulation_interfaces.msg import (Bounds, EntityCategory, EntityFilters, EntityState,  # noqa: E402
                                        Resource, Result, SimulationState, SimulatorFeatures, TagsFilter)
@@ -244,8 +245,7 @@ def test_simulate_steps_action_feedback_result_and_cancel(ros):
     assert feedback and feedback[-1].completed_steps == 40 and feedback[-1].remaining_steps == 0
     done = [f.completed_steps for f in feedback]
     assert done == sorted(done) and all(f.completed_steps + f.remaining_steps == 40 for f in feedback)
-    # Cancelled: the steps not yet run are withdrawn.
-    ros.sim.real_time_factor = 0.5  # (paused steps run as fast as they can: a long goal to catch)
+    # Cancelled: the steps not yet run are withdrawn, and the world stays where it stopped.
     sent = client.send_goal_async(SimulateSteps.Goal(steps=1_000_000))
     assert wait_for(sent.done)
     handle = sent.result()
@@ -256,7 +256,9 @@ def test_simulate_steps_action_feedback_result_and_cancel(ros):
     assert wait_for(outcome.done, 30)
     assert outcome.result().status == 5  # GoalStatus.STATUS_CANCELED
     assert wait_for(lambda: ros.sim.pending_steps == 0)
-    assert ros.sim.world.step_count - before < 1_000_000
+    stopped_at = ros.sim.world.step_count
+    time.sleep(0.3)
+    assert ros.sim.world.step_count == stopped_at < before + 1_000_000
     # Not paused: aborted with the standard's RESULT_OPERATION_FAILED.
     play(ros)
     sent = client.send_goal_async(SimulateSteps.Goal(steps=3))
@@ -264,7 +266,6 @@ def test_simulate_steps_action_feedback_result_and_cancel(ros):
     outcome = sent.result().get_result_async()
     assert wait_for(outcome.done, 30)
     assert outcome.result().result.result.result == FAILED
-    ros.sim.real_time_factor = 4.0
     client.destroy()
 
 
@@ -394,3 +395,46 @@ def test_an_immovable_body_takes_a_pose_but_no_velocity(ros):
     refused = call(ros, SetEntityState, "set_entity_state", entity="pillar", state=pushed)
     assert refused.result.result == FAILED and "immovable" in refused.result.error_message
     assert call(ros, GetEntityState, "get_entity_state", entity="pillar").state.pose.position.x == -3.0
+
+
+def test_a_long_step_holds_nothing_else_and_counts_only_its_own_steps(ros):
+    """step_simulation answers once its own steps have run, behind those queued before it (here
+    ~/step's), and the node answers other calls meanwhile."""
+    play(ros)
+    assert set_state(ros, SimulationState.STATE_PAUSED).result == OK
+    before = ros.sim.world.step_count
+    assert ros.call(Trigger, "/vplayground/step", Trigger.Request()).success
+    queued = ros.runtime.parameters["step_count"]  # ~/step's
+    client = ros.client.create_client(StepSimulation, "/step_simulation")
+    assert client.wait_for_service(timeout_sec=10)
+    stepping = client.call_async(StepSimulation.Request(steps=4000))  # seconds of steps
+    assert wait_for(lambda: ros.sim.pending_steps > 0)
+    assert state(ros) == SimulationState.STATE_PAUSED and not stepping.done()  # answered meanwhile
+    assert wait_for(stepping.done, 60)
+    assert stepping.result().result.result == OK
+    assert ros.sim.world.step_count == before + queued + 4000
+    ros.client.destroy_client(client)
+
+
+def test_stopped_forgets_queued_steps_and_the_yaml_pause_leaves_it(ros):
+    play(ros)
+    assert set_state(ros, SimulationState.STATE_PAUSED).result == OK
+    assert ros.call(Trigger, "/vplayground/step", Trigger.Request()).success
+    assert set_state(ros, SimulationState.STATE_STOPPED).result == OK
+    time.sleep(0.3)
+    assert ros.sim.world.step_count == 0 and ros.sim.pending_steps == 0  # nothing stepped while stopped
+    assert ros.call(SetBool, "/vplayground/pause", SetBool.Request(data=True)).success  # STOPPED -> PAUSED
+    assert state(ros) == SimulationState.STATE_PAUSED
+    assert call(ros, StepSimulation, "step_simulation", steps=2).result.result == OK
+    assert ros.sim.world.step_count == 2
+    play(ros)
+
+
+def test_a_sensor_is_not_moved_by_set_entity_state(ros):
+    reply = call(ros, SpawnEntity, "spawn_entity", name="si_imu",
+                 resource_string="{type: imu, parent: world, pose: [0, 0, 0.5, 0, 0, 0]}")
+    assert reply.result.result == OK, reply.result.error_message
+    refused = call(ros, SetEntityState, "set_entity_state", entity="si_imu",
+                   state=EntityState(pose=Pose(orientation=Quaternion(w=1.0))))
+    assert refused.result.result == FAILED and "mount" in refused.result.error_message
+    assert call(ros, DeleteEntity, "delete_entity", entity="si_imu").result.result == OK

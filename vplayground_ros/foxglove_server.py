@@ -180,12 +180,8 @@ class FoxgloveServer:
     def _service(self, service):
         request_type, response_type = f"{service.type}_Request", f"{service.type}_Response"
 
-        def handle(request):
-            if request.encoding == "json":
-                message = from_json(request.payload)
-            else:
-                message = decoder(request_type)(bytes(request.payload))
-            return encode(response_type, service.handler(message))
+        def handle(request):  # CDR only: the SDK answers a call in another encoding itself
+            return encode(response_type, service.handler(decoder(request_type)(bytes(request.payload))))
         return Service(self.runtime.resolve_name(service.name), handler=handle, schema=ServiceSchema(
             service.type, request=MessageSchema(encoding="cdr", schema=ros2msg(request_type)),
             response=MessageSchema(encoding="cdr", schema=ros2msg(response_type))))

@@ -18,6 +18,7 @@ from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.task import Future
 
 from .broadcast import NODE_NAME, TOPICS
@@ -185,20 +186,28 @@ class SimulatorNode(Node):
         self._follow_robots()
         self.create_timer(ROBOT_POLL_PERIOD, self._follow_robots)
         missing = []
+        # The default group runs one callback at a time and holds it across an await: what
+        # runs aside gets a group that lets everything else through meanwhile.
+        self._aside_group = ReentrantCallbackGroup()
         for service in runtime.services:
             try:
                 kind = interface_class(service.type)
-            except ImportError:  # simulation_interfaces not installed: the YAML services stay
+            except (ImportError, AttributeError):  # simulation_interfaces not installed, or older
                 missing.append(service.name)
                 continue
-            self.create_service(kind, service.name, self._serve_aside(service.handler) if service.aside
-                                else self._serve(service.handler))
+            if service.aside:
+                self.create_service(kind, service.name, self._serve_aside(service.handler),
+                                    callback_group=self._aside_group)
+            else:
+                self.create_service(kind, service.name, self._serve(service.handler))
         if missing:
             self.get_logger().warning(
-                f"simulation_interfaces is not installed: {len(missing)} standard services are not served "
+                f"simulation_interfaces is not installed (or older than 1.5): {len(missing)} standard services "
+                f"are not served ({', '.join(missing)}) "
                 "(make builds it into the venv; in a ROS install: apt install ros-$ROS_DISTRO-simulation-interfaces)")
         else:
             self._simulate_steps = simulate_steps_action(self, runtime)
+            runtime.requests.actions_served = True
 
     def _follow_robots(self):
         """Each namespaced robot's cmd_vel, subscribed as robots come (a spawn, another scene)
@@ -295,36 +304,33 @@ def simulate_steps_action(node, runtime):
 
     standard = StandardServices(runtime)
 
-    def advance(progress):
-        """The next (completed, remaining), None after a pause, or ("end", Result)."""
-        try:
-            tick = next(progress)
-        except StopIteration as end:  # not raised through a Future: await would make it a RuntimeError
-            return "end", end.value
-        if tick is None:
-            time.sleep(ACTION_POLL)
-        return tick
-
-    async def execute(goal_handle):
+    def run_goal(goal_handle):
+        """The goal's steps followed on a thread of its own, feedback as they complete."""
         progress = standard.stepping(int(goal_handle.request.steps))
         outcome = SimulateSteps.Result()
-        while True:
-            tick = await node.aside(advance, progress)
-            if tick is not None and tick[0] == "end":
-                fill(outcome.result, tick[1])
-                break
-            if goal_handle.is_cancel_requested:
-                progress.close()  # withdraws the steps not yet run
-                fill(outcome.result, {"result": 4, "error_message": "cancelled"})
-                goal_handle.canceled()
-                return outcome
-            if tick is not None:
-                goal_handle.publish_feedback(SimulateSteps.Feedback(completed_steps=tick[0], remaining_steps=tick[1]))
+        try:
+            while True:
+                tick = next(progress)
+                if goal_handle.is_cancel_requested:
+                    progress.close()  # withdraws the steps not yet run
+                    fill(outcome.result, {"result": 4, "error_message": "cancelled"})
+                    goal_handle.canceled()
+                    return outcome
+                if tick is None:
+                    time.sleep(ACTION_POLL)
+                else:
+                    goal_handle.publish_feedback(SimulateSteps.Feedback(completed_steps=tick[0],
+                                                                        remaining_steps=tick[1]))
+        except StopIteration as end:
+            fill(outcome.result, end.value)
         (goal_handle.succeed if outcome.result.result == 1 else goal_handle.abort)()
         return outcome
 
+    async def execute(goal_handle):
+        return await node.aside(run_goal, goal_handle)
+
     return ActionServer(node, SimulateSteps, "simulate_steps", execute_callback=execute,
-                        cancel_callback=lambda _goal: CancelResponse.ACCEPT)
+                        cancel_callback=lambda _goal: CancelResponse.ACCEPT, callback_group=node._aside_group)
 
 
 ACTION_POLL = 0.005  # s between looks at the steps a SimulateSteps goal has run

@@ -196,10 +196,16 @@ class Simulation:
         """While paused: advance exactly `count` steps (the ~/step service)."""
         self._pending_steps += count
 
-    def withdraw_steps(self, count):
-        """Takes back up to `count` of the steps asked for and not yet run (a cancelled
-        SimulateSteps)."""
-        self._pending_steps = max(0, self._pending_steps - count)
+    def withdraw_steps(self, target, count):
+        """Takes back the last `count` steps asked for, those that would end at step `target`,
+        if they are still the last queued and not yet run (a cancelled SimulateSteps); steps
+        asked for after them, by others, stay."""
+        if self.world.step_count + self._pending_steps == target:  # run between batches: none in flight
+            self._pending_steps -= min(count, self._pending_steps)
+
+    def clear_steps(self):
+        """Forgets the steps asked for (a new world, a reset to the scene's start: STOPPED)."""
+        self._pending_steps = 0
 
     @property
     def pending_steps(self):
@@ -250,13 +256,13 @@ class Simulation:
             to_publish = (self._next_due_time(world) - world.time) * rate
             if 0.0 < to_publish < steps:
                 steps = max(1, math.ceil(to_publish - 1e-6))
-            if self.paused:
-                self._pending_steps -= steps
             if steps > 0:
                 resting, second = self._resting(world), world.step_count // rate
                 started, engine_before = time.perf_counter(), world.engine_cpu_seconds
                 try:
                     world.step(steps)
+                    if self.paused:  # only now: while a batch runs its steps are still pending
+                        self._pending_steps -= steps
                 except Exception as error:  # an engine bug: keep the loop (and the node) alive
                     self.paused, self._pending_steps = True, 0  # not the same failure 100 times a second
                     self.fault("step", error)

@@ -12,7 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .api import MAP_DOES_NOT_EXIST, MAP_SUCCESS, INVALID_MAP_DATA, SIMULATOR_FEATURES
+from .api import INVALID_MAP_DATA, MAP_DOES_NOT_EXIST, MAP_SUCCESS
+from .api.simulation_control import SPAWN_FORMATS
 from .api.entity_queries import category_of
 from .api.file_access import confine
 from .api.payload import MAX_PAYLOAD, parse
@@ -36,9 +37,7 @@ NO_WORLD_CODES = {"NO_WORLD_LOADED": 101}
 ENTITIES_SPAWN_FAILED = 150
 # What may take long: steps waited for, a message of every entity (10,000: ~0.4 s), a list of spawns.
 ASIDE = {"step_simulation", "get_entities_states", "spawn_entities"}
-SPAWN_FORMATS = ["yaml"]  # this package's entity spec (README, "Scene files"); URDF comes with robots
 STEP_POLL = 0.002  # s between looks at the step count while step_simulation waits
-STEPS_LAPSE = 2.0  # s without progress or queued steps after which stepping has stopped
 
 
 def result(reply, codes=None):
@@ -134,7 +133,7 @@ class StandardServices:
     # ------------------------------------------------------------------ features
     def features(self, _request):
         return {"features": {
-            "features": sorted(SIMULATOR_FEATURES.values()), "spawn_formats": SPAWN_FORMATS,
+            "features": self.requests.honoured_features(), "spawn_formats": SPAWN_FORMATS,
             "custom_info": "vplayground_ros: resource_string and uri hold this package's YAML entity spec (spawn) "
                            "or scene (load_world); see its README"}}
 
@@ -256,6 +255,13 @@ class StandardServices:
         set_pose/set_twist choosing what is set (2.x; 1.x sets both); a non-zero acceleration
         is refused (forces make it)."""
         state = request.state
+        try:
+            if self.requests.entity(str(request.entity))["category"] == "sensor":
+                return {"result": failed("RESULT_OPERATION_FAILED", f"{request.entity}: a sensor is placed by its mount "
+                                         "in its parent's frame (~/edit {entity: NAME, pose: [x, y, z, roll, pitch, "
+                                         "yaw]}); set_entity_state moves bodies and vehicles")}
+        except RequestError as error:
+            return {"result": refused(error)}
         set_pose, set_twist = getattr(request, "set_pose", True), getattr(request, "set_twist", True)
         accel = state.acceleration
         asked = getattr(request, "set_acceleration", any(
@@ -299,38 +305,36 @@ class StandardServices:
             return {"result": end.value}
 
     def stepping(self, steps):
-        """~/step of `steps`, followed: yields (completed, remaining) as they change and
-        returns the Result once they have all run (or why not: stepping refused, the world
-        reset or replaced, the run ended). Closing it early withdraws the steps not yet run
-        (SimulateSteps' cancel)."""
+        """~/step of `steps`, followed: yields (completed, remaining) as they change, None
+        between looks, and returns the Result once they have run (or why not: refused, the
+        world replaced or reset to its start, the simulation played or ended). Its steps end at
+        a step count fixed when they were queued, behind any asked for before. Closing it early
+        withdraws those not yet run while they are the last queued (SimulateSteps' cancel)."""
         sim = self.runtime.sim
-        world = sim.world
-        start = world.step_count
-        reply = self.requests.step(steps)
-        if not reply[0]:  # the standard: RESULT_OPERATION_FAILED when not paused
+        reply, world, target = self.requests.step_to(steps)
+        if world is None:  # the standard: RESULT_OPERATION_FAILED when not paused
             return result(reply, {"RESULT_INCORRECT_STATE": OPERATION_FAILED})
-        done, idle_since = -1, None
+        done = -1
         try:
             while True:
-                now = min(max(world.step_count - start, 0), steps)
+                now = min(max(world.step_count - (target - steps), 0), steps)
                 if now != done:
-                    done, idle_since = now, None
+                    done = now
                     yield done, steps - done
                 if done >= steps:
                     return result(reply)
-                # None queued and none coming (the batch that took the last ones ends within
-                # a second): played (the queue lapses), a failed step, or a withdrawal.
-                if not sim.pending_steps:
-                    idle_since = idle_since or time.monotonic()
+                # Pending steps count down only once their batch has run: none pending and the
+                # count short means they will not run (played, a failed step, a time reset).
                 if (sim.world is not world or sim.wait(0) or not sim.paused
-                        or (idle_since and time.monotonic() - idle_since > STEPS_LAPSE)):
+                        or (not sim.pending_steps and world.step_count < target)):
                     return failed("RESULT_OPERATION_FAILED", f"stepping stopped after {done} of {steps} steps (the "
-                                                             "world was replaced, the simulation played or ended)")
+                                                             "world was replaced or reset, or the simulation played "
+                                                             "or ended)")
                 yield None
         finally:
             if done < steps:
                 remaining = steps - max(done, 0)
-                sim.submit(lambda _: sim.withdraw_steps(remaining))
+                sim.submit(lambda _: sim.withdraw_steps(target, remaining))
 
     # ------------------------------------------------------------------ worlds
     def load_world(self, request):

@@ -53,6 +53,7 @@ class SceneRequests:
 
         def install(_):
             self.sim.world = world
+            self.sim.clear_steps()  # none queued for the old world run on the new one
             self.initial = initial
             self.scene_label = label
             self.sim.world_loaded = True
@@ -74,6 +75,7 @@ class SceneRequests:
             if not self.sim.world_loaded:
                 raise RequestError(NO_WORLD_LOADED, "no world is loaded")
             self.sim.world = empty
+            self.sim.clear_steps()
             self.initial = copy.deepcopy(world_to_scene(empty))
             self.scene_label = ""
             self.sim.world_loaded, self.sim.paused, self.sim.stopped = False, True, False

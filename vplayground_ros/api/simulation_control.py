@@ -52,12 +52,15 @@ SIMULATOR_FEATURES = {
     "AVAILABLE_WORLDS": 45,          # get_available_worlds: the scene files of scene_directories
     "SPAWNING_ENTITIES": 50,         # ~/spawn with a list, spawn_entities
 }
+SPAWN_FORMATS = ["yaml"]  # this package's entity spec (README, "Scene files"); URDF comes with robots
 QUIT_DELAY = 0.5  # s from SetSimulationState QUITTING's reply to the end of the run
 MAX_STEPS = 1_000_000  # steps one ~/step may queue (~2 h of simulated time at 128 Hz)
 
 
 class ControlRequests:
     """Requests' simulation-state handlers (see requests.py for the state they share)."""
+
+    actions_served = False  # a ROS node serves the SimulateSteps action (node.py sets it)
 
     @handled
     def pause(self, paused):
@@ -66,7 +69,7 @@ class ControlRequests:
 
     def _pause(self, paused):
         self._check_world("playing or pausing")
-        if self.sim.paused == paused:
+        if self.sim.paused == paused and not (paused and self.sim.stopped):
             return reply(ALREADY, "already paused" if paused else "already playing")
         self.sim.paused, self.sim.stopped = paused, False
         return reply(OK, "paused" if paused else "playing")
@@ -87,6 +90,8 @@ class ControlRequests:
             raise RequestError(INCORRECT_TRANSITION, f"state.state: {target} cannot be set (0 STOPPED, 1 PLAYING, "
                                                      "2 PAUSED, 3 QUITTING; unload_world and load_world reach 4 and 5)")
         if target == QUITTING:  # paused now, and the run ends (as Ctrl-C ends it) once the reply is out
+            if self.sim.quitting:
+                return reply(ALREADY, "already quitting")
             self.sim.call(lambda world: setattr(self.sim, "paused", True))
             self.sim.quitting = True
             threading.Timer(QUIT_DELAY, self.sim.stop).start()
@@ -108,17 +113,28 @@ class ControlRequests:
 
     @handled
     def step(self, count):
-        count = specs.integer(count, "step.steps", 1, MAX_STEPS)
-        return self.sim.call(lambda world: self._step(count))
+        return self.step_to(count)[0]
 
-    def _step(self, count):
+    def step_to(self, count):
+        """~/step, and where its steps end: (reply, the world, its step_count once they have
+        run), the last two None when refused. Steps queue in order behind those asked before."""
+        queued = {}
+
+        def queue():
+            steps = specs.integer(count, "step.steps", 1, MAX_STEPS)
+            answer, queued["world"], queued["target"] = self.sim.call(lambda world: self._step(world, steps))
+            return answer
+        return handled(queue)(), queued.get("world"), queued.get("target")
+
+    def _step(self, world, count):
         self._check_world("stepping")
         if self.sim.state != PAUSED:
-            return reply(INCORRECT_STATE, "stepping needs the simulation paused (~/pause true)")
+            return reply(INCORRECT_STATE, "stepping needs the simulation paused (~/pause true)"), None, None
         if self.sim.pending_steps + count > MAX_STEPS:
-            return reply(FAILED, f"{self.sim.pending_steps} steps are still queued; at most {MAX_STEPS} may be")
+            return (reply(FAILED, f"{self.sim.pending_steps} steps are still queued; at most {MAX_STEPS} may be"),
+                    None, None)
         self.sim.request_steps(count)
-        return reply(OK, f"stepping {count}")
+        return reply(OK, f"stepping {count}"), world, world.step_count + self.sim.pending_steps
 
     @handled
     def reset(self, scope):
@@ -132,6 +148,7 @@ class ControlRequests:
         self._check_world("a reset")
         if scope == SCOPE_ALL:
             self.sim.world = load_world(copy.deepcopy(self.initial))
+            self.sim.clear_steps()  # none queued for the old world run on the new one
             return reply(OK, "reset everything to the loaded scene")
         initial = {b["name"]: b for b in self.initial["bodies"]}
         initial.update({v["name"]: v for v in self.initial["vehicles"]})
@@ -171,7 +188,12 @@ class ControlRequests:
     def wake_all(self):
         return self.sim.call(lambda world: (world.wake_all(), reply(OK, "every body awake"))[1])
 
+    def honoured_features(self):
+        """The SIMULATOR_FEATURES numbers honoured here: the SimulateSteps action's only where
+        a ROS node serves it (`actions_served`, set by the node; Foxglove has no actions)."""
+        return sorted(number for name, number in SIMULATOR_FEATURES.items()
+                      if name != "STEP_SIMULATION_ACTION" or self.actions_served)
+
     def features(self):
-        return True, yaml.safe_dump({"features": sorted(SIMULATOR_FEATURES.values()),
-                                     "spawn_formats": ["vplayground_yaml"]},
+        return True, yaml.safe_dump({"features": self.honoured_features(), "spawn_formats": SPAWN_FORMATS},
                                     default_flow_style=True).strip()
