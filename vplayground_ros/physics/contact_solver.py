@@ -90,7 +90,7 @@ BIAS, LINEAR, ANGULAR, PUSH_LINEAR, PUSH_ANGULAR, MASS, INV_MASS = 0, 1, 4, 7, 1
 SHOCK_ROW_SIZE = 15
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
 def tangent_basis(n):
     """Two unit tangents completing n to a right-handed basis."""
     if abs(n[0]) > 0.57735:
@@ -102,7 +102,7 @@ def tangent_basis(n):
     return t1, cross(n, t1)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
 def prepare_contacts(contacts, bodies, ground_material, gravity, dt):
     """Rows (directions, lever arms, angular responses, effective masses), pair materials, the
     targets of the three passes, and the warm-start friction projected onto this step's
@@ -211,7 +211,7 @@ def prepare_contacts(contacts, bodies, ground_material, gravity, dt):
     order_supports(contacts, bodies, gravity)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
 def order_supports(contacts, bodies, gravity):
     """Finds each point's upper body (the one the other holds up against gravity; none for side
     contacts, or when the upper one does not move) and groups the support points per upper
@@ -284,7 +284,7 @@ def order_supports(contacts, bodies, gravity):
     contacts.support_count[0] = supports
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
 def solve_rows(velocity, contacts, sweeps, target, normal_impulse, friction, with_friction, position,
                gravity, threads):
     """Sequential impulses over every point, `sweeps` times. Points are visited bottom to top
@@ -372,7 +372,7 @@ def solve_span(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, point
                 velocity[b, 3 + e] += d * rows[c, 0, TURN_B + e]
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
 def solve_rows_shared(velocity, contacts, sweeps, target, normal_impulse, friction, with_friction,
                       position, gravity, points, count, threads):
     """solve_rows' sweeps over points[:count] on up to two threads, bit for bit the serial
@@ -398,7 +398,7 @@ def solve_rows_shared(velocity, contacts, sweeps, target, normal_impulse, fricti
     return True
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH, parallel=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH, parallel=True)
 def run_workers(workers, velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, target,
                 normal_impulse, friction, with_friction, items, chain_start, need_up, need_down,
                 publish_up, publish_down, sweeps, sync):
@@ -409,7 +409,7 @@ def run_workers(workers, velocity, rows, row_mass, row_inv_mass, rows_a, rows_b,
                     need_down, publish_up, publish_down, sweeps, sync)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
 def work_chains(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, target,
                 normal_impulse, friction, with_friction, items, chain_start, need_up, need_down,
                 publish_up, publish_down, sweeps, sync):
@@ -496,14 +496,14 @@ def work_chains(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, targ
                 own[c] = True
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
 def collision_pass(contacts, bodies, iterations, gravity, threads):
     solve_rows(bodies.velocity, contacts, iterations, contacts.collision_target,
                contacts.collision_impulse, contacts.collision_friction, True, bodies.position,
                gravity, threads)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
 def warm_start(contacts, bodies):
     """Applies last step's contact-pass impulses: stacks start each solve near the answer."""
     velocity, rows, row_inv_mass = bodies.velocity, contacts.rows, contacts.row_inv_mass
@@ -757,7 +757,7 @@ def reads_body(order, velocity_a, velocity_b, start, end, body):
     return False
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
 def shock_propagation_shared(contacts, bodies, threads, group_start, groups, view):
     """shock_propagation on up to two threads, bit for bit the serial result: the groups
     (support_groups) level by level (solve_schedule.shock_levels), claimed a few at a time by
@@ -783,7 +783,7 @@ def shock_propagation_shared(contacts, bodies, threads, group_start, groups, vie
     return True
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH, parallel=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH, parallel=True)
 def run_shock_workers(workers, velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
                       shock_friction, support_mass, order, velocity_a, velocity_b, support_body,
                       group_start, by_level, need, groups, sync, view):
@@ -793,7 +793,7 @@ def run_shock_workers(workers, velocity, rows, row_inv_mass, target, mu, impulse
                      group_start, by_level, need, groups, sync, view)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
 def shock_worker(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
                  shock_friction, support_mass, order, velocity_a, velocity_b, support_body,
                  group_start, by_level, need, groups, sync, view):
@@ -833,7 +833,7 @@ def shock_worker(velocity, rows, row_inv_mass, target, mu, impulse, friction, sh
                 place += 1
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
 def contact_pass(contacts, bodies, iterations, gravity, threads):
     """Velocities (zero elasticity, friction), shock propagation, then the split-impulse
     position pass on the pseudo velocities; keeps the friction as a world vector for the next

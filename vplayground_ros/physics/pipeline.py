@@ -36,7 +36,7 @@ warnings.filterwarnings("ignore", message="Code running in object mode won't all
                         category=NumbaWarning)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def clock_ns(profile):
     """This thread's CPU nanoseconds when profiling (briefly takes the GIL to read the clock),
     else 0."""
@@ -51,7 +51,7 @@ def clock_ns(profile):
 STAT_WOKEN, STAT_FROZEN, STAT_PAIRS, STAT_POINTS, STAT_TRIANGLES = 0, 1, 2, 3, 4
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def lap(profile, stage_ns, stage, since):
     """Adds the time since `since` to stage_ns[stage] when profiling; returns now. (Not handed
     the StepContext: each stage constant is a specialisation of its own, and each took 4.5 s to
@@ -62,7 +62,7 @@ def lap(profile, stage_ns, stage, since):
     return now
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def rebuild_static_index(bodies, broad, settings):
     """Indexes every resting (frozen or immovable) body. False when the index is too small."""
     ids = np.nonzero(bodies.active & ~bodies.awake)[0]
@@ -77,7 +77,7 @@ def rebuild_static_index(bodies, broad, settings):
     return True
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def list_live_bodies(bodies, broad, everyone):
     """The step's live bodies in slot order, in broad.moving_ids: the active ones outside the
     static index (every active one when `everyone`). Every awake body is among them, so the
@@ -91,7 +91,7 @@ def list_live_bodies(bodies, broad, everyone):
     return broad.moving_ids[:n]
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def static_index_outdated(bodies, broad, live):
     """Enough bodies wait for the static index (resting but outside it), or enough of its
     entries are stale. Every un-indexing counts one stale entry, so the index holds
@@ -112,7 +112,7 @@ def reindex_limit(indexed, stale):
     return max(STATIC_REINDEX_MIN_PENDING, int(STATIC_REINDEX_PENDING_FRACTION * (indexed - stale)))
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def detect(bodies, hulls, broad, playground, contacts, settings, moving_ids):
     """Broad phase then narrow phase for the current positions of the live bodies `moving_ids`
     (list_live_bodies); `hulls` is the World's hull table of convex bodies. Returns a status."""
@@ -137,7 +137,7 @@ def detect(bodies, hulls, broad, playground, contacts, settings, moving_ids):
     return DONE
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def at_rest(bodies, live, vehicles):
     """No live body is awake (those outside the static index are frozen ones waiting for it)
     and no car drives: nothing can move or touch a moving body this step."""
@@ -149,7 +149,7 @@ def at_rest(bodies, live, vehicles):
     return True
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def rest_step(bodies, broad, contacts, settings, live):
     """What the stages leave behind in a step `at_rest`: the moving index (of the frozen bodies
     not yet in the static one, which ray casts query), no pairs, no contacts (indexed, for the
