@@ -549,28 +549,28 @@ def shock_propagation(contacts, bodies, threads):
     if threads > 1 and supports >= PARALLEL_MIN_POINTS and shock_propagation_shared(
             contacts, bodies, threads, group_start, groups, view):
         return
-    velocity, rows, row_inv_mass = bodies.velocity, contacts.rows, contacts.row_inv_mass
-    target, mu = contacts.contact_target, contacts.friction_coefficient
-    impulse, friction = contacts.impulse, contacts.friction
-    shock, shock_friction = contacts.support_impulse, contacts.support_friction
-    support_mass = contacts.support_mass
-    velocity_a, velocity_b = contacts.velocity_a, contacts.velocity_b
     # Groups in order, two at a time where the second does not read the first's upper body
-    # (the first may read the second's: its velocity stays put until both are done).
+    # (the first may read the second's: its velocity stays put until both are done): the
+    # shared path's worker alone, all groups claimed at once, a pair being two places with
+    # the same `need` (one kernel holds the inlined sweeps for both paths: a shorter compile).
+    velocity_a, velocity_b = contacts.velocity_a, contacts.velocity_b
+    by_level = np.arange(groups)
+    need = np.empty(groups, np.int64)
     g = 0
     while g < groups:
-        start, end = group_start[g], group_start[g + 1]
-        upper = support_body[order[start]]
-        if g + 1 < groups and not reads_body(order, velocity_a, velocity_b, end, group_start[g + 2], upper):
-            shock_pair(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
-                       shock_friction, support_mass, order, velocity_a, velocity_b, start, end,
-                       upper, end, group_start[g + 2], support_body[order[end]], view)
+        need[g] = g
+        if g + 1 < groups and not reads_body(order, velocity_a, velocity_b, group_start[g + 1],
+                                             group_start[g + 2], support_body[order[group_start[g]]]):
+            need[g + 1] = g
             g += 2
         else:
-            shock_group(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
-                        shock_friction, support_mass, order, velocity_a, velocity_b, start, end,
-                        upper, view)
             g += 1
+    sync = np.zeros(2 * SYNC_STRIDE, np.int64)
+    shock_worker(bodies.velocity, contacts.rows, contacts.row_inv_mass, contacts.contact_target,
+                 contacts.friction_coefficient, contacts.impulse, contacts.friction,
+                 contacts.support_impulse, contacts.support_friction, contacts.support_mass, order,
+                 velocity_a, velocity_b, support_body, group_start, by_level, need, groups, sync,
+                 view, np.int64(max(groups, 1)))
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH, inline="always")
@@ -790,23 +790,23 @@ def run_shock_workers(workers, velocity, rows, row_inv_mass, target, mu, impulse
     for _ in prange(workers):
         shock_worker(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
                      shock_friction, support_mass, order, velocity_a, velocity_b, support_body,
-                     group_start, by_level, need, groups, sync, view)
+                     group_start, by_level, need, groups, sync, view, np.int64(SHOCK_CLAIM))
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
 def shock_worker(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
                  shock_friction, support_mass, order, velocity_a, velocity_b, support_body,
-                 group_start, by_level, need, groups, sync, view):
-    """One thread of the shared shock propagation: claims SHOCK_CLAIM groups at a time, in
+                 group_start, by_level, need, groups, sync, view, claim):
+    """One thread of the shared shock propagation: claims `claim` groups at a time, in
     level order, until none are left. A thread alone (the other late, or Numba running the
     region's iterations one after the other) claims and runs them all: every group it waits
     for was claimed before its own, by itself (done) or by a thread that is running."""
     claimed, done = 0, SYNC_STRIDE
     while True:
-        first = atomic_add(sync, claimed, SHOCK_CLAIM)
+        first = atomic_add(sync, claimed, claim)
         if first >= groups:
             return
-        last = min(first + SHOCK_CLAIM, groups)
+        last = min(first + claim, groups)
         place = first
         while place < last:
             spins = 0
