@@ -308,7 +308,7 @@ def find_body_pairs(moving, static, aabb_min, aabb_max, awake, static_indexed, r
     index against itself at every pair of levels, and against the static index at every pair of
     levels (static entries of bodies that have since woken are skipped). Returns the pair count,
     or -1 when pair_a/pair_b are full."""
-    count = 0
+    count = np.int64(0)  # a literal 0 compiled join_levels once more for it
     moving_levels, static_levels = moving.level_mask[0], static.level_mask[0]
     for fine in range(MAX_OCTREE_DEPTH + 1):
         for coarse in range(fine + 1):

@@ -328,7 +328,7 @@ def gjk(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, limit, si
     d = sub(pb, pa)
     if dot(d, d) < 1e-24:
         d = (1.0, 0.0, 0.0)
-    v = put_support(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, d, simplex, 4, 0)
+    v = put_support(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, d, simplex, np.int64(4), np.int64(0))
     point_a, point_b = row(simplex, 4), row(simplex, 8)  # v's points on A and B
     n = 1
     for _ in range(GJK_MAX_ITERATIONS):
@@ -336,7 +336,7 @@ def gjk(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, limit, si
         if vv < GJK_OVERLAP_DISTANCE * GJK_OVERLAP_DISTANCE:
             return OVERLAPPING, n, point_a, point_b
         w = put_support(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b,
-                        (-v[0], -v[1], -v[2]), simplex, 4, n)
+                        (-v[0], -v[1], -v[2]), simplex, np.int64(4), n)
         vw = dot(v, w)
         if vw > 0.0 and vw * vw > vv * limit * limit:
             return BEYOND, n, point_a, point_b  # w's plane separates them by more than limit
@@ -392,7 +392,7 @@ def tetrahedron_from(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot
     if n == 1:
         for d in axes:
             gap = sub(put_support(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, d,
-                                  store, EPA_MAX_VERTICES, 1), row(store, 0))
+                                  store, np.int64(EPA_MAX_VERTICES), np.int64(1)), row(store, 0))
             if dot(gap, gap) > 1e-18:
                 n = 2
                 break
@@ -403,7 +403,7 @@ def tetrahedron_from(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot
             if dot(side, side) < 1e-6 * dot(line, line):
                 continue  # d along the line
             x = put_support(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, side,
-                            store, EPA_MAX_VERTICES, 2)
+                            store, np.int64(EPA_MAX_VERTICES), np.int64(2))
             off = cross(line, sub(x, row(store, 0)))
             if dot(off, off) > 1e-18 * dot(line, line):
                 n = 3
@@ -412,7 +412,7 @@ def tetrahedron_from(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot
         normal = cross(sub(row(store, 1), row(store, 0)), sub(row(store, 2), row(store, 0)))
         for sign in (1.0, -1.0):
             x = put_support(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b,
-                            scaled(sign, normal), store, EPA_MAX_VERTICES, 3)
+                            scaled(sign, normal), store, np.int64(EPA_MAX_VERTICES), np.int64(3))
             volume = dot(normal, sub(x, row(store, 0)))
             if abs(volume) > 1e-12 * dot(normal, normal) ** 0.75:
                 n = 4
@@ -453,7 +453,7 @@ def epa(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, simplex, 
         if vertex_count == EPA_MAX_VERTICES:
             break
         x = put_support(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, normal, w,
-                        EPA_MAX_VERTICES, vertex_count)
+                        np.int64(EPA_MAX_VERTICES), vertex_count)
         if dot(x, normal) - planes[best, 3] <= EPA_TOLERANCE:
             break  # the closest face is on A - B's boundary
         # Remove the faces x sees; their boundary (edges not shared by two of them) is the

@@ -55,7 +55,8 @@ STAT_WOKEN, STAT_FROZEN, STAT_PAIRS, STAT_POINTS, STAT_TRIANGLES = 0, 1, 2, 3, 4
 def lap(profile, stage_ns, stage, since):
     """Adds the time since `since` to stage_ns[stage] when profiling; returns now. (Not handed
     the StepContext: each stage constant is a specialisation of its own, and each took 4.5 s to
-    compile for the wrapper unboxing the context's ~170 arrays.)"""
+    compile for the wrapper unboxing the context's ~170 arrays. The callers hand the stage as
+    np.int64: a bare constant is a literal type, and compiled lap once per stage.)"""
     now = clock_ns(profile)
     if profile:
         stage_ns[stage] += now - since
@@ -212,7 +213,7 @@ def step_world(steps, ctx):
         if static_index_outdated(bodies, broad, live):
             if not rebuild_static_index(bodies, broad, s):
                 return done, GROW_INDEX
-            live = list_live_bodies(bodies, broad, False)
+            live = list_live_bodies(bodies, broad, np.bool_(False))
         if at_rest(bodies, live, ctx.vehicles):
             # Every body asleep or immovable: the step is its empty result (no counters). Sleepers
             # still waiting for the static index join it now, once: nothing else will freeze
@@ -221,53 +222,53 @@ def step_world(steps, ctx):
             if len(live) > 0:
                 if not rebuild_static_index(bodies, broad, s):
                     return done, GROW_INDEX
-                live = list_live_bodies(bodies, broad, False)
+                live = list_live_bodies(bodies, broad, np.bool_(False))
             if not rest_step(bodies, broad, current, s, live):
                 return done, GROW_INDEX
-            lap(profile, stage_ns, STAGE_DERIVED, t)
+            lap(profile, stage_ns, np.int64(STAGE_DERIVED), t)
             swap_contacts(ctx.contacts)
             continue
-        t = lap(profile, stage_ns, STAGE_DERIVED, t)
+        t = lap(profile, stage_ns, np.int64(STAGE_DERIVED), t)
         # 2. Collision detection (octree broad phase, narrow phase per shape pair) at the current
         #    positions, with speculative margins covering this step's motion.
         status = detect(bodies, ctx.hulls, broad, playground, current, s, live)
         if status != DONE:
             return done, status
-        t = lap(profile, stage_ns, STAGE_DETECTION, t)
+        t = lap(profile, stage_ns, np.int64(STAGE_DETECTION), t)
         # 3. Freezing: sleepers touched by moving bodies wake, and are detected again with their
         #    own contacts so they do not sink for a step.
         woken, stale = wake_touched(current, bodies, s.freezing_linear_speed)
         if woken > 0:
-            live = list_live_bodies(bodies, broad, False)
+            live = list_live_bodies(bodies, broad, np.bool_(False))
             update_bodies(bodies, live, s.dt, s.root_size, s.octree_depth)
             broad.stale[0] += stale
             status = detect(bodies, ctx.hulls, broad, playground, current, s, live)
             if status != DONE:
                 return done, status
-        t = lap(profile, stage_ns, STAGE_WAKE, t)
+        t = lap(profile, stage_ns, np.int64(STAGE_WAKE), t)
         # 4. Collision pass with the pre-step velocities and the bodies' elasticity.
         warm_start_from(previous, current)
         prepare_contacts(current, bodies, s.ground_material, s.gravity, s.dt)
         collision_pass(current, bodies, s.resolve_iterations, s.gravity, s.solver_threads)
-        t = lap(profile, stage_ns, STAGE_COLLISION, t)
+        t = lap(profile, stage_ns, np.int64(STAGE_COLLISION), t)
         # 5. Velocity update with external forces: the cars' wheels (springs and dampers see the
         #    velocities before gravity adds its share, or dampers would hold up the cars), then
         #    gravity and pushes.
         drive_vehicles(ctx.vehicles, bodies, ctx.hulls, broad, playground, s)
         integrate_velocities(bodies, live, s.gravity, s.dt)
-        t = lap(profile, stage_ns, STAGE_FORCES, t)
+        t = lap(profile, stage_ns, np.int64(STAGE_FORCES), t)
         # 6. Contact pass: zero elasticity, twice the iterations, split-impulse penetration fix.
         warm_start(current, bodies)
         contact_pass(current, bodies, 2 * s.resolve_iterations, s.gravity, s.solver_threads)
-        t = lap(profile, stage_ns, STAGE_CONTACT, t)
+        t = lap(profile, stage_ns, np.int64(STAGE_CONTACT), t)
         # 7. Positions from velocities.
         integrate_positions(bodies, live, s.dt)
-        t = lap(profile, stage_ns, STAGE_POSITIONS, t)
+        t = lap(profile, stage_ns, np.int64(STAGE_POSITIONS), t)
         # 8. Freezing of bodies that have been at rest long enough.
         frozen_now = update_freezing(bodies, live, s.freezing_enabled, s.freezing_time,
                                      s.freezing_linear_speed, s.freezing_angular_speed, s.dt)
         index_manifolds(current)
-        lap(profile, stage_ns, STAGE_FREEZING, t)
+        lap(profile, stage_ns, np.int64(STAGE_FREEZING), t)
         stats = ctx.stats
         stats[STAT_WOKEN] += woken
         stats[STAT_FROZEN] += frozen_now
