@@ -744,7 +744,8 @@ def shock_pair(velocity, rows, row_inv_mass, target, mu, impulse, friction, shoc
         if not (running_a or running_b):
             break
     finish_group(velocity, upper_a, u_a, order, start_a, end_a, view, shock, shock_friction)
-    finish_group(velocity, upper_b, u_b, order, start_b, end_b, view, shock, shock_friction)
+    if end_b > start_b:  # B empty: A alone, as shock_group (B's body is not written)
+        finish_group(velocity, upper_b, u_b, order, start_b, end_b, view, shock, shock_friction)
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
@@ -817,20 +818,21 @@ def shock_worker(velocity, rows, row_inv_mass, target, mu, impulse, friction, sh
                     yield_thread()
             g = by_level[place]
             start, end = group_start[g], group_start[g + 1]
+            upper = support_body[order[start]]
             if place + 1 < last and need[place + 1] == need[place]:  # one level: independent
                 h = by_level[place + 1]
-                shock_pair(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
-                           shock_friction, support_mass, order, velocity_a, velocity_b, start, end,
-                           support_body[order[start]], group_start[h], group_start[h + 1],
-                           support_body[order[group_start[h]]], view)
-                atomic_add(sync, done, 2)
-                place += 2
-            else:
-                shock_group(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
-                            shock_friction, support_mass, order, velocity_a, velocity_b, start,
-                            end, support_body[order[start]], view)
-                atomic_add(sync, done, 1)
-                place += 1
+                start_b, end_b = group_start[h], group_start[h + 1]
+                upper_b = support_body[order[start_b]]
+                count = 2
+            else:  # one group: a pair with an empty second (one call site: the sweeps inlined once)
+                start_b = end_b = end
+                upper_b = upper
+                count = 1
+            shock_pair(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
+                       shock_friction, support_mass, order, velocity_a, velocity_b, start, end,
+                       upper, start_b, end_b, upper_b, view)
+            atomic_add(sync, done, count)
+            place += count
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
