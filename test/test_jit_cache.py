@@ -187,3 +187,78 @@ def test_a_complete_cache_is_marked_used_when_found(tmp_path, monkeypatch):
     monkeypatch.setattr(jit_cache, "_marked", set())
     compile_once(lambda: pytest.fail("a complete cache is not filled again"))
     assert time.time() - marker.stat().st_mtime < 60
+
+
+def test_no_python_code_calls_a_kernel_without_its_python_wrapper():
+    """A kernel compiled with no_cpython_wrapper=True (one only other kernels call: its wrapper
+    cost 7 % of the cold compile) cannot be called from Python: the call segfaults. So no Python
+    code of the package, the tests or the benchmarks names one outside a kernel: the names each
+    file imports from the engine, or reaches through an engine module it imports, are resolved
+    to the objects themselves."""
+    import ast
+    import importlib
+
+    from numba.core.registry import CPUDispatcher
+
+    root = Path(__file__).resolve().parent.parent
+    files = [p for folder in ("vplayground_ros", "test", "bench") for p in (root / folder).rglob("*.py")]
+
+    def in_kernel(function):
+        return any("jit" in ast.unparse(d) for d in function.decorator_list)
+
+    def wrapperless(value):
+        return isinstance(value, CPUDispatcher) and value.targetoptions.get("no_cpython_wrapper")
+
+    def package_of(path):
+        parts = path.relative_to(root).with_suffix("").parts
+        return ".".join(parts[:-1]) if parts[-1] != "__init__" else ".".join(parts[:-1])
+
+    wrong = []
+    for path in files:
+        tree = ast.parse(path.read_text())
+        names, modules = {}, {}  # a name -> the engine object it is; a name -> the engine module
+        engine_module = None
+        if path.is_relative_to(root / "vplayground_ros" / "physics"):
+            engine_module = importlib.import_module(".".join(path.relative_to(root).with_suffix("").parts)
+                                                    .removesuffix(".__init__"))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom):
+                module = node.module or ""
+                if node.level:
+                    base = package_of(path).split(".")
+                    base = base[:len(base) - node.level + 1]
+                    module = ".".join(base + ([module] if module else []))
+                if not module.startswith("vplayground_ros.physics"):
+                    continue
+                source = importlib.import_module(module)
+                for alias in node.names:
+                    value = getattr(source, alias.name, None)
+                    if value is None:
+                        value = importlib.import_module(f"{module}.{alias.name}")
+                    (modules if isinstance(value, type(source)) else names)[alias.asname or alias.name] = value
+            elif isinstance(node, ast.Import):
+                for alias in node.names:
+                    if alias.name.startswith("vplayground_ros.physics") and alias.asname:
+                        modules[alias.asname] = importlib.import_module(alias.name)
+
+        class Calls(ast.NodeVisitor):
+            def visit_FunctionDef(self, node):
+                if not in_kernel(node):
+                    self.generic_visit(node)
+
+            def visit_Name(self, node):
+                value = names.get(node.id, getattr(engine_module, node.id, None))
+                if wrapperless(value):
+                    wrong.append(f"{path.relative_to(root)}:{node.lineno} {node.id}")
+
+            def visit_Attribute(self, node):
+                if isinstance(node.value, ast.Name) and node.value.id in modules:
+                    if wrapperless(getattr(modules[node.value.id], node.attr, None)):
+                        wrong.append(f"{path.relative_to(root)}:{node.lineno} {node.value.id}.{node.attr}")
+                self.generic_visit(node)
+
+            def visit_ImportFrom(self, node):
+                pass  # a kernel imported by a kernel module is called by its kernels
+
+        Calls().visit(tree)
+    assert wrong == []

@@ -13,13 +13,13 @@ from .convex_contact import (PARALLEL_SINE, add_scaled, dot, scaled, set_row, su
 from .math3d import cross
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def core_axis(r):
     """A capsule's axis (its body z) in the world."""
     return (r[0][2], r[1][2], r[2][2])
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def segments_closest(ca, ua, ha, cb, ub, hb):
     """Parameters (s, t) in [-ha, ha] x [-hb, hb] of the closest points ca + s ua, cb + t ub of
     two segments given by centre, unit direction and half length (0 for a point)."""
@@ -33,13 +33,13 @@ def segments_closest(ca, ua, ha, cb, ub, hb):
     return s, t
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def put_contact(out_point, out_depth, k, surface_a, surface_b, depth):
     set_row(out_point, k, scaled(0.5, add_scaled(surface_a, 1.0, surface_b)))
     out_depth[k] = depth
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def meeting_normal(pa, ua, ha, pb, ub, hb):
     """A normal for cores that meet (no closest-point direction): square to both segments (or
     to the one segment), pointing from A's centre towards B's."""
@@ -58,7 +58,7 @@ def meeting_normal(pa, ua, ha, pb, ub, hb):
     return scaled(-1.0, normal) if dot(normal, sub(pb, pa)) < 0.0 else normal
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def round_pair(pa, ra, da, pb, rb, db, margin, out_point, out_depth):
     """Spheres and capsules (dims: radius, half length of the core; 0 for a sphere): (point
     count, normal A -> B). Two capsules lying (nearly) parallel touch along a stretch: its two
@@ -98,7 +98,7 @@ def round_pair(pa, ra, da, pb, rb, db, margin, out_point, out_depth):
     return 1, normal
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def sphere_box(c, radius, pb, rb, hb, margin, out_point, out_depth):
     """Sphere (centre, radius) and box (p, r, half extents): (point count, normal sphere ->
     box). The box's closest point to the centre gives the normal; a centre inside the box
@@ -131,7 +131,7 @@ def sphere_box(c, radius, pb, rb, hb, margin, out_point, out_depth):
     return 1, normal
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def round_ground(p, r, dims, height, margin, out_point, out_depth):
     """A sphere's lowest point, or a capsule's two ends' lowest points, within `margin` of the
     ground z = height. Returns the count (normal (0, 0, -1))."""
@@ -147,7 +147,7 @@ def round_ground(p, r, dims, height, margin, out_point, out_depth):
     return count
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def sphere_triangle(c, radius, tri, tri_normal, margin, out_point, out_depth):
     """Sphere and one-sided triangle: (point count, normal sphere -> triangle). None when the
     centre is behind the plane. The triangle's closest point gives the contact. While the

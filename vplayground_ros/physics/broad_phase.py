@@ -99,7 +99,7 @@ def cell_centres(keys, depth, root_min, root_size):
     return cells
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def spread_bits(v):
     """Inserts two zero bits after each of the low 10 bits of v (Morton interleave)."""
     v &= 0x3FF
@@ -110,12 +110,12 @@ def spread_bits(v):
     return v
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def morton(x, y, z):
     return spread_bits(x) | (spread_bits(y) << 1) | (spread_bits(z) << 2)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def object_level(aabb_min, aabb_max, root_size, depth):
     extent = max(aabb_max[0] - aabb_min[0], aabb_max[1] - aabb_min[1], aabb_max[2] - aabb_min[2])
     level = 0
@@ -126,13 +126,13 @@ def object_level(aabb_min, aabb_max, root_size, depth):
     return level
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def cell_coordinate(value, origin, cell_size, cells):
     c = int(np.floor((value - origin) / cell_size))
     return min(max(c, 0), cells - 1)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def cell_box(aabb_min, aabb_max, level, root_min, root_size):
     """Inclusive cell coordinate ranges (x0, x1, y0, y1, z0, z1) the AABB touches at `level`."""
     cells = 1 << level
@@ -145,7 +145,7 @@ def cell_box(aabb_min, aabb_max, level, root_min, root_size):
             cell_coordinate(aabb_max[2], root_min[2], size, cells))
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def build_index(index, ids, aabb_min, aabb_max, levels, root_min, root_size):
     """Indexes the objects `ids` (rows of aabb_min/aabb_max/levels). Returns False when the
     index arrays are too small (the caller grows them and calls again)."""
@@ -176,20 +176,20 @@ def build_index(index, ids, aabb_min, aabb_max, levels, root_min, root_size):
     return True
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def key_run(index, key_lo, key_hi):
     """Entries whose cell key lies in [key_lo, key_hi)."""
     keys = index.keys[:index.count[0]]
     return np.searchsorted(keys, key_lo), np.searchsorted(keys, key_hi)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def aabbs_overlap(min_a, max_a, min_b, max_b):
     return (min_a[0] <= max_b[0] and min_b[0] <= max_a[0] and min_a[1] <= max_b[1]
             and min_b[1] <= max_a[1] and min_a[2] <= max_b[2] and min_b[2] <= max_a[2])
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def cell_query_range(level, code, other_level, finer_too):
     """Key range at `other_level` that can hold objects overlapping cell (level, code): the
     ancestor cell when coarser, every descendant when finer (only asked for when `finer_too`)."""
@@ -203,7 +203,7 @@ def cell_query_range(level, code, other_level, finer_too):
     return base + (code << shift), base + ((code + 1) << shift)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def query_index(index, level, box, finer_too, stamp, query_id, out):
     """Objects of `index` in the cells `box` (from cell_box at `level`) and their ancestors (and
     descendants when `finer_too`), each once: `stamp[obj] == query_id` marks it as seen.
@@ -231,7 +231,7 @@ def query_index(index, level, box, finer_too, stamp, query_id, out):
     return n
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def level_entries(index, level):
     """Entries of `index` at `level`: keys of a level lie in [level_offset(L), level_offset(L+1))."""
     keys = index.keys[:index.count[0]]
@@ -242,7 +242,7 @@ def level_entries(index, level):
 MOVING_MOVING, MOVING_STATIC, STATIC_MOVING = 0, 1, 2
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def join_levels(fine, fine_level, coarse, coarse_level, kind, aabb_min, aabb_max, awake,
                 static_indexed, root_min, root_size, pair_a, pair_b, count):
     """Pairs between the entries of `fine` at fine_level and those of `coarse` at coarse_level
@@ -301,14 +301,14 @@ def join_levels(fine, fine_level, coarse, coarse_level, kind, aabb_min, aabb_max
     return count
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def find_body_pairs(moving, static, aabb_min, aabb_max, awake, static_indexed, root_min,
                     root_size, pair_a, pair_b):
     """Candidate body pairs whose AABBs overlap and at least one of which moves: the moving
     index against itself at every pair of levels, and against the static index at every pair of
     levels (static entries of bodies that have since woken are skipped). Returns the pair count,
     or -1 when pair_a/pair_b are full."""
-    count = 0
+    count = np.int64(0)  # a literal 0 compiled join_levels once more for it
     moving_levels, static_levels = moving.level_mask[0], static.level_mask[0]
     for fine in range(MAX_OCTREE_DEPTH + 1):
         for coarse in range(fine + 1):

@@ -76,13 +76,13 @@ def allocate_contacts(points, manifolds):
         table_slot=i(manifolds), table_count=i(1))
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def pair_key(a, b):
     """a is a body slot; b a body slot, GROUND, or a playground triangle's ids.triangle_key."""
     return a * (1 << 32) + (b + (1 << 31))
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def table_slot(key, mask):
     # Fibonacci hashing (2**64 / golden ratio, as a signed int64) spreads neighbouring keys.
     return ((key * -7046029254386353131) >> 17) & mask
@@ -108,7 +108,7 @@ def index_manifolds(contacts):
     contacts.table_count[0] = contacts.manifold_count[0]
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def find_manifold(keys, manifolds, a, b):
     """The manifold of pair (a, b) in the hash table (table_key, table_manifold), or -1. Takes
     the two arrays, not the Contacts: Numba counts references to every array of a tuple handed
@@ -123,7 +123,7 @@ def find_manifold(keys, manifolds, a, b):
     return -1
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def warm_start_from(previous, current):
     """Copies last step's contact-pass and shock-propagation impulses onto this step's points
     that are the same contact (same pair, within WARM_START_MATCH_DISTANCE in A's frame). Stacks

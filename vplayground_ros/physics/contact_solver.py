@@ -90,7 +90,7 @@ BIAS, LINEAR, ANGULAR, PUSH_LINEAR, PUSH_ANGULAR, MASS, INV_MASS = 0, 1, 4, 7, 1
 SHOCK_ROW_SIZE = 15
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
 def tangent_basis(n):
     """Two unit tangents completing n to a right-handed basis."""
     if abs(n[0]) > 0.57735:
@@ -102,7 +102,7 @@ def tangent_basis(n):
     return t1, cross(n, t1)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
 def prepare_contacts(contacts, bodies, ground_material, gravity, dt):
     """Rows (directions, lever arms, angular responses, effective masses), pair materials, the
     targets of the three passes, and the warm-start friction projected onto this step's
@@ -211,7 +211,7 @@ def prepare_contacts(contacts, bodies, ground_material, gravity, dt):
     order_supports(contacts, bodies, gravity)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
 def order_supports(contacts, bodies, gravity):
     """Finds each point's upper body (the one the other holds up against gravity; none for side
     contacts, or when the upper one does not move) and groups the support points per upper
@@ -284,7 +284,7 @@ def order_supports(contacts, bodies, gravity):
     contacts.support_count[0] = supports
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
 def solve_rows(velocity, contacts, sweeps, target, normal_impulse, friction, with_friction, position,
                gravity, threads):
     """Sequential impulses over every point, `sweeps` times. Points are visited bottom to top
@@ -372,7 +372,7 @@ def solve_span(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, point
                 velocity[b, 3 + e] += d * rows[c, 0, TURN_B + e]
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
 def solve_rows_shared(velocity, contacts, sweeps, target, normal_impulse, friction, with_friction,
                       position, gravity, points, count, threads):
     """solve_rows' sweeps over points[:count] on up to two threads, bit for bit the serial
@@ -398,7 +398,7 @@ def solve_rows_shared(velocity, contacts, sweeps, target, normal_impulse, fricti
     return True
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH, parallel=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH, parallel=True)
 def run_workers(workers, velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, target,
                 normal_impulse, friction, with_friction, items, chain_start, need_up, need_down,
                 publish_up, publish_down, sweeps, sync):
@@ -409,7 +409,7 @@ def run_workers(workers, velocity, rows, row_mass, row_inv_mass, rows_a, rows_b,
                     need_down, publish_up, publish_down, sweeps, sync)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
 def work_chains(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, target,
                 normal_impulse, friction, with_friction, items, chain_start, need_up, need_down,
                 publish_up, publish_down, sweeps, sync):
@@ -496,14 +496,14 @@ def work_chains(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, targ
                 own[c] = True
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
 def collision_pass(contacts, bodies, iterations, gravity, threads):
     solve_rows(bodies.velocity, contacts, iterations, contacts.collision_target,
                contacts.collision_impulse, contacts.collision_friction, True, bodies.position,
                gravity, threads)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
 def warm_start(contacts, bodies):
     """Applies last step's contact-pass impulses: stacks start each solve near the answer."""
     velocity, rows, row_inv_mass = bodies.velocity, contacts.rows, contacts.row_inv_mass
@@ -549,28 +549,28 @@ def shock_propagation(contacts, bodies, threads):
     if threads > 1 and supports >= PARALLEL_MIN_POINTS and shock_propagation_shared(
             contacts, bodies, threads, group_start, groups, view):
         return
-    velocity, rows, row_inv_mass = bodies.velocity, contacts.rows, contacts.row_inv_mass
-    target, mu = contacts.contact_target, contacts.friction_coefficient
-    impulse, friction = contacts.impulse, contacts.friction
-    shock, shock_friction = contacts.support_impulse, contacts.support_friction
-    support_mass = contacts.support_mass
-    velocity_a, velocity_b = contacts.velocity_a, contacts.velocity_b
     # Groups in order, two at a time where the second does not read the first's upper body
-    # (the first may read the second's: its velocity stays put until both are done).
+    # (the first may read the second's: its velocity stays put until both are done): the
+    # shared path's worker alone, all groups claimed at once, a pair being two places with
+    # the same `need` (one kernel holds the inlined sweeps for both paths: a shorter compile).
+    velocity_a, velocity_b = contacts.velocity_a, contacts.velocity_b
+    by_level = np.arange(groups)
+    need = np.empty(groups, np.int64)
     g = 0
     while g < groups:
-        start, end = group_start[g], group_start[g + 1]
-        upper = support_body[order[start]]
-        if g + 1 < groups and not reads_body(order, velocity_a, velocity_b, end, group_start[g + 2], upper):
-            shock_pair(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
-                       shock_friction, support_mass, order, velocity_a, velocity_b, start, end,
-                       upper, end, group_start[g + 2], support_body[order[end]], view)
+        need[g] = g
+        if g + 1 < groups and not reads_body(order, velocity_a, velocity_b, group_start[g + 1],
+                                             group_start[g + 2], support_body[order[group_start[g]]]):
+            need[g + 1] = g
             g += 2
         else:
-            shock_group(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
-                        shock_friction, support_mass, order, velocity_a, velocity_b, start, end,
-                        upper, view)
             g += 1
+    sync = np.zeros(2 * SYNC_STRIDE, np.int64)
+    shock_worker(bodies.velocity, contacts.rows, contacts.row_inv_mass, contacts.contact_target,
+                 contacts.friction_coefficient, contacts.impulse, contacts.friction,
+                 contacts.support_impulse, contacts.support_friction, contacts.support_mass, order,
+                 velocity_a, velocity_b, support_body, group_start, by_level, need, groups, sync,
+                 view, np.int64(max(groups, 1)))
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH, inline="always")
@@ -744,7 +744,8 @@ def shock_pair(velocity, rows, row_inv_mass, target, mu, impulse, friction, shoc
         if not (running_a or running_b):
             break
     finish_group(velocity, upper_a, u_a, order, start_a, end_a, view, shock, shock_friction)
-    finish_group(velocity, upper_b, u_b, order, start_b, end_b, view, shock, shock_friction)
+    if end_b > start_b:  # B empty: A alone, as shock_group (B's body is not written)
+        finish_group(velocity, upper_b, u_b, order, start_b, end_b, view, shock, shock_friction)
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
@@ -757,7 +758,7 @@ def reads_body(order, velocity_a, velocity_b, start, end, body):
     return False
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
 def shock_propagation_shared(contacts, bodies, threads, group_start, groups, view):
     """shock_propagation on up to two threads, bit for bit the serial result: the groups
     (support_groups) level by level (solve_schedule.shock_levels), claimed a few at a time by
@@ -783,30 +784,30 @@ def shock_propagation_shared(contacts, bodies, threads, group_start, groups, vie
     return True
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH, parallel=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH, parallel=True)
 def run_shock_workers(workers, velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
                       shock_friction, support_mass, order, velocity_a, velocity_b, support_body,
                       group_start, by_level, need, groups, sync, view):
     for _ in prange(workers):
         shock_worker(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
                      shock_friction, support_mass, order, velocity_a, velocity_b, support_body,
-                     group_start, by_level, need, groups, sync, view)
+                     group_start, by_level, need, groups, sync, view, np.int64(SHOCK_CLAIM))
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
 def shock_worker(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
                  shock_friction, support_mass, order, velocity_a, velocity_b, support_body,
-                 group_start, by_level, need, groups, sync, view):
-    """One thread of the shared shock propagation: claims SHOCK_CLAIM groups at a time, in
+                 group_start, by_level, need, groups, sync, view, claim):
+    """One thread of the shared shock propagation: claims `claim` groups at a time, in
     level order, until none are left. A thread alone (the other late, or Numba running the
     region's iterations one after the other) claims and runs them all: every group it waits
     for was claimed before its own, by itself (done) or by a thread that is running."""
     claimed, done = 0, SYNC_STRIDE
     while True:
-        first = atomic_add(sync, claimed, SHOCK_CLAIM)
+        first = atomic_add(sync, claimed, claim)
         if first >= groups:
             return
-        last = min(first + SHOCK_CLAIM, groups)
+        last = min(first + claim, groups)
         place = first
         while place < last:
             spins = 0
@@ -817,23 +818,24 @@ def shock_worker(velocity, rows, row_inv_mass, target, mu, impulse, friction, sh
                     yield_thread()
             g = by_level[place]
             start, end = group_start[g], group_start[g + 1]
+            upper = support_body[order[start]]
             if place + 1 < last and need[place + 1] == need[place]:  # one level: independent
                 h = by_level[place + 1]
-                shock_pair(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
-                           shock_friction, support_mass, order, velocity_a, velocity_b, start, end,
-                           support_body[order[start]], group_start[h], group_start[h + 1],
-                           support_body[order[group_start[h]]], view)
-                atomic_add(sync, done, 2)
-                place += 2
-            else:
-                shock_group(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
-                            shock_friction, support_mass, order, velocity_a, velocity_b, start,
-                            end, support_body[order[start]], view)
-                atomic_add(sync, done, 1)
-                place += 1
+                start_b, end_b = group_start[h], group_start[h + 1]
+                upper_b = support_body[order[start_b]]
+                count = 2
+            else:  # one group: a pair with an empty second (one call site: the sweeps inlined once)
+                start_b = end_b = end
+                upper_b = upper
+                count = 1
+            shock_pair(velocity, rows, row_inv_mass, target, mu, impulse, friction, shock,
+                       shock_friction, support_mass, order, velocity_a, velocity_b, start, end,
+                       upper, start_b, end_b, upper_b, view)
+            atomic_add(sync, done, count)
+            place += count
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
 def contact_pass(contacts, bodies, iterations, gravity, threads):
     """Velocities (zero elasticity, friction), shock propagation, then the split-impulse
     position pass on the pseudo velocities; keeps the friction as a world vector for the next

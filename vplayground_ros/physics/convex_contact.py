@@ -87,38 +87,38 @@ def allocate_scratch():
                    np.empty((3 * EPA_MAX_FACES, 2), np.int64))
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def dot(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def sub(a, b):
     return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def add_scaled(a, s, b):
     """a + s b"""
     return (a[0] + s * b[0], a[1] + s * b[1], a[2] + s * b[2])
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def scaled(s, a):
     return (s * a[0], s * a[1], s * a[2])
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def row(m, i):
     return (m[i, 0], m[i, 1], m[i, 2])
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def set_row(m, i, v):
     m[i, 0], m[i, 1], m[i, 2] = v[0], v[1], v[2]
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def to_local(r, d):
     """R^T d: a world direction in the frame whose axes are r's columns."""
     return (r[0][0] * d[0] + r[1][0] * d[1] + r[2][0] * d[2],
@@ -126,14 +126,14 @@ def to_local(r, d):
             r[0][2] * d[0] + r[1][2] * d[1] + r[2][2] * d[2])
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def to_world(p, r, x):
     return (p[0] + r[0][0] * x[0] + r[0][1] * x[1] + r[0][2] * x[2],
             p[1] + r[1][0] * x[0] + r[1][1] * x[1] + r[1][2] * x[2],
             p[2] + r[2][0] * x[0] + r[2][1] * x[1] + r[2][2] * x[2])
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def triangle_frame(tri, normal):
     """(origin, rotation) of a triangle as a TRIANGLE shape (see TRIANGLE)."""
     v0, v1, v2 = tri[0], tri[1], tri[2]
@@ -142,7 +142,7 @@ def triangle_frame(tri, normal):
                 (v1[2] - v0[2], v2[2] - v0[2], normal[2]))
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def core_point(hulls, kind, p, r, dims, slot, d):
     """The point of the shape's core farthest along the world direction d (support mapping;
     for a linear map M, support_MK(d) = M support_K(M^T d), so a triangle's frame works too)."""
@@ -158,12 +158,12 @@ def core_point(hulls, kind, p, r, dims, slot, d):
     return to_world(p, r, s)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def radius_of(kind, dims):
     return 0.0 if kind == TRIANGLE else core_radius(kind, dims)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def surface_point(hulls, kind, p, r, dims, slot, d):
     """The point of the whole shape farthest along the unit world direction d."""
     return add_scaled(core_point(hulls, kind, p, r, dims, slot, d), radius_of(kind, dims), d)
@@ -172,7 +172,7 @@ def surface_point(hulls, kind, p, r, dims, slot, d):
 # --- GJK --------------------------------------------------------------------------------------
 # A point store holds `block` rows of points of A - B, then as many of A's, then B's.
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def segment_weights(a, b):
     """Barycentric weights of the point of segment ab closest to the origin."""
     ab = sub(b, a)
@@ -232,7 +232,7 @@ def triangle_weights(a, b, c):
     return t2, 0.0, s2
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def keep_weighted(simplex, n, weights):
     """Drops the simplex points of zero weight, moving the others (and their points on A and B)
     down. Returns (count, the kept points' weights padded with zeros)."""
@@ -254,7 +254,7 @@ def keep_weighted(simplex, n, weights):
     return kept, (w0, w1, w2, 0.0)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def face_weights(i, j, k, u, v, w):
     """Weights u, v, w of points i, j, k among four (the fourth 0)."""
     return (u if i == 0 else (v if j == 0 else (w if k == 0 else 0.0)),
@@ -263,7 +263,7 @@ def face_weights(i, j, k, u, v, w):
             u if i == 3 else (v if j == 3 else (w if k == 3 else 0.0)))
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def closest_on_simplex(simplex, n):
     """Reduces GJK's simplex (rows 0..n-1) to the smallest one holding its point closest to
     the origin. Returns (count, weights); count 4 means the origin is inside the tetrahedron."""
@@ -295,7 +295,7 @@ def closest_on_simplex(simplex, n):
     return keep_weighted(simplex, 4, weights)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def put_support(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, d, store, block, i):
     """Writes as point i of `store` the point of A - B farthest along d, with its points on the
     cores of A and B (rows block + i, 2 block + i). Returns the point of A - B."""
@@ -308,7 +308,7 @@ def put_support(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, d
     return w
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def in_simplex(simplex, n, w):
     """w is (to 1e-12 m) a point of the simplex already: rounding in v kept the test on v . w
     from seeing it, and a repeated point would make the simplex degenerate."""
@@ -319,7 +319,7 @@ def in_simplex(simplex, n, w):
     return False
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def gjk(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, limit, simplex):
     """Distance between the cores of A and B (van den Bergen's GJK). Returns (outcome, simplex
     size, closest point on A's core, closest point on B's core): BEYOND as soon as a direction
@@ -328,7 +328,7 @@ def gjk(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, limit, si
     d = sub(pb, pa)
     if dot(d, d) < 1e-24:
         d = (1.0, 0.0, 0.0)
-    v = put_support(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, d, simplex, 4, 0)
+    v = put_support(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, d, simplex, np.int64(4), np.int64(0))
     point_a, point_b = row(simplex, 4), row(simplex, 8)  # v's points on A and B
     n = 1
     for _ in range(GJK_MAX_ITERATIONS):
@@ -336,7 +336,7 @@ def gjk(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, limit, si
         if vv < GJK_OVERLAP_DISTANCE * GJK_OVERLAP_DISTANCE:
             return OVERLAPPING, n, point_a, point_b
         w = put_support(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b,
-                        (-v[0], -v[1], -v[2]), simplex, 4, n)
+                        (-v[0], -v[1], -v[2]), simplex, np.int64(4), n)
         vw = dot(v, w)
         if vw > 0.0 and vw * vw > vv * limit * limit:
             return BEYOND, n, point_a, point_b  # w's plane separates them by more than limit
@@ -362,7 +362,7 @@ def gjk(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, limit, si
 
 # --- EPA --------------------------------------------------------------------------------------
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def set_face(faces, planes, f, i, j, k, w):
     """Face f = (i, j, k) of the polytope whose points are w's rows, with its plane. False when
     it is degenerate."""
@@ -378,7 +378,7 @@ def set_face(faces, planes, f, i, j, k, w):
     return True
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def tetrahedron_from(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, simplex, n,
                      store):
     """Copies GJK's simplex (n points) to EPA's store and grows it to a tetrahedron with new
@@ -392,7 +392,7 @@ def tetrahedron_from(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot
     if n == 1:
         for d in axes:
             gap = sub(put_support(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, d,
-                                  store, EPA_MAX_VERTICES, 1), row(store, 0))
+                                  store, np.int64(EPA_MAX_VERTICES), np.int64(1)), row(store, 0))
             if dot(gap, gap) > 1e-18:
                 n = 2
                 break
@@ -403,7 +403,7 @@ def tetrahedron_from(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot
             if dot(side, side) < 1e-6 * dot(line, line):
                 continue  # d along the line
             x = put_support(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, side,
-                            store, EPA_MAX_VERTICES, 2)
+                            store, np.int64(EPA_MAX_VERTICES), np.int64(2))
             off = cross(line, sub(x, row(store, 0)))
             if dot(off, off) > 1e-18 * dot(line, line):
                 n = 3
@@ -412,7 +412,7 @@ def tetrahedron_from(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot
         normal = cross(sub(row(store, 1), row(store, 0)), sub(row(store, 2), row(store, 0)))
         for sign in (1.0, -1.0):
             x = put_support(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b,
-                            scaled(sign, normal), store, EPA_MAX_VERTICES, 3)
+                            scaled(sign, normal), store, np.int64(EPA_MAX_VERTICES), np.int64(3))
             volume = dot(normal, sub(x, row(store, 0)))
             if abs(volume) > 1e-12 * dot(normal, normal) ** 0.75:
                 n = 4
@@ -420,7 +420,7 @@ def tetrahedron_from(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot
     return n == 4
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def epa(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, simplex, n, sc):
     """Penetration of the overlapping cores of A and B (expanding polytope): returns (found,
     normal A -> B, depth, deepest point of A's core, deepest point of B's core); depth is how
@@ -453,7 +453,7 @@ def epa(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, simplex, 
         if vertex_count == EPA_MAX_VERTICES:
             break
         x = put_support(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, normal, w,
-                        EPA_MAX_VERTICES, vertex_count)
+                        np.int64(EPA_MAX_VERTICES), vertex_count)
         if dot(x, normal) - planes[best, 3] <= EPA_TOLERANCE:
             break  # the closest face is on A - B's boundary
         # Remove the faces x sees; their boundary (edges not shared by two of them) is the
@@ -500,7 +500,7 @@ def epa(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, simplex, 
     return True, normal, dot(sub(point_a, point_b), normal), point_a, point_b
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def shrink_of(kind, dims):
     """How far the shallow-overlap test shrinks a shape without a radius (see SHRINK); a convex
     hull is not shrunk (0)."""
@@ -511,7 +511,7 @@ def shrink_of(kind, dims):
     return 0.0
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def shrunk(kind, dims, by):
     """The dimensions of the shape shrunk by `by` all round (a box's or cylinder's)."""
     if kind == BOX:
@@ -521,7 +521,7 @@ def shrunk(kind, dims, by):
     return (dims[0], dims[1], dims[2])
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def shallow_contact(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, sc):
     """The contact of overlapping A and B from the distance of their shrunk versions (see
     SHRINK): (found, normal A -> B, point on A, point on B, depth), found when the shrunk
@@ -588,7 +588,7 @@ def shape_contact(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b,
 
 # --- Manifold ---------------------------------------------------------------------------------
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def clip_polygon(src, n_src, dst, plane, offset):
     """Sutherland-Hodgman: the part of polygon src (world points) with plane . p <= offset,
     written to dst. Returns its point count."""
@@ -612,7 +612,7 @@ def clip_polygon(src, n_src, dst, plane, offset):
     return n
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def clip_segment(poly, plane, offset):
     """Keeps the part of segment poly[0]-poly[1] with plane . p <= offset. False when none."""
     d0 = dot(row(poly, 0), plane) - offset
@@ -626,7 +626,7 @@ def clip_segment(poly, plane, offset):
     return True
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def to_world_face(hulls, kind, p, r, dims, slot, d, out):
     """The shape's supporting face along world d (shapes.supporting_face), in world points."""
     count = supporting_face(kind, dims, hulls, slot, to_local(r, d), out)
@@ -635,7 +635,7 @@ def to_world_face(hulls, kind, p, r, dims, slot, d, out):
     return count
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def clip_faces(face_a, count_a, face_b, count_b, normal, margin, sc, out_point, out_depth):
     """Contact points of A's supporting face and B's (each a polygon or a segment), normal
     A -> B: the incident feature clipped to the reference feature's side planes (planes through
@@ -699,7 +699,7 @@ def clip_faces(face_a, count_a, face_b, count_b, normal, margin, sc, out_point, 
     return kept
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def add_deepest(count, point_a, point_b, depth, out_point, out_depth):
     """Adds the exact deepest contact (points on A and B) unless a clipped point is about as
     deep already. Returns the new count."""
@@ -711,7 +711,7 @@ def add_deepest(count, point_a, point_b, depth, out_point, out_depth):
     return count + 1
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def convex_pair(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, margin, sc,
                 out_point, out_depth):
     """Manifold of any two shapes: (point count, normal A -> B)."""
@@ -729,7 +729,7 @@ def convex_pair(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, m
     return add_deepest(count, point_a, point_b, depth, out_point, out_depth), normal
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def convex_ground(hulls, kind, p, r, dims, slot, height, margin, sc, out_point, out_depth):
     """Manifold of a shape and the ground z = height (normal (0, 0, -1)): the corners of its
     supporting face along -z within `margin` of the plane, and its lowest point when they miss
@@ -750,7 +750,7 @@ def convex_ground(hulls, kind, p, r, dims, slot, height, margin, sc, out_point, 
                        out_point, out_depth)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def triangle_face(tri, tri_normal, d, out):
     """The triangle's feature facing d: itself when d is within 45 degrees of its plane's
     normal (either side), an edge nearly square to d, else its vertex farthest along d."""
@@ -773,7 +773,7 @@ def triangle_face(tri, tri_normal, d, out):
     return 1
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def convex_triangle(hulls, kind, p, r, dims, slot, tri, tri_normal, margin, sc, out_point,
                     out_depth):
     """Manifold of a shape and a one-sided playground triangle: (point count, normal shape ->

@@ -24,7 +24,7 @@ def wake_body(bodies, i):
     return True
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def wake_touched(contacts, bodies, linear_threshold):
     """Wakes frozen bodies that an awake body touches fast enough. Returns how many woke and how
     many of them left stale static-index entries."""
@@ -50,7 +50,7 @@ def wake_touched(contacts, bodies, linear_threshold):
     return woken, stale
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def update_freezing(bodies, live, enabled, time_to_freeze, linear_threshold, angular_threshold, dt):
     """Advances the freeze timers of the awake bodies among `live` and freezes those that stayed
     slow long enough. Returns how many froze."""

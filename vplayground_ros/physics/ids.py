@@ -11,13 +11,13 @@ PLAYGROUND = -2    # the playground mesh (any triangle)
 NOTHING = -3       # a ray that hits nothing
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def triangle_key(triangle):
     """The warm-start key of playground triangle `triangle` (a manifold each): below NOTHING."""
     return -3 - triangle
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def wheel_query(vehicle, wheel, wheels):
     """The octree query stamp of one wheel's ray in a step (unique per wheel, below every other
     id; the stamps are reset each step)."""

@@ -12,7 +12,7 @@ from .math3d import integrate_orientation, quat_to_matrix
 from .shapes import world_extent
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def update_bodies(bodies, live, dt, root_size, depth):
     """Rotations, solver masses, speculative reach and the broad-phase bounds (grown by this
     step's motion) of the bodies `live` (slots). The step passes the bodies outside the static
@@ -62,7 +62,7 @@ def update_bodies(bodies, live, dt, root_size, depth):
         bodies.octree_level[i] = object_level(bodies.aabb_min[i], bodies.aabb_max[i], root_size, depth)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def finite_state(bodies, i):
     total = 0.0
     for e in range(3):
@@ -74,7 +74,7 @@ def finite_state(bodies, i):
     return np.isfinite(total)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def quarantine(bodies, i):
     """A body whose state went non-finite takes no part in the step (empty bounds, no mass), so
     it cannot spread NaN to others before the World removes it (World.remove_escaped)."""
@@ -87,7 +87,7 @@ def quarantine(bodies, i):
     bodies.octree_level[i] = 0
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def integrate_velocities(bodies, live, gravity, dt):
     """The gyroscopic term, gravity and the queued external impulses (cleared once applied), for
     the awake bodies among `live` (every awake body is: see pipeline.list_live_bodies)."""
@@ -113,7 +113,7 @@ def integrate_velocities(bodies, live, gravity, dt):
 GYROSCOPIC_NEWTON_STEPS = 2
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def gyroscopic_step(inv_i, omega, dt):
     """The angular velocity after a step of torque-free rotation, I dw/dt = -w x I w (I the
     world inertia, inv_i its inverse): without it w stays fixed while the body turns, so an
@@ -150,7 +150,7 @@ def gyroscopic_step(inv_i, omega, dt):
     return x0, x1, x2
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def inverse3(m):
     """Inverse of a 3x3 matrix given and returned as a tuple of rows; zero if it is singular."""
     c00 = m[1][1] * m[2][2] - m[1][2] * m[2][1]
@@ -165,7 +165,7 @@ def inverse3(m):
             (c02 * inv, (m[0][1] * m[2][0] - m[0][0] * m[2][1]) * inv, (m[0][0] * m[1][1] - m[0][1] * m[1][0]) * inv))
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def integrate_positions(bodies, live, dt):
     """Positions of the awake bodies among `live` from the solved velocities plus this step's
     position correction, which is then dropped so it never becomes momentum."""

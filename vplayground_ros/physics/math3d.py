@@ -3,7 +3,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def cross(a, b):
     """Returns a tuple: hot loops call this per contact, and tuples never touch the heap."""
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
@@ -24,7 +24,7 @@ def quat_to_matrix(q, m):
     m[2, 2] = 1.0 - 2.0 * (x * x + y * y)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def integrate_orientation(q, omega, dt):
     """q + dt/2 * (omega, 0) * q, renormalised: first order, exact enough at 128 steps/s."""
     ox, oy, oz = omega[0] * 0.5 * dt, omega[1] * 0.5 * dt, omega[2] * 0.5 * dt

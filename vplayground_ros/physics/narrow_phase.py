@@ -23,20 +23,20 @@ from .shapes import BOX, CAPSULE, SPHERE
 FACE_AXIS_TOLERANCE = 1e-3  # B's face must beat A's by this to become the reference (no flip-flop)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def vector3(v, i):
     """Row i of an (N, 3) array as a tuple (the narrow phase works on tuples: see collide)."""
     return (v[i, 0], v[i, 1], v[i, 2])
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def matrix3(m, i):
     """m[i] of an (N, 3, 3) array as a tuple of its rows."""
     return ((m[i, 0, 0], m[i, 0, 1], m[i, 0, 2]), (m[i, 1, 0], m[i, 1, 1], m[i, 1, 2]),
             (m[i, 2, 0], m[i, 2, 1], m[i, 2, 2]))
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def axis_dots(ra, rb, i):
     """(a_i . b_0, a_i . b_1, a_i . b_2) for the axes (columns) of rotations ra and rb."""
     return (ra[0][i] * rb[0][0] + ra[1][i] * rb[1][0] + ra[2][i] * rb[2][0],
@@ -44,7 +44,7 @@ def axis_dots(ra, rb, i):
             ra[0][i] * rb[0][2] + ra[1][i] * rb[1][2] + ra[2][i] * rb[2][2])
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def box_box_axis(pa, ra, ha, pb, rb, hb, margin):
     """Best separating axis: (kind 0 face of A / 1 face of B / 2 edges / -1 separated,
     index (face axis, or 3*i + j for edge a_i x b_j), separation, normal A -> B)."""
@@ -108,7 +108,7 @@ def box_box_axis(pa, ra, ha, pb, rb, hb, margin):
     return 0, i, best_a, (ra[0][i] * sign, ra[1][i] * sign, ra[2][i] * sign)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def incident_box_face(p, r, h, normal, out):
     """Writes to out the 4 corners (in order around it) of the face of box (p, r, h) most
     anti-parallel to `normal`, the reference normal pointing at this box."""
@@ -126,7 +126,7 @@ def incident_box_face(p, r, h, normal, out):
             out[corner, e] = p[e] + sign * r[e][axis] * h[axis] + su * r[e][k1] * h[k1] + sv * r[e][k2] * h[k2]
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def keep_below(poly, n, origin, normal, margin, out_point, out_depth):
     """Points of poly at most `margin` above the reference plane (origin, normal), moved halfway
     to it; depth is how far below the plane they were. Returns their count."""
@@ -143,7 +143,7 @@ def keep_below(poly, n, origin, normal, margin, out_point, out_depth):
     return kept
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def clip_to_box_face(pr, rr, hr, face_axis, normal, poly_a, n, poly_b, margin, out_point,
                      out_depth):
     """Clips the incident polygon in poly_a (n world points) to the side planes of the reference
@@ -160,7 +160,7 @@ def clip_to_box_face(pr, rr, hr, face_axis, normal, poly_a, n, poly_b, margin, o
     return keep_below(poly_a, n, origin, normal, margin, out_point, out_depth)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def box_edge(p, r, h, axis, direction):
     """The edge of box (p, r, h) parallel to its `axis` that lies farthest along `direction`:
     (centre, unit direction, half length)."""
@@ -172,7 +172,7 @@ def box_edge(p, r, h, axis, direction):
     return (c0, c1, c2), (r[0][axis], r[1][axis], r[2][axis]), h[axis]
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def segments_midpoint(ca, da, half_a, cb, db, half_b):
     """Midpoint of the closest points of two segments (centre, unit direction, half length)."""
     r0, r1, r2 = ca[0] - cb[0], ca[1] - cb[1], ca[2] - cb[2]
@@ -256,7 +256,7 @@ def box_box(pa, ra, ha, pb, rb, hb, margin, poly_a, poly_b, out_point, out_depth
     return n, normal
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def interval_separation(box_center, box_radius, t0, t1, t2):
     """Gap between the box's [c - r, c + r] and the triangle's projections on an axis, and
     +1 when the triangle lies on the axis' positive side (else -1)."""
@@ -265,7 +265,7 @@ def interval_separation(box_center, box_radius, t0, t1, t2):
     return (above, 1.0) if above > below else (below, -1.0)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def box_triangle(p, r, h, tri, tri_normal, margin, poly_a, poly_b, out_point, out_depth):
     """Manifold of a box and a one-sided triangle: (point count, normal box -> triangle).
 
@@ -357,7 +357,7 @@ def box_triangle(p, r, h, tri, tri_normal, margin, poly_a, poly_b, out_point, ou
     return 1, best_dir
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def box_ground(p, r, h, height, margin, out_point, out_depth):
     """Corners of the box within `margin` of the plane z = height; points halfway to the plane."""
     n = 0
@@ -377,12 +377,12 @@ def box_ground(p, r, h, height, margin, out_point, out_depth):
     return n
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def is_round(kind):
     return kind == SPHERE or kind == CAPSULE
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def flipped(pair):
     count, normal = pair
     return count, (-normal[0], -normal[1], -normal[2])
@@ -432,7 +432,7 @@ def collide_ground(hulls, kind, p, r, dims, slot, height, margin, scratch, out_p
                          out_depth)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def collide(contacts, bodies, hulls, broad, playground, ground_enabled, ground_height, live):
     """Manifolds of every candidate pair, of every (body, playground triangle) candidate and of
     every awake body among `live` (slots, ascending) with the ground, each reduced to at most 4 points and appended to

@@ -36,7 +36,7 @@ warnings.filterwarnings("ignore", message="Code running in object mode won't all
                         category=NumbaWarning)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def clock_ns(profile):
     """This thread's CPU nanoseconds when profiling (briefly takes the GIL to read the clock),
     else 0."""
@@ -51,18 +51,19 @@ def clock_ns(profile):
 STAT_WOKEN, STAT_FROZEN, STAT_PAIRS, STAT_POINTS, STAT_TRIANGLES = 0, 1, 2, 3, 4
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def lap(profile, stage_ns, stage, since):
     """Adds the time since `since` to stage_ns[stage] when profiling; returns now. (Not handed
     the StepContext: each stage constant is a specialisation of its own, and each took 4.5 s to
-    compile for the wrapper unboxing the context's ~170 arrays.)"""
+    compile for the wrapper unboxing the context's ~170 arrays. The callers hand the stage as
+    np.int64: a bare constant is a literal type, and compiled lap once per stage.)"""
     now = clock_ns(profile)
     if profile:
         stage_ns[stage] += now - since
     return now
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def rebuild_static_index(bodies, broad, settings):
     """Indexes every resting (frozen or immovable) body. False when the index is too small."""
     ids = np.nonzero(bodies.active & ~bodies.awake)[0]
@@ -77,7 +78,7 @@ def rebuild_static_index(bodies, broad, settings):
     return True
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def list_live_bodies(bodies, broad, everyone):
     """The step's live bodies in slot order, in broad.moving_ids: the active ones outside the
     static index (every active one when `everyone`). Every awake body is among them, so the
@@ -91,7 +92,7 @@ def list_live_bodies(bodies, broad, everyone):
     return broad.moving_ids[:n]
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def static_index_outdated(bodies, broad, live):
     """Enough bodies wait for the static index (resting but outside it), or enough of its
     entries are stale. Every un-indexing counts one stale entry, so the index holds
@@ -112,7 +113,7 @@ def reindex_limit(indexed, stale):
     return max(STATIC_REINDEX_MIN_PENDING, int(STATIC_REINDEX_PENDING_FRACTION * (indexed - stale)))
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def detect(bodies, hulls, broad, playground, contacts, settings, moving_ids):
     """Broad phase then narrow phase for the current positions of the live bodies `moving_ids`
     (list_live_bodies); `hulls` is the World's hull table of convex bodies. Returns a status."""
@@ -137,7 +138,7 @@ def detect(bodies, hulls, broad, playground, contacts, settings, moving_ids):
     return DONE
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def at_rest(bodies, live, vehicles):
     """No live body is awake (those outside the static index are frozen ones waiting for it)
     and no car drives: nothing can move or touch a moving body this step."""
@@ -149,7 +150,7 @@ def at_rest(bodies, live, vehicles):
     return True
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def rest_step(bodies, broad, contacts, settings, live):
     """What the stages leave behind in a step `at_rest`: the moving index (of the frozen bodies
     not yet in the static one, which ray casts query), no pairs, no contacts (indexed, for the
@@ -212,7 +213,7 @@ def step_world(steps, ctx):
         if static_index_outdated(bodies, broad, live):
             if not rebuild_static_index(bodies, broad, s):
                 return done, GROW_INDEX
-            live = list_live_bodies(bodies, broad, False)
+            live = list_live_bodies(bodies, broad, np.bool_(False))
         if at_rest(bodies, live, ctx.vehicles):
             # Every body asleep or immovable: the step is its empty result (no counters). Sleepers
             # still waiting for the static index join it now, once: nothing else will freeze
@@ -221,53 +222,53 @@ def step_world(steps, ctx):
             if len(live) > 0:
                 if not rebuild_static_index(bodies, broad, s):
                     return done, GROW_INDEX
-                live = list_live_bodies(bodies, broad, False)
+                live = list_live_bodies(bodies, broad, np.bool_(False))
             if not rest_step(bodies, broad, current, s, live):
                 return done, GROW_INDEX
-            lap(profile, stage_ns, STAGE_DERIVED, t)
+            lap(profile, stage_ns, np.int64(STAGE_DERIVED), t)
             swap_contacts(ctx.contacts)
             continue
-        t = lap(profile, stage_ns, STAGE_DERIVED, t)
+        t = lap(profile, stage_ns, np.int64(STAGE_DERIVED), t)
         # 2. Collision detection (octree broad phase, narrow phase per shape pair) at the current
         #    positions, with speculative margins covering this step's motion.
         status = detect(bodies, ctx.hulls, broad, playground, current, s, live)
         if status != DONE:
             return done, status
-        t = lap(profile, stage_ns, STAGE_DETECTION, t)
+        t = lap(profile, stage_ns, np.int64(STAGE_DETECTION), t)
         # 3. Freezing: sleepers touched by moving bodies wake, and are detected again with their
         #    own contacts so they do not sink for a step.
         woken, stale = wake_touched(current, bodies, s.freezing_linear_speed)
         if woken > 0:
-            live = list_live_bodies(bodies, broad, False)
+            live = list_live_bodies(bodies, broad, np.bool_(False))
             update_bodies(bodies, live, s.dt, s.root_size, s.octree_depth)
             broad.stale[0] += stale
             status = detect(bodies, ctx.hulls, broad, playground, current, s, live)
             if status != DONE:
                 return done, status
-        t = lap(profile, stage_ns, STAGE_WAKE, t)
+        t = lap(profile, stage_ns, np.int64(STAGE_WAKE), t)
         # 4. Collision pass with the pre-step velocities and the bodies' elasticity.
         warm_start_from(previous, current)
         prepare_contacts(current, bodies, s.ground_material, s.gravity, s.dt)
         collision_pass(current, bodies, s.resolve_iterations, s.gravity, s.solver_threads)
-        t = lap(profile, stage_ns, STAGE_COLLISION, t)
+        t = lap(profile, stage_ns, np.int64(STAGE_COLLISION), t)
         # 5. Velocity update with external forces: the cars' wheels (springs and dampers see the
         #    velocities before gravity adds its share, or dampers would hold up the cars), then
         #    gravity and pushes.
         drive_vehicles(ctx.vehicles, bodies, ctx.hulls, broad, playground, s)
         integrate_velocities(bodies, live, s.gravity, s.dt)
-        t = lap(profile, stage_ns, STAGE_FORCES, t)
+        t = lap(profile, stage_ns, np.int64(STAGE_FORCES), t)
         # 6. Contact pass: zero elasticity, twice the iterations, split-impulse penetration fix.
         warm_start(current, bodies)
         contact_pass(current, bodies, 2 * s.resolve_iterations, s.gravity, s.solver_threads)
-        t = lap(profile, stage_ns, STAGE_CONTACT, t)
+        t = lap(profile, stage_ns, np.int64(STAGE_CONTACT), t)
         # 7. Positions from velocities.
         integrate_positions(bodies, live, s.dt)
-        t = lap(profile, stage_ns, STAGE_POSITIONS, t)
+        t = lap(profile, stage_ns, np.int64(STAGE_POSITIONS), t)
         # 8. Freezing of bodies that have been at rest long enough.
         frozen_now = update_freezing(bodies, live, s.freezing_enabled, s.freezing_time,
                                      s.freezing_linear_speed, s.freezing_angular_speed, s.dt)
         index_manifolds(current)
-        lap(profile, stage_ns, STAGE_FREEZING, t)
+        lap(profile, stage_ns, np.int64(STAGE_FREEZING), t)
         stats = ctx.stats
         stats[STAT_WOKEN] += woken
         stats[STAT_FROZEN] += frozen_now

@@ -68,7 +68,7 @@ def index_playground(playground, root_min, root_size, depth):
                        playground.octree_level, root_min, root_size)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def find_playground_pairs(playground, moving_ids, bodies, root_min, root_size, pair_body,
                           pair_triangle):
     """(awake body, triangle) pairs whose bounds overlap, from the triangles' octree. Returns the

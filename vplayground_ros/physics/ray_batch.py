@@ -60,7 +60,7 @@ RayGrid = namedtuple("RayGrid", [
 ])
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def filed_range(lo, hi, lower, cell, dims):
     """Inclusive cell ranges (x0, x1, y0, y1, z0, z1) an AABB (grown by the filing margin)
     overlaps, clamped to the grid, and whether that is too many cells to file it in (it is then
@@ -84,7 +84,7 @@ def separated_on(ax, ay, az, v0, v1, v2, half):
     return min(p0, p1, p2) > radius or max(p0, p1, p2) < -radius
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def triangle_meets_cell(triangles, t, centre, half):
     """Separating-axis test of triangle t against the cube (centre, half edge): the cube's axes,
     the triangle's normal and the nine edge-by-axis cross products (Akenine-Moeller)."""
@@ -109,7 +109,7 @@ def triangle_meets_cell(triangles, t, centre, half):
     return True
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def file_items(used, item_min, item_max, capacity, triangles, lower, cell, dims, counts, items, fill,
                wide, write):
     """One filing pass over the used items: with write False it counts each cell's items into
@@ -270,7 +270,7 @@ def axis_step(d):
 
 # error_model "numpy": no zero-division checks (every division here is guarded or meant to give
 # inf), which cost the walk a branch each.
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, error_model="numpy")
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, error_model="numpy")
 def cast_chunk(start, stop, origins, directions, max_range, excluded, grid, geometry, hulls,
                triangles, normals, ground_enabled, ground_height, row_of_slot, distance, point, normal, hit):
     """cast_ray_batch for rays start..stop; returns how many of them were invalid (a zero or

@@ -88,7 +88,7 @@ def ray_triangle(origin, direction, reach, triangles, normals, j):
     return t if 0.0 <= t <= reach else NO_HIT
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def cast_ray(origin, direction, reach, exclude, query_id, bodies, hulls, broad, playground, s):
     """Nearest hit of the segment origin + t direction, 0 <= t <= reach (direction unit), with
     anything in the world of the StepContext's parts (`s` its Settings) but body `exclude`: (t,

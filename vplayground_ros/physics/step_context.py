@@ -59,7 +59,7 @@ def newest_contacts(buffers):
     return buffers.pair[buffers.newest[0]]
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def swap_contacts(buffers):
     """The buffer just filled becomes the newest; the other is the next step's to fill."""
     buffers.newest[0] = 1 - buffers.newest[0]

@@ -79,7 +79,7 @@ def grow_vehicles(vehicles, capacity):
     return grown
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def control(vehicles, v, speed, yaw_rate, hold, dt):
     """The Twist controller of vehicle v: sets throttle, brake and steer from its command.
     `hold` is the throttle that balances gravity along the car's heading (fed forward: on a
@@ -117,7 +117,7 @@ def control(vehicles, v, speed, yaw_rate, hold, dt):
     vehicles.steer[v] = min(max(steer, -limit), limit)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def ackermann(vehicles, v, w):
     """Steer angle of wheel w: every steered wheel points square to the line from it to one
     turning centre, on the rear axle line at wheelbase / tan(steer) to the left (REP-103)."""
@@ -133,7 +133,7 @@ def ackermann(vehicles, v, w):
     return np.arctan((vehicles.mount[v, w, 0] - vehicles.rear_axle[v]) / (centre - vehicles.mount[v, w, 1]))
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def drive_vehicles(vehicles, bodies, hulls, broad, playground, settings):
     """Controller, wheel ray casts, suspension and tyre forces of every vehicle for one step,
     applied as impulses to the chassis (and the opposite to any box a wheel stands on). The four
@@ -268,7 +268,7 @@ def drive_vehicles(vehicles, bodies, hulls, broad, playground, settings):
                     push(bodies, hit, point, (-p[0], -p[1], -p[2]))
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def contact_velocity(bodies, body, other, point):
     """Velocity of `body` at a world point relative to `other` (a slot, or static if < 0)."""
     vel, pos = bodies.velocity, bodies.position
@@ -284,7 +284,7 @@ def contact_velocity(bodies, body, other, point):
     return vx, vy, vz
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def tyre_velocity(bodies, chassis, other, point, up, fall):
     """Velocity of a tyre over what it stands on, at its contact point: the chassis' translation
     and yaw (about `up`), relative to `other`, and what `fall` (gravity x dt, which the step adds
@@ -304,7 +304,7 @@ def tyre_velocity(bodies, chassis, other, point, up, fall):
             vz - (sway[0] * arm[1] - sway[1] * arm[0]))
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def tyre_response(bodies, chassis, point, d, up):
     """1 / effective mass of the chassis for tyre_velocity along unit d at a world point: its
     mass, and its yaw (0 if it does not move)."""
@@ -320,7 +320,7 @@ def tyre_response(bodies, chassis, point, d, up):
     return bodies.solver_inv_mass[chassis] + yaw * (up[0] * cx + up[1] * cy + up[2] * cz)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def point_response(bodies, body, point, d):
     """1 / effective mass of `body` at a world point along unit d (0 if it does not move)."""
     if body < 0 or not bodies.awake[body]:
@@ -334,7 +334,7 @@ def point_response(bodies, body, point, d):
         + cz * (inv_i[2, 0] * cx + inv_i[2, 1] * cy + inv_i[2, 2] * cz))
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def push(bodies, body, point, p):
     """Impulse p at a world point on an awake body (others ignore it)."""
     if not bodies.awake[body]:

@@ -44,7 +44,7 @@ def half_extents(kind, dims):
     return dims
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def world_extent(kind, dims, r, e):
     """Half the extent along world axis e of the shape turned by rotation r (3x3, columns the
     body axes): the exact bounding box, not the box around the body-frame one (a hull's is the
@@ -73,7 +73,7 @@ def bounds(kinds, dimensions, positions, orientations):
     return lo, hi
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def core_radius(kind, dims):
     """Spheres and capsules are a core (point, segment) grown by this radius; the others 0."""
     if kind == SPHERE or kind == CAPSULE:
@@ -81,7 +81,7 @@ def core_radius(kind, dims):
     return 0.0
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def core_support(kind, dims, hulls, h, d):
     """The point of the shape's core farthest along d (body frame)."""
     if kind == BOX:
@@ -95,7 +95,7 @@ def core_support(kind, dims, hulls, h, d):
     return convex.support(hulls, h, d)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def supporting_face(kind, dims, hulls, h, d, out):
     """Writes to out (at least MAX_FACE_POINTS rows) the shape's feature facing d (body
     frame): a polygon counter-clockwise seen from outside, a segment or a point. Returns its
@@ -111,7 +111,7 @@ def supporting_face(kind, dims, hulls, h, d, out):
     return convex.supporting_face(hulls, h, d, out)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def ray(kind, dims, hulls, h, o, d, reach):
     """The ray o + t d (body frame, d unit, 0 <= t <= reach) against the shape: (t, outward
     normal), t NO_HIT when it misses or starts inside."""

@@ -33,13 +33,13 @@ def half_extents(dims):
     return (dims[0], dims[1], dims[2])
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def support(dims, d):
     return (dims[0] if d[0] >= 0.0 else -dims[0], dims[1] if d[1] >= 0.0 else -dims[1],
             dims[2] if d[2] >= 0.0 else -dims[2])
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def supporting_face(dims, d, out):
     """The face whose outward normal is closest to d: 4 corners, counter-clockwise seen from
     outside."""
@@ -59,7 +59,7 @@ def supporting_face(dims, d, out):
     return 4
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def ray(dims, o, d, reach):
     """Slab test: (distance, outward normal), or NO_HIT when the ray misses or starts inside."""
     t_in, t_out = 0.0, reach

@@ -44,12 +44,12 @@ def half_extents(dims):
     return (dims[0], dims[0], dims[1] + dims[0])
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def core_support(dims, d):
     return (0.0, 0.0, dims[1] if d[2] >= 0.0 else -dims[1])
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def supporting_face(dims, d, out):
     n = unit_or(d, (0.0, 0.0, 1.0))
     r, h = dims[0], dims[1]
@@ -64,7 +64,7 @@ def supporting_face(dims, d, out):
     return 1
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def ray(dims, o, d, reach):
     r, h = dims[0], dims[1]
     z = min(max(o[2], -h), h)

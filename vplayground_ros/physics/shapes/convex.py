@@ -153,7 +153,7 @@ def spec_fields(hull):
     return {"points": hull.points.tolist()}
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def farthest_along(rows, start, count, d):
     """The index in start..start + count of the row of `rows` (K, 3) with the largest dot with d."""
     best, best_dot = start, -np.inf
@@ -164,14 +164,14 @@ def farthest_along(rows, start, count, d):
     return best
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def support(hulls, h, d):
     p = hulls.points
     best = farthest_along(p, hulls.point_start[h], hulls.point_count[h], d)
     return (p[best, 0], p[best, 1], p[best, 2])
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def supporting_face(hulls, h, d, out):
     """The face whose outward normal is closest to d: its corners, counter-clockwise."""
     best = farthest_along(hulls.face_normal, hulls.face_start[h], hulls.face_count[h], d)
@@ -183,7 +183,7 @@ def supporting_face(hulls, h, d, out):
     return count
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def ray(hulls, h, o, d, reach):
     """Clips the ray against every face's half-space: (entry distance, the entry face's
     normal), or NO_HIT when it misses or starts inside."""

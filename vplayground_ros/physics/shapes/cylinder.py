@@ -37,13 +37,13 @@ def half_extents(dims):
     return (dims[0], dims[0], dims[1])
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def support(dims, d):
     side = unit_or((d[0], d[1], 0.0), (0.0, 0.0, 0.0))
     return (dims[0] * side[0], dims[0] * side[1], dims[1] if d[2] >= 0.0 else -dims[1])
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def supporting_face(dims, d, out):
     """The end facing d (a regular CAP_POINTS-gon, counter-clockwise seen from outside) when d
     is nearer the axis than the side, else the side's line facing d."""
@@ -61,7 +61,7 @@ def supporting_face(dims, d, out):
     return 2
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def ray(dims, o, d, reach):
     r, h = dims[0], dims[1]
     if abs(o[2]) <= h and o[0] * o[0] + o[1] * o[1] <= r * r:

@@ -5,7 +5,7 @@ from numba import njit
 NO_HIT = np.inf  # a ray's distance when it hits nothing
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def axis_vector(axis, sign):
     if axis == 0:
         return (sign, 0.0, 0.0)
@@ -14,7 +14,7 @@ def axis_vector(axis, sign):
     return (0.0, 0.0, sign)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def unit_or(d, fallback):
     """d normalised, or `fallback` when d is (nearly) zero."""
     length = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
@@ -23,7 +23,7 @@ def unit_or(d, fallback):
     return (d[0] / length, d[1] / length, d[2] / length)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def ray_sphere(centre, radius, o, d, reach):
     """Entry distance of the ray o + t d (d unit) into the sphere, or NO_HIT when it misses or
     starts inside."""
@@ -39,7 +39,7 @@ def ray_sphere(centre, radius, o, d, reach):
     return t if t <= reach else NO_HIT
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def ray_side(radius, half_length, o, d, reach):
     """Entry distance of the ray into the side of the infinite cylinder x^2 + y^2 = r^2 within
     |z| <= half_length, or NO_HIT (caps and ends are the caller's)."""

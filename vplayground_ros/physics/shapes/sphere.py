@@ -31,12 +31,12 @@ def half_extents(dims):
     return (dims[0], dims[0], dims[0])
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def core_support(dims, d):
     return (0.0, 0.0, 0.0)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def supporting_face(dims, d, out):
     n = unit_or(d, (0.0, 0.0, 1.0))
     for e in range(3):
@@ -44,7 +44,7 @@ def supporting_face(dims, d, out):
     return 1
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def ray(dims, o, d, reach):
     t = ray_sphere((0.0, 0.0, 0.0), dims[0], o, d, reach)
     if t == NO_HIT:
