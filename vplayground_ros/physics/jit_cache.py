@@ -130,7 +130,7 @@ def compile_once(warm_up):
                         fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
                 if (directory / COMPLETE_MARKER).exists():  # another process filled it meanwhile
                     return
-                _log.warning(f"compiling the engine once into {directory} (about 2.5 minutes on "
+                _log.warning(f"compiling the engine once into {directory} (about 2 minutes on "
                              f"2 cores); later starts load it in about a second")
                 # What an interrupted process left; also what this one compiled before its first
                 # World (kernels called directly): those load or compile later, as before.
