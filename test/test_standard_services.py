@@ -303,8 +303,13 @@ def test_worlds_load_unload_and_list(ros):
         refused = call(ros, LoadWorld, "load_world", resource_string=text)
         assert refused.result.result == code, (text, refused.result.error_message)
     assert sorted(call(ros, GetEntities, "get_entities").entities) == ["left", "right"]  # failures change nothing
+    slower = ros.scene_directory / "slower.yaml"
+    slower.write_text("version: 1\nsettings: {steps_per_second: 100}\n")
+    assert call(ros, LoadWorld, "load_world", uri=str(slower)).result.result == OK
+    assert ros.node.get_parameter("steps_per_second").value == 100
     assert call(ros, UnloadWorld, "unload_world").result.result == OK
     assert state(ros) == SimulationState.STATE_NO_WORLD
+    assert ros.node.get_parameter("steps_per_second").value == 128  # the empty world's, not the last scene's
     assert list(call(ros, GetEntities, "get_entities").entities) == []
     assert call(ros, UnloadWorld, "unload_world").result.result == UnloadWorld.Response.NO_WORLD_LOADED
     assert call(ros, GetCurrentWorld, "get_current_world").result.result == GetCurrentWorld.Response.NO_WORLD_LOADED

@@ -80,7 +80,9 @@ class SceneRequests:
             self.scene_label = ""
             self.sim.world_loaded, self.sim.paused, self.sim.stopped = False, True, False
             return reply(OK, "unloaded: every entity removed")
-        return self.sim.call(unload)
+        answer = self.sim.call(unload)
+        self._follow_scene_settings()  # the parameters show the empty world's settings, not the last scene's
+        return answer
 
     def current_world(self):
         """(file of the loaded scene, '' for one from text or the built-in default), or None
