@@ -443,3 +443,26 @@ def test_a_sensor_is_not_moved_by_set_entity_state(ros):
                    state=EntityState(pose=Pose(orientation=Quaternion(w=1.0))))
     assert refused.result.result == FAILED and "mount" in refused.result.error_message
     assert call(ros, DeleteEntity, "delete_entity", entity="si_imu").result.result == OK
+
+
+def test_long_requests_beyond_the_limit_are_refused_at_once(ros):
+    """Calls that may take long run on threads of their own, a bounded number at once: beyond
+    it they are answered RESULT_OPERATION_FAILED at once (here the limit made 1 for the test)."""
+    import threading
+
+    play(ros)
+    assert set_state(ros, SimulationState.STATE_PAUSED).result == OK
+    slots = ros.node._aside_slots
+    ros.node._aside_slots = threading.BoundedSemaphore(1)
+    try:
+        client = ros.client.create_client(StepSimulation, "/step_simulation")
+        assert client.wait_for_service(timeout_sec=10)
+        stepping = client.call_async(StepSimulation.Request(steps=4000))
+        assert wait_for(lambda: ros.sim.pending_steps > 0)
+        refused = call(ros, GetEntitiesStates, "get_entities_states")
+        assert refused.result.result == FAILED and "long requests are running" in refused.result.error_message
+        assert wait_for(stepping.done, 60) and stepping.result().result.result == OK
+        assert call(ros, GetEntitiesStates, "get_entities_states").result.result == OK  # its slot is free again
+        ros.client.destroy_client(client)
+    finally:
+        ros.node._aside_slots = slots
