@@ -12,13 +12,16 @@ from pathlib import Path
 
 import numpy as np
 
+from . import messages
 from .api import INVALID_MAP_DATA, MAP_DOES_NOT_EXIST, MAP_SUCCESS
-from .api.simulation_control import SPAWN_FORMATS
 from .api.entity_queries import category_of
-from .api.file_access import confine
+from .api.file_access import confine, local_path
 from .api.payload import MAX_PAYLOAD, parse
-from .api.results import RequestError, handled
+from .api.results import (FAILED, FEATURE_UNSUPPORTED, INCORRECT_STATE, NAME_INVALID, NO_RESOURCE, NO_WORLD_LOADED,
+                          NOT_FOUND, RESOURCE_PARSE_ERROR, UNSUPPORTED_FORMAT, RequestError, handled)
+from .api.simulation_control import SPAWN_FORMATS
 from .physics import specs
+from .scene import read_capped
 from .services import Service, carriable
 
 PACKAGE = "simulation_interfaces"
@@ -62,10 +65,6 @@ def refused(error, codes=None):
     return result((False, str(error)), codes)
 
 
-def vector(values):
-    return dict(zip("xyz", map(float, values)))
-
-
 def plain_pose(pose):
     """{position: [x y z], orientation: [x y z w]} of a geometry_msgs Pose."""
     return {"position": [pose.position.x, pose.position.y, pose.position.z],
@@ -90,14 +89,9 @@ def state_message(table_or_entity, frame, row=None):
         t = table_or_entity
         position, orientation, linear, angular = t.positions[row], t.quaternions[row], t.linear[row], t.angular[row]
         seconds = t.time
-    return {"header": {"stamp": stamp(seconds), "frame_id": frame},
-            "pose": {"position": vector(position), "orientation": dict(zip("xyzw", map(float, orientation)))},
-            "twist": {"linear": vector(linear), "angular": vector(angular)}}
-
-
-def stamp(seconds):
-    nanoseconds = int(round(seconds * 1e9))
-    return {"sec": nanoseconds // 1_000_000_000, "nanosec": nanoseconds % 1_000_000_000}
+    return {"header": messages.header(seconds, frame),
+            "pose": {"position": messages.xyz(position), "orientation": messages.xyzw(orientation)},
+            "twist": {"linear": messages.xyz(linear), "angular": messages.xyz(angular)}}
 
 
 class StandardServices:
@@ -148,7 +142,7 @@ class StandardServices:
         count check: more entries than max_bodies fail at once."""
         cap = int(self.requests.max_bodies)
         if len(request.spawn_requests) > cap:
-            return {"result": failed("RESULT_OPERATION_FAILED", f"spawn_requests: {len(request.spawn_requests)} "
+            return {"result": failed(FAILED, f"spawn_requests: {len(request.spawn_requests)} "
                                                                 f"entries, more than max_bodies ({cap})")}
         results = [self.spawn_entity(item) for item in request.spawn_requests]
         failures = sum(r["result"]["result"] != RESULT_OK for r in results)
@@ -167,13 +161,13 @@ class StandardServices:
         if uri:
             text = self._read_resource(uri)
         elif not text:
-            raise RequestError("NO_RESOURCE", "both uri and resource_string are empty")
+            raise RequestError(NO_RESOURCE, "both uri and resource_string are empty")
         try:
             spec = parse(text, "resource_string" if not uri else uri)
         except RequestError as error:
-            raise RequestError("RESOURCE_PARSE_ERROR", str(error).partition(": ")[2]) from None
+            raise RequestError(RESOURCE_PARSE_ERROR, str(error).partition(": ")[2]) from None
         if not isinstance(spec, dict):
-            raise RequestError("UNSUPPORTED_FORMAT", f"the resource is {type(spec).__name__}, not this package's "
+            raise RequestError(UNSUPPORTED_FORMAT, f"the resource is {type(spec).__name__}, not this package's "
                                                      "YAML entity spec (a mapping: shape, size, mass...; spawn_formats "
                                                      f"{SPAWN_FORMATS})")
         spec = dict(spec)
@@ -181,7 +175,7 @@ class StandardServices:
         if name:
             spec["name"] = name
         elif not spec.get("name") and not request.allow_renaming:
-            raise RequestError("NAME_INVALID", "name: empty, and the resource names no entity (allow_renaming: true "
+            raise RequestError(NAME_INVALID, "name: empty, and the resource names no entity (allow_renaming: true "
                                                "picks one)")
         spec["allow_renaming"] = bool(request.allow_renaming)
         namespace = str(request.entity_namespace)
@@ -190,7 +184,7 @@ class StandardServices:
                 raise RequestError("NAMESPACE_INVALID", f"entity_namespace: {specs.quote(namespace)} is not a ROS "
                                                         "namespace (letters, digits, _ and /)")
             if "wheels" not in spec and "chassis" not in spec:
-                raise RequestError("RESULT_OPERATION_FAILED", "entity_namespace: only a vehicle has interfaces to "
+                raise RequestError(FAILED, "entity_namespace: only a vehicle has interfaces to "
                                                               "put under a namespace")
             spec["namespace"] = namespace.strip("/")
         pose = request.initial_pose
@@ -201,19 +195,16 @@ class StandardServices:
         return self.requests.spawn_entities(spec)
 
     def _read_resource(self, uri):
-        path = uri[len("file://"):] if uri.startswith("file://") else uri
         try:
-            target = confine(path, "uri", self.requests.scene_directories)
+            target = confine(local_path(uri), "uri", self.requests.scene_directories)
         except RequestError as error:
-            raise RequestError("RESULT_NOT_FOUND", str(error).partition(": ")[2]) from None
+            raise RequestError(NOT_FOUND, str(error).partition(": ")[2]) from None
         if not target.is_file():
-            raise RequestError("RESULT_NOT_FOUND", f"uri: no file at {specs.quote(uri)}")
-        try:
-            with open(target, "rb") as f:
-                data = f.read(MAX_PAYLOAD + 1)
-            return data.decode("utf-8")
-        except (OSError, UnicodeDecodeError) as error:
-            raise RequestError("RESOURCE_PARSE_ERROR", f"uri: cannot read {target}: {error}") from None
+            raise RequestError(NOT_FOUND, f"uri: no file at {specs.quote(uri)}")
+        try:  # ValueError: larger than a request may be, a device, not UTF-8 (UnicodeDecodeError)
+            return read_capped(target, MAX_PAYLOAD, "uri").decode("utf-8")
+        except ValueError as error:
+            raise RequestError(RESOURCE_PARSE_ERROR, f"uri: cannot read {target}: {str(error)[:300]}") from None
 
     def delete_entity(self, request):
         return {"result": result(self.requests.remove_entity(str(request.entity)))}
@@ -257,7 +248,7 @@ class StandardServices:
         state = request.state
         try:
             if self.requests.entity(str(request.entity))["category"] == "sensor":
-                return {"result": failed("RESULT_OPERATION_FAILED", f"{request.entity}: a sensor is placed by its mount "
+                return {"result": failed(FAILED, f"{request.entity}: a sensor is placed by its mount "
                                          "in its parent's frame (~/edit {entity: NAME, pose: [x, y, z, roll, pitch, "
                                          "yaw]}); set_entity_state moves bodies and vehicles")}
         except RequestError as error:
@@ -281,7 +272,7 @@ class StandardServices:
         """The box around the entity in its own frame (Bounds TYPE_BOX: lower, then upper corner)."""
         def bounds(entity):
             half = 0.5 * np.asarray(entity["bounds"]["size"], float)
-            return {"bounds": {"type": 1, "points": [vector(-half), vector(half)]}}  # TYPE_BOX
+            return {"bounds": {"type": 1, "points": [messages.xyz(-half), messages.xyz(half)]}}  # TYPE_BOX
         return self._about(request, bounds)
 
     # ------------------------------------------------------------------ simulation
@@ -313,7 +304,7 @@ class StandardServices:
         sim = self.runtime.sim
         reply, world, target = self.requests.step_to(steps)
         if world is None:  # the standard: RESULT_OPERATION_FAILED when not paused
-            return result(reply, {"RESULT_INCORRECT_STATE": OPERATION_FAILED})
+            return result(reply, {INCORRECT_STATE: OPERATION_FAILED})
         done = -1
         try:
             while True:
@@ -327,7 +318,7 @@ class StandardServices:
                 # count short means they will not run (played, a failed step, a time reset).
                 if (sim.world is not world or sim.wait(0) or not sim.paused
                         or (not sim.pending_steps and world.step_count < target)):
-                    return failed("RESULT_OPERATION_FAILED", f"stepping stopped after {done} of {steps} steps (the "
+                    return failed(FAILED, f"stepping stopped after {done} of {steps} steps (the "
                                                              "world was replaced or reset, or the simulation played "
                                                              "or ended)")
                 yield None
@@ -342,15 +333,13 @@ class StandardServices:
         (resource_string); the new world waits STOPPED, as the standard says."""
         uri, text = resource_of(request, "world_resource")
         if uri:
-            code, message = self.requests.load_scene(uri[len("file://"):] if uri.startswith("file://") else uri,
-                                                     stopped=True)
+            code, message = self.requests.load_scene(local_path(uri), stopped=True)
         elif text:
             code, message = self.requests.load_scene_text(text, stopped=True)
         else:
-            return {"result": failed("NO_RESOURCE", "both uri and resource_string are empty", LOAD_WORLD_CODES)}
+            return {"result": failed(NO_RESOURCE, "both uri and resource_string are empty", LOAD_WORLD_CODES)}
         if code != MAP_SUCCESS:
-            name = {MAP_DOES_NOT_EXIST: "RESULT_NOT_FOUND", INVALID_MAP_DATA: "RESOURCE_PARSE_ERROR"}.get(
-                code, "RESULT_OPERATION_FAILED")
+            name = {MAP_DOES_NOT_EXIST: NOT_FOUND, INVALID_MAP_DATA: RESOURCE_PARSE_ERROR}.get(code, FAILED)
             code, _, detail = message.partition(": ")
             if code in LOAD_WORLD_CODES:  # a format, asset or element the scene reader refused
                 name = code
@@ -367,12 +356,12 @@ class StandardServices:
     def get_current_world(self, _request):
         label = self.requests.current_world()
         if label is None:
-            return {"result": failed("NO_WORLD_LOADED", "no world is loaded (unload_world)", NO_WORLD_CODES)}
+            return {"result": failed(NO_WORLD_LOADED, "no world is loaded (unload_world)", NO_WORLD_CODES)}
         return {"result": SUCCESS, "world": self._world_resource(label)}
 
     def get_available_worlds(self, request):
         if list(request.filter.tags):
-            return {"result": failed("RESULT_FEATURE_UNSUPPORTED", "filter.tags: worlds have no tags here (WORLD_TAGS "
+            return {"result": failed(FEATURE_UNSUPPORTED, "filter.tags: worlds have no tags here (WORLD_TAGS "
                                                                    "is not among get_simulator_features)"), "worlds": []}
         try:
             found = self.requests.available_worlds([str(s) for s in request.additional_sources])
@@ -390,9 +379,9 @@ class StandardServices:
 
 
 def valid_namespace(namespace):
-    parts = namespace.strip("/").split("/")
-    return all(p and (p[0].isalpha() or p[0] == "_") and all(c.isalnum() or c == "_" for c in p) and p.isascii()
-               for p in parts)
+    """A namespace a robot can take (specs.NAMESPACE_PATTERN), leading and trailing '/' aside."""
+    relative = namespace.strip("/")
+    return bool(relative) and specs.NAMESPACE_PATTERN.fullmatch(relative) is not None
 
 
 def entity_text(entity):

@@ -39,6 +39,11 @@ def allowed_directories(directories):
     return roots
 
 
+def local_path(uri):
+    """A path given as a file:// URI (simulation_interfaces' resources), or as a path, as a path."""
+    return uri[len("file://"):] if uri.startswith("file://") else uri
+
+
 def confine(raw, what, directories):
     """The absolute, resolved path of a scene file named in a request, refused (FAILED)
     unless it lies inside one of `directories` and ends in .yaml or .yml. Relative paths start

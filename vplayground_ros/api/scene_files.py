@@ -9,7 +9,7 @@ import yaml
 
 from ..physics import specs
 from ..scene import SceneError, load_world, world_to_scene
-from .file_access import allowed_directories, confine, write_file
+from .file_access import allowed_directories, confine, local_path, write_file
 from .payload import YAML_DUMPER, as_mapping, parse
 from .results import (FAILED, INVALID_MAP_DATA, MAP_DOES_NOT_EXIST, MAP_SUCCESS, NO_WORLD_LOADED, NOT_FOUND, OK,
                       UNDEFINED_FAILURE, UNSUPPORTED_FORMAT, RequestError, handled, reply)
@@ -96,7 +96,7 @@ class SceneRequests:
         roots = allowed_directories(self.scene_directories)
         folders = list(roots)
         for source in sources:
-            raw = source[len("file://"):] if source.startswith("file://") else source
+            raw = local_path(source)
             folder = Path(raw).resolve() if raw else None
             if folder is None or not folder.is_dir() or not any(folder == r or r in folder.parents for r in roots):
                 raise RequestError(FAILED, f"additional_sources: {specs.quote(source)} is not a directory inside "
