@@ -31,8 +31,7 @@ import numpy as np
 from .messages import CATEGORY_COLOURS, COLOURS, FROZEN, IMMOVABLE, VEHICLE, BOX
 from .physics import specs
 from .physics.ids import GROUND, NOTHING, PLAYGROUND
-from .physics.math3d import rpy_to_quat
-from .physics.math3d import quaternions_to_matrices
+from .physics.math3d import matrix_to_quaternion, quaternions_to_matrices, rpy_to_quat
 
 TYPES = ("lidar_2d", "lidar_3d", "depth_camera", "camera", "imu")
 CAMERAS = ("depth_camera", "camera")  # the types that see through a pinhole, with an optical frame
@@ -446,21 +445,3 @@ class Sensors:
         return {"orientation": matrix_to_quaternion(rotation), "angular_velocity": gyro,
                 "linear_acceleration": accel}
 
-
-def matrix_to_quaternion(m):
-    """(x, y, z, w) of a rotation matrix (Shepperd's method, the largest component first)."""
-    trace = m[0, 0] + m[1, 1] + m[2, 2]
-    if trace > 0.0:
-        s = 2.0 * math.sqrt(1.0 + trace)
-        q = ((m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, 0.25 * s)
-    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
-        s = 2.0 * math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
-        q = (0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s, (m[2, 1] - m[1, 2]) / s)
-    elif m[1, 1] > m[2, 2]:
-        s = 2.0 * math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
-        q = ((m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s, (m[0, 2] - m[2, 0]) / s)
-    else:
-        s = 2.0 * math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
-        q = ((m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s, (m[1, 0] - m[0, 1]) / s)
-    q = np.array(q)
-    return q / np.linalg.norm(q)

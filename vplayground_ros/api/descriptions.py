@@ -3,9 +3,9 @@ and bounds of a body, a vehicle or a sensor.
 """
 import numpy as np
 
-from ..physics.math3d import rpy_to_quat
+from ..physics.math3d import matrix_to_quaternion, rpy_to_quat
 from ..physics.shapes import SHAPES, half_extents, solid
-from ..sensors import matrix_to_quaternion, pose_matrix
+from ..sensors import pose_matrix
 
 SENSOR_SIZE = 0.1  # m: the cube ~/get_entities draws a sensor as
 

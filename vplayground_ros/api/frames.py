@@ -8,10 +8,10 @@ thread, from the World: the state the next step starts from.
 import numpy as np
 
 from ..frame_names import mount_frame, sensor_frame
+from ..physics.math3d import matrix_to_quaternion, rpy_to_quat
 from ..robots import robot_transforms, world_robots
 from ..sensor_messages import static_frames
-from ..sensors import WORLD, matrix_to_quaternion, pose_matrix
-from ..physics.math3d import rpy_to_quat
+from ..sensors import WORLD, pose_matrix
 
 
 def frame_pose(world, frame, frames):

@@ -27,6 +27,7 @@ BodyArrays = namedtuple("BodyArrays", [
     "immovable",             # (N,) infinite mass, never moves
     "allow_freezing",        # (N,)
     "frozen",                # (N,) not simulated, static for others
+    "jointed",               # (N,) a joint holds it: it freezes and wakes with its group
     "freeze_timer",          # (N,) seconds spent below the freezing thresholds
     "static_indexed",        # (N,) the body sits in the rarely rebuilt static octree index
     "external_impulse",      # (N, 3) N*s applied at the next step, then cleared (~/push)
@@ -53,7 +54,7 @@ def allocate_bodies(capacity):
         velocity=np.zeros((capacity + 1, 6)), mass=f(), inv_mass=f(), inv_inertia=f(3, 3),
         shape=np.zeros(capacity, np.int64), dimensions=f(3), half_extents=f(3),
         elasticity=f(), static_friction=f(), dynamic_friction=f(), immovable=b(),
-        allow_freezing=b(), frozen=b(), freeze_timer=f(), static_indexed=b(),
+        allow_freezing=b(), frozen=b(), jointed=b(), freeze_timer=f(), static_indexed=b(),
         external_impulse=f(3), external_angular_impulse=f(3), awake=b(), rotation=f(3, 3),
         solver_inv_mass=f(), inv_inertia_world=f(3, 3), pseudo_velocity=np.zeros((capacity + 1, 6)),
         speculative_reach=f(), aabb_min=f(3), aabb_max=f(3),

@@ -37,6 +37,7 @@ from .constants import (LINEAR_SLOP, MAX_CORRECTION_SPEED, POSITION_CORRECTION,
                         RESTITUTION_THRESHOLD, SHOCK_SWEEPS, SHOCK_TOLERANCE,
                         STICKING_SPEED)
 from .contact import ARM_A, ARM_B, DIRECTION, TURN_A, TURN_B
+from .joints import solve_joint_sweep
 from .math3d import cross
 from .solve_schedule import shock_levels, split_chains, support_groups
 
@@ -240,7 +241,9 @@ def order_supports(contacts, bodies, gravity):
             # n points from A to B: pointing down, B holds A up.
             up = -(n[0] * gravity[0] + n[1] * gravity[1] + n[2] * gravity[2]) / g
             upper = a if up < -0.5 else (b if up > 0.5 else -1)
-        if upper < 0 or not bodies.awake[upper]:
+        # A jointed body is no upper: shock propagation moves the upper body alone, which
+        # would pull it off its joints (it still holds up what rests on it).
+        if upper < 0 or not bodies.awake[upper] or bodies.jointed[upper]:
             # Last step's one-sided impulses (warm_start_from, prepare_contacts) stay on a point
             # that is a support again; any other has none.
             contacts.support_impulse[c] = contacts.support_friction[c, 0] = contacts.support_friction[c, 1] = 0.0
@@ -284,6 +287,23 @@ def order_supports(contacts, bodies, gravity):
     contacts.support_count[0] = supports
 
 
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH, inline="always")
+def select_points(contacts, target):
+    """Puts the points a pass solves (target set) in contacts.sweep_points, in the sweep order;
+    returns how many. Once a pass: the collision pass takes only fast closing contacts and the
+    position pass only penetrating ones, and re-skipping the rest in every sweep cost more than
+    solving them."""
+    order, points = contacts.solve_order, contacts.sweep_points
+    # A typed zero: a literal 0 made Numba compile solve_rows_shared (and split_chains) once
+    # more for count == 0 while it typed this loop.
+    count = np.int64(0)
+    for k in range(contacts.count[0]):
+        if target[order[k]] > INACTIVE:
+            points[count] = order[k]
+            count += 1
+    return count
+
+
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
 def solve_rows(velocity, contacts, sweeps, target, normal_impulse, friction, with_friction, position,
                gravity, threads):
@@ -294,17 +314,8 @@ def solve_rows(velocity, contacts, sweeps, target, normal_impulse, friction, wit
     counts. Within a manifold that also puts the lowest (most loaded) corner first. With
     `threads` > 1 and enough points, two threads share the sweeps, with the same result
     (solve_schedule)."""
-    # The points this pass solves, once: the collision pass takes only fast closing contacts and
-    # the position pass only penetrating ones, and re-skipping the rest in every sweep cost more
-    # than solving them.
-    order, points = contacts.solve_order, contacts.sweep_points
-    # A typed zero: a literal 0 made Numba compile solve_rows_shared (and split_chains) once
-    # more for count == 0 while it typed this loop.
-    count = np.int64(0)
-    for k in range(contacts.count[0]):
-        if target[order[k]] > INACTIVE:
-            points[count] = order[k]
-            count += 1
+    points = contacts.sweep_points
+    count = select_points(contacts, target)
     if threads > 1 and count >= PARALLEL_MIN_POINTS and solve_rows_shared(
             velocity, contacts, sweeps, target, normal_impulse, friction, with_friction, position,
             gravity, points, count, threads):
@@ -497,10 +508,33 @@ def work_chains(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, targ
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
-def collision_pass(contacts, bodies, iterations, gravity, threads):
-    solve_rows(bodies.velocity, contacts, iterations, contacts.collision_target,
-               contacts.collision_impulse, contacts.collision_friction, True, bodies.position,
-               gravity, threads)
+def collision_pass(contacts, joints, bodies, iterations, gravity, threads):
+    if joints.count[0] == 0:
+        solve_rows(bodies.velocity, contacts, iterations, contacts.collision_target,
+                   contacts.collision_impulse, contacts.collision_friction, True, bodies.position,
+                   gravity, threads)
+    else:
+        solve_with_joints(bodies.velocity, contacts, joints, iterations, contacts.collision_target,
+                          contacts.collision_impulse, contacts.collision_friction,
+                          joints.collision_target, joints.collision_impulse, False)
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
+def solve_with_joints(velocity, contacts, joints, sweeps, target, normal_impulse, friction,
+                      joint_target, joint_impulse, with_motors):
+    """solve_rows' sweeps (with friction) with a sweep over the joints' rows after each, in
+    alternating order too: one pass over both kinds of row, so a robot's wheels press on the
+    ground through its axles. On the stepping thread alone (the two-thread schedule knows
+    contacts only); worlds without joints take solve_rows."""
+    count = select_points(contacts, target)
+    rows, row_mass, row_inv_mass = contacts.rows, contacts.row_mass, contacts.row_inv_mass
+    rows_a, rows_b, mu = contacts.velocity_a, contacts.velocity_b, contacts.friction_coefficient
+    for sweep in range(sweeps):
+        backwards = sweep % 2 == 1
+        solve_span(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu,
+                   contacts.sweep_points, 0, count, backwards, target, normal_impulse, friction,
+                   True)
+        solve_joint_sweep(velocity, joints, joint_target, joint_impulse, backwards, with_motors)
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
@@ -836,12 +870,17 @@ def shock_worker(velocity, rows, row_inv_mass, target, mu, impulse, friction, sh
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
-def contact_pass(contacts, bodies, iterations, gravity, threads):
-    """Velocities (zero elasticity, friction), shock propagation, then the split-impulse
-    position pass on the pseudo velocities; keeps the friction as a world vector for the next
-    step's warm start."""
-    solve_rows(bodies.velocity, contacts, iterations, contacts.contact_target, contacts.impulse,
-               contacts.friction, True, bodies.position, gravity, threads)
+def contact_pass(contacts, joints, bodies, iterations, gravity, threads):
+    """Velocities (zero elasticity, friction; the joints' rows with them), shock propagation,
+    then the split-impulse position pass on the pseudo velocities; keeps the friction as a world
+    vector for the next step's warm start."""
+    if joints.count[0] == 0:
+        solve_rows(bodies.velocity, contacts, iterations, contacts.contact_target, contacts.impulse,
+                   contacts.friction, True, bodies.position, gravity, threads)
+    else:
+        solve_with_joints(bodies.velocity, contacts, joints, iterations, contacts.contact_target,
+                          contacts.impulse, contacts.friction, joints.contact_target, joints.impulse,
+                          True)
     shock_propagation(contacts, bodies, threads)
     solve_rows(bodies.pseudo_velocity, contacts, iterations, contacts.position_target,
                contacts.position_impulse, contacts.friction, False, bodies.position, gravity, threads)

@@ -4,10 +4,15 @@ A body slower than both thresholds for `freezing.time` seconds freezes. A frozen
 an awake body touches it moving faster than WAKE_SPEED_FACTOR x the linear threshold at the
 contact (it was hit, or what it rests on moves), when a body it touches is removed or edited, and
 when it is edited itself (those two are the World's job, between steps).
+
+Bodies a joint holds together freeze and wake as one (a robot standing still sleeps whole; a
+link knocked wakes its robot): a jointed body freezes only with every moving body of its group.
 """
+import numpy as np
 from numba import njit
 
 from .constants import WAKE_SPEED_FACTOR
+from .joints import find_root
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True)
@@ -67,9 +72,58 @@ def update_freezing(bodies, live, enabled, time_to_freeze, linear_threshold, ang
             bodies.freeze_timer[i] = 0.0
             continue
         bodies.freeze_timer[i] += dt
-        if bodies.freeze_timer[i] >= time_to_freeze:
+        if bodies.freeze_timer[i] >= time_to_freeze and not bodies.jointed[i]:
             bodies.frozen[i] = True
             bodies.awake[i] = False
             v[:] = 0.0
             frozen += 1
+    return frozen
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
+def wake_joint_groups(bodies, joints):
+    """Wakes the frozen bodies jointed to a moving one, group-wide. Returns how many left stale
+    static-index entries."""
+    stale = 0
+    changed = True
+    while changed:  # one pass per link of the longest chain woken from one end
+        changed = False
+        for j in range(joints.count[0]):
+            a, b = joints.body_a[j], joints.body_b[j]
+            if a < 0 or b < 0 or bodies.frozen[a] == bodies.frozen[b]:
+                continue
+            sleeper, other = (a, b) if bodies.frozen[a] else (b, a)
+            if not bodies.immovable[other]:
+                stale += wake_body(bodies, sleeper)
+                changed = True
+    return stale
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
+def freeze_joint_groups(bodies, joints, time_to_freeze):
+    """Freezes the groups of jointed moving bodies (immovable ones and the world hold, not
+    join) whose every member has been slow for time_to_freeze (update_freezing keeps their
+    timers). Returns how many bodies froze."""
+    count = joints.count[0]
+    if count == 0:
+        return 0
+    parent = np.arange(len(bodies.active))
+    for j in range(count):
+        a, b = joints.body_a[j], joints.body_b[j]
+        if a >= 0 and b >= 0 and not bodies.immovable[a] and not bodies.immovable[b]:
+            parent[find_root(parent, a)] = find_root(parent, b)
+    ready = np.ones(len(bodies.active), np.bool_)
+    for j in range(count):
+        for body in (joints.body_a[j], joints.body_b[j]):
+            if body >= 0 and not bodies.immovable[body]:
+                if not (bodies.awake[body] and bodies.freeze_timer[body] >= time_to_freeze):
+                    ready[find_root(parent, body)] = False
+    frozen = 0
+    for j in range(count):
+        for body in (joints.body_a[j], joints.body_b[j]):
+            if body >= 0 and bodies.awake[body] and ready[find_root(parent, body)]:
+                bodies.frozen[body] = True
+                bodies.awake[body] = False
+                bodies.velocity[body, :] = 0.0
+                frozen += 1
     return frozen

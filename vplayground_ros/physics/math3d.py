@@ -1,4 +1,6 @@
 """Small vector and quaternion kernels. Quaternions are (x, y, z, w), rotations are body -> world."""
+import math
+
 import numpy as np
 from numba import njit
 
@@ -55,3 +57,50 @@ def rpy_to_quat(rpy):
                      cr * sp * cy + sr * cp * sy,
                      cr * cp * sy - sr * sp * cy,
                      cr * cp * cy + sr * sp * sy))
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
+def quat_multiply(a, b):
+    """a * b as a tuple (x, y, z, w): rotation b, then a."""
+    ax, ay, az, aw = a[0], a[1], a[2], a[3]
+    bx, by, bz, bw = b[0], b[1], b[2], b[3]
+    return (aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz)
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
+def quat_conjugate(q):
+    """The inverse rotation of unit quaternion q, as a tuple."""
+    return (-q[0], -q[1], -q[2], q[3])
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
+def rotate(q, v):
+    """Vector v turned by unit quaternion q, as a tuple: v + 2w (u x v) + 2 u x (u x v)."""
+    u = (q[0], q[1], q[2])
+    t = cross(u, v)
+    t = (2.0 * t[0], 2.0 * t[1], 2.0 * t[2])
+    s = cross(u, t)
+    return (v[0] + q[3] * t[0] + s[0], v[1] + q[3] * t[1] + s[1], v[2] + q[3] * t[2] + s[2])
+
+
+
+def matrix_to_quaternion(m):
+    """(x, y, z, w) of a rotation matrix (Shepperd's method, the largest component first)."""
+    trace = m[0, 0] + m[1, 1] + m[2, 2]
+    if trace > 0.0:
+        s = 2.0 * math.sqrt(1.0 + trace)
+        q = ((m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, 0.25 * s)
+    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
+        q = (0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s, (m[2, 1] - m[1, 2]) / s)
+    elif m[1, 1] > m[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
+        q = ((m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s, (m[0, 2] - m[2, 0]) / s)
+    else:
+        s = 2.0 * math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
+        q = ((m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s, (m[1, 0] - m[0, 1]) / s)
+    q = np.array(q)
+    return q / np.linalg.norm(q)

@@ -12,8 +12,9 @@ from .broad_phase import build_index, find_body_pairs
 from .constants import STATIC_REINDEX_MIN_PENDING, STATIC_REINDEX_PENDING_FRACTION
 from .contact import index_manifolds, warm_start_from
 from .contact_solver import collision_pass, contact_pass, prepare_contacts, warm_start
-from .freezing import update_freezing, wake_touched
+from .freezing import freeze_joint_groups, update_freezing, wake_joint_groups, wake_touched
 from .integrate import integrate_positions, integrate_velocities, update_bodies
+from .joints import drop_jointed_pairs, prepare_joints, record_effort, warm_start_joints
 from .narrow_phase import collide
 from .playground import find_playground_pairs
 from .step_context import swap_contacts
@@ -114,9 +115,10 @@ def reindex_limit(indexed, stale):
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
-def detect(bodies, hulls, broad, playground, contacts, settings, moving_ids):
+def detect(bodies, hulls, broad, playground, contacts, settings, moving_ids, excluded_pairs):
     """Broad phase then narrow phase for the current positions of the live bodies `moving_ids`
-    (list_live_bodies); `hulls` is the World's hull table of convex bodies. Returns a status."""
+    (list_live_bodies); `hulls` is the World's hull table of convex bodies; pairs whose key is
+    in `excluded_pairs` (jointed, sorted) are not collided. Returns a status."""
     s = settings
     if not build_index(broad.moving, moving_ids, bodies.aabb_min, bodies.aabb_max,
                        bodies.octree_level, s.root_min, s.root_size):
@@ -126,6 +128,8 @@ def detect(bodies, hulls, broad, playground, contacts, settings, moving_ids):
                             broad.pair_a, broad.pair_b)
     if pairs < 0:
         return GROW_PAIRS
+    if len(excluded_pairs) > 0:
+        pairs = drop_jointed_pairs(broad.pair_a, broad.pair_b, pairs, excluded_pairs)
     broad.pair_count[0] = pairs
     pairs = find_playground_pairs(playground, moving_ids, bodies, s.root_min, s.root_size,
                                   broad.playground_body, broad.playground_triangle)
@@ -200,12 +204,15 @@ def step_world(steps, ctx):
     """Runs up to `steps` steps of the StepContext `ctx`. Returns (steps done, status). A status
     other than DONE means a buffer was too small; that step has not been applied and the caller
     grows the buffer and goes on."""
-    bodies, broad, playground, s = ctx.bodies, ctx.broad, ctx.playground, ctx.settings
+    bodies, broad, playground, s, joints = ctx.bodies, ctx.broad, ctx.playground, ctx.settings, ctx.joints
     profile, stage_ns = ctx.profile, ctx.stage_ns
+    jointed = joints.count[0] > 0
     for done in range(steps):
         previous = ctx.contacts.pair[ctx.contacts.newest[0]]
         current = ctx.contacts.pair[1 - ctx.contacts.newest[0]]
         t = clock_ns(profile)
+        if jointed:  # a body the World woke between steps wakes its group
+            broad.stale[0] += wake_joint_groups(bodies, joints)
         # 1. Derived state: rotations, solver masses, broad-phase bounds (of every body when the
         #    octree changed under the static index).
         live = list_live_bodies(bodies, broad, broad.force_rebuild[0])
@@ -231,25 +238,30 @@ def step_world(steps, ctx):
         t = lap(profile, stage_ns, np.int64(STAGE_DERIVED), t)
         # 2. Collision detection (octree broad phase, narrow phase per shape pair) at the current
         #    positions, with speculative margins covering this step's motion.
-        status = detect(bodies, ctx.hulls, broad, playground, current, s, live)
+        status = detect(bodies, ctx.hulls, broad, playground, current, s, live, joints.excluded_pairs)
         if status != DONE:
             return done, status
         t = lap(profile, stage_ns, np.int64(STAGE_DETECTION), t)
         # 3. Freezing: sleepers touched by moving bodies wake, and are detected again with their
-        #    own contacts so they do not sink for a step.
+        #    own contacts so they do not sink for a step, and so do their jointed groups.
         woken, stale = wake_touched(current, bodies, s.freezing_linear_speed)
+        if woken > 0 and jointed:
+            stale += wake_joint_groups(bodies, joints)
         if woken > 0:
             live = list_live_bodies(bodies, broad, np.bool_(False))
             update_bodies(bodies, live, s.dt, s.root_size, s.octree_depth)
             broad.stale[0] += stale
-            status = detect(bodies, ctx.hulls, broad, playground, current, s, live)
+            status = detect(bodies, ctx.hulls, broad, playground, current, s, live, joints.excluded_pairs)
             if status != DONE:
                 return done, status
         t = lap(profile, stage_ns, np.int64(STAGE_WAKE), t)
-        # 4. Collision pass with the pre-step velocities and the bodies' elasticity.
+        # 4. Collision pass with the pre-step velocities and the bodies' elasticity; the joints
+        #    hold (their rows without position correction or motors' drive).
         warm_start_from(previous, current)
         prepare_contacts(current, bodies, s.ground_material, s.gravity, s.dt)
-        collision_pass(current, bodies, s.resolve_iterations, s.gravity, s.solver_threads)
+        if jointed:
+            prepare_joints(joints, bodies, s.dt)
+        collision_pass(current, joints, bodies, s.resolve_iterations, s.gravity, s.solver_threads)
         t = lap(profile, stage_ns, np.int64(STAGE_COLLISION), t)
         # 5. Velocity update with external forces: the cars' wheels (springs and dampers see the
         #    velocities before gravity adds its share, or dampers would hold up the cars), then
@@ -257,9 +269,14 @@ def step_world(steps, ctx):
         drive_vehicles(ctx.vehicles, bodies, ctx.hulls, broad, playground, s)
         integrate_velocities(bodies, live, s.gravity, s.dt)
         t = lap(profile, stage_ns, np.int64(STAGE_FORCES), t)
-        # 6. Contact pass: zero elasticity, twice the iterations, split-impulse penetration fix.
+        # 6. Contact pass: zero elasticity, twice the iterations, split-impulse penetration fix;
+        #    the joints' rows with the contacts', correcting their drift and driving motors.
         warm_start(current, bodies)
-        contact_pass(current, bodies, 2 * s.resolve_iterations, s.gravity, s.solver_threads)
+        if jointed:
+            warm_start_joints(joints, bodies.velocity)
+        contact_pass(current, joints, bodies, 2 * s.resolve_iterations, s.gravity, s.solver_threads)
+        if jointed:
+            record_effort(joints, s.dt)
         t = lap(profile, stage_ns, np.int64(STAGE_CONTACT), t)
         # 7. Positions from velocities.
         integrate_positions(bodies, live, s.dt)
@@ -267,6 +284,8 @@ def step_world(steps, ctx):
         # 8. Freezing of bodies that have been at rest long enough.
         frozen_now = update_freezing(bodies, live, s.freezing_enabled, s.freezing_time,
                                      s.freezing_linear_speed, s.freezing_angular_speed, s.dt)
+        if jointed and s.freezing_enabled:
+            frozen_now += freeze_joint_groups(bodies, joints, s.freezing_time)
         index_manifolds(current)
         lap(profile, stage_ns, np.int64(STAGE_FREEZING), t)
         stats = ctx.stats

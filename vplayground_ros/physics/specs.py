@@ -429,3 +429,88 @@ def mass_properties(solid, mass, path):
         raise SpecError(path, f"the body's inertia (principal moments {', '.join(f'{m:g}' for m in moments)} "
                               "kg m^2) has no finite inverse")
     return MassProperties(float(mass), 1.0 / mass, inverse)
+
+
+# Joints (World.add_joint): `parent` a body's name or absent (the world), `child` a body's name,
+# `anchor` and `axis` in the world when the joint is made (the anchor defaults to the child's
+# centre of mass), limits along the axis (rad or m; revolute and prismatic), a motor.
+JOINT_TYPES = ("fixed", "revolute", "continuous", "prismatic")
+JOINT_KEYS = {"name", "type", "parent", "child", "anchor", "axis", "lower", "upper", "motor",
+              "collide_connected"}
+JOINT_EDIT_KEYS = {"lower", "upper", "motor", "collide_connected"}
+MOTOR_KEYS = {"mode", "target", "max_effort", "max_speed"}
+MOTOR_MODES = ("none", "velocity", "position")
+MOTOR_DEFAULTS = {"mode": "none", "target": 0.0, "max_effort": math.inf, "max_speed": math.inf}
+MAX_EFFORT = 1.0e12  # N or N m
+
+
+def validate_joint(raw, path="joint"):
+    """A complete joint spec: the given keys, checked, over the defaults (name and anchor stay
+    optional: the World names it and puts the anchor at the child's centre of mass)."""
+    mapping(raw, path, JOINT_KEYS)
+    if "type" not in raw:
+        raise SpecError(child(path, "type"), f"missing (one of {', '.join(JOINT_TYPES)})")
+    if "child" not in raw:
+        raise SpecError(child(path, "child"), "missing (the name of the body the joint holds)")
+    joint = {"type": raw["type"], "child": name(raw["child"], child(path, "child")),
+             "axis": [0.0, 0.0, 1.0], "lower": -math.inf, "upper": math.inf,
+             "motor": dict(MOTOR_DEFAULTS), "collide_connected": False}
+    if joint["type"] not in JOINT_TYPES:
+        raise SpecError(child(path, "type"), f"unsupported joint type {quote(joint['type'])} "
+                                             f"(supported: {', '.join(JOINT_TYPES)})")
+    for key in ("name", "parent"):
+        if raw.get(key) is not None:
+            joint[key] = name(raw[key], child(path, key))
+    if joint.get("parent") == joint["child"]:
+        raise SpecError(child(path, "parent"), f"{joint['child']!r} is the child too: a joint holds two bodies")
+    if "anchor" in raw:
+        joint["anchor"] = vector(raw["anchor"], child(path, "anchor"), 3, -MAX_COORDINATE, MAX_COORDINATE)
+    if "axis" in raw:
+        axis = vector(raw["axis"], child(path, "axis"), 3, -1.0e3, 1.0e3)
+        length = math.sqrt(sum(v * v for v in axis))
+        if length < 1e-6:
+            raise SpecError(child(path, "axis"), "has zero length")
+        joint["axis"] = [v / length for v in axis]
+    return {**joint, **validate_joint_edit({k: raw[k] for k in JOINT_EDIT_KEYS & raw.keys()},
+                                           path, joint["type"], joint)}
+
+
+def validate_joint_edit(raw, path, joint_type, current):
+    """The given editable keys of a joint (limits, motor, collide_connected), checked against
+    the joint's type and its `current` values (validate_joint's complete spec)."""
+    mapping(raw, path, JOINT_EDIT_KEYS)
+    out = {}
+    for key in ("lower", "upper"):
+        if key in raw:
+            if joint_type not in ("revolute", "prismatic"):
+                raise SpecError(child(path, key), f"a {joint_type} joint has no limits")
+            value = raw[key]
+            if value not in (math.inf, -math.inf):
+                value = number(value, child(path, key), -MAX_COORDINATE, MAX_COORDINATE)
+            out[key] = float(value)
+    lower, upper = out.get("lower", current["lower"]), out.get("upper", current["upper"])
+    if lower > upper:
+        raise SpecError(child(path, "lower" if "lower" in out else "upper"),
+                        f"lower limit {lower:g} is above the upper limit {upper:g}")
+    if "motor" in raw:
+        motor_path = child(path, "motor")
+        motor = mapping(raw["motor"], motor_path, MOTOR_KEYS)
+        merged = dict(current["motor"])
+        if "mode" in motor:
+            if motor["mode"] not in MOTOR_MODES:
+                raise SpecError(child(motor_path, "mode"), f"unsupported motor mode {quote(motor['mode'])} "
+                                                           f"(supported: {', '.join(MOTOR_MODES)})")
+            merged["mode"] = motor["mode"]
+        if "target" in motor:
+            merged["target"] = number(motor["target"], child(motor_path, "target"), -MAX_COORDINATE, MAX_COORDINATE)
+        for key in ("max_effort", "max_speed"):
+            if key in motor:
+                value = motor[key]
+                merged[key] = math.inf if value == math.inf else number(
+                    value, child(motor_path, key), 0.0, MAX_EFFORT if key == "max_effort" else MAX_SPEED, low_open=True)
+        if merged["mode"] != "none" and joint_type == "fixed":
+            raise SpecError(child(motor_path, "mode"), "a fixed joint has no motor")
+        out["motor"] = merged
+    if "collide_connected" in raw:
+        out["collide_connected"] = boolean(raw["collide_connected"], child(path, "collide_connected"))
+    return out

@@ -20,7 +20,9 @@ from .constants import CONTACT_MARGIN
 from .contact import index_manifolds
 from .freezing import wake_body
 from .jit_cache import compile_once
-from .math3d import rpy_to_quat
+from .joint_registry import JointRegistry
+from .joints import WORLD_SIDE, measure_joints
+from .math3d import matrix_to_quaternion, quaternions_to_matrices, rpy_to_quat
 from .pipeline import (DONE, GROW_CONTACTS, GROW_INDEX, GROW_PAIRS, STAGES, STAT_FROZEN,
                        STAT_PAIRS, STAT_POINTS, STAT_TRIANGLES, STAT_WOKEN, resting_steps,
                        step_world)
@@ -109,6 +111,8 @@ class World(WorldQueries):
         # immovable bodies do not move).
         self._unchecked = np.ones(capacity, dtype=bool)
         self._vehicles = VehicleRegistry()  # the chassis of each is the body of its name
+        self._joints = JointRegistry()
+        self._generated_joints = 0
         self._broad = allocate_broad_phase(capacity, 4 * capacity)
         self._contacts = allocate_contact_buffers(16 * capacity, 4 * capacity)
         self._root = None  # (min corner, edge length) of the octree root cube; fitted lazily
@@ -295,6 +299,7 @@ class World(WorldQueries):
         slots = np.array([self._slot(name) for name in names], dtype=np.int64)
         if len(slots) == 0:
             return
+        self._remove_joints(self._joints.holding(slots))
         self._wake_touching(slots)
         self._forget_contacts(slots)
         for name, slot in zip(names, slots):
@@ -320,6 +325,93 @@ class World(WorldQueries):
             self._pack_hulls()
         self.layout_version += 1
         heapq.heappush(self._free, slot)
+
+    # ----------------------------------------------------------------- joints
+    def add_joint(self, spec, path="joint"):
+        """Adds a joint from a spec (specs.validate_joint) between two bodies, or a body and the
+        world (no `parent`), as they stand now: its anchor and axis are fixed to each body here,
+        and its coordinate is 0 in this pose. Returns its (given or generated) unique name.
+        Jointed bodies do not collide with each other unless `collide_connected`."""
+        joint = specs.validate_joint(spec, path)
+        name = joint.get("name")
+        if name is None:
+            name = self._generate_joint_name()
+        elif name in self._joints:
+            raise ValueError(f"{path}.name: a joint named {name!r} already exists")
+        sides = []
+        for key in ("parent", "child"):
+            if key not in joint:
+                sides.append(WORLD_SIDE)
+            elif joint[key] not in self._slots:
+                raise specs.SpecError(f"{path}.{key}", f"no body named {joint[key]!r}")
+            else:
+                sides.append(self._slots[joint[key]])
+        b = self._bodies
+        anchor = np.array(joint.get("anchor", b.position[sides[1]]), dtype=np.float64)
+        joint["anchor"] = anchor.tolist()
+        frame = joint_frame(np.asarray(joint["axis"]))
+        anchors, frames = [], []
+        for slot in sides:
+            if slot == WORLD_SIDE:
+                centre, rotation = np.zeros(3), np.eye(3)
+            else:
+                centre, rotation = b.position[slot], quaternions_to_matrices(b.orientation[slot][None])[0]
+            anchors.append(rotation.T @ (anchor - centre))
+            frames.append(matrix_to_quaternion(rotation.T @ frame))
+        self._joints.add(name, joint, sides, anchors, frames)
+        self._joints.update_bodies(b.jointed)
+        self._forget_contacts([slot for slot in sides if slot != WORLD_SIDE])
+        for slot in sides:
+            if slot != WORLD_SIDE:
+                self._wake(slot)
+        return name
+
+    def joint_names(self):
+        """Every joint, in the order they were made (the order the solver sweeps them)."""
+        return self._joints.names()
+
+    def joint(self, name):
+        """The joint's spec as made (anchor and axis in the world then) and its state now:
+        `position` (rad, turns counted, or m; 0 where it was made), `velocity` (rad/s or m/s)
+        and `effort` (N m or N its motor and limits applied along the axis in the last step)."""
+        row = self._joints.row(name)
+        arrays = self._joints.arrays
+        measure_joints(self._bodies, arrays)
+        spec = self._joints.spec(name)
+        return {**spec, "motor": dict(spec["motor"]), "position": float(arrays.position[row]),
+                "velocity": float(arrays.speed[row]), "effort": float(arrays.effort[row])}
+
+    def edit_joint(self, name, /, **fields):
+        """Changes only the given keys: lower, upper, motor (a partial mapping: mode, target,
+        max_effort, max_speed) and collide_connected. Wakes the bodies it holds."""
+        spec = self._joints.spec(name)
+        edit = specs.validate_joint_edit(fields, name, spec["type"], spec)
+        self._joints.edit(name, edit)
+        self._joints.update_bodies(self._bodies.jointed)
+        for slot in self._joints.slots(name):
+            if slot != WORLD_SIDE:
+                self._wake(slot)
+
+    def remove_joint(self, name):
+        self._joints.row(name)  # KeyError for an unknown name
+        self._remove_joints([name])
+
+    def _remove_joints(self, names):
+        if not names:
+            return
+        held = {slot for name in names for slot in self._joints.slots(name) if slot != WORLD_SIDE}
+        self._joints.remove(names)
+        self._joints.update_bodies(self._bodies.jointed)
+        for slot in held:
+            if self._bodies.active[slot]:
+                self._wake(slot)
+
+    def _generate_joint_name(self):
+        while True:
+            self._generated_joints += 1
+            name = f"joint_{self._generated_joints}"
+            if name not in self._joints:
+                return name
 
     def apply_impulse(self, name, impulse=(0.0, 0.0, 0.0), angular_impulse=(0.0, 0.0, 0.0)):
         """Queues an impulse (N s) and an angular impulse (N m s, world) for the next step: the
@@ -433,7 +525,7 @@ class World(WorldQueries):
         done = 0
         while done < n:
             ctx = StepContext(self._bodies, self._hulls, self._playground, self._vehicles.arrays, self._broad,
-                              self._contacts, kernel_settings(self.settings, self.ground, specs.DEFAULT_GROUND,
+                              self._contacts, self._joints.arrays, kernel_settings(self.settings, self.ground, specs.DEFAULT_GROUND,
                                                               self._root, self._solver_threads),
                               counters, self._stage_ns, self.profiling)
             started = time.thread_time()
@@ -627,6 +719,15 @@ class World(WorldQueries):
         self._contacts = grown
 
 
+def joint_frame(axis):
+    """A rotation whose x column is the unit `axis` (the other two: any right-handed pair across
+    it, chosen from the world axis least along it)."""
+    helper = np.eye(3)[int(np.argmin(np.abs(axis)))]
+    across = np.cross(axis, helper)
+    across /= np.linalg.norm(across)
+    return np.column_stack([axis, across, np.cross(axis, across)])
+
+
 def warm_up():
     """Compiles (or loads) the kernels of everything a world does, in this one process
     (jit_cache.compile_once): a step of every shape on the ground, on a playground and under a
@@ -645,7 +746,16 @@ def warm_up():
                        "chassis": {"size": [2.0, 1.0, 0.4], "mass": 400.0},
                        "wheels": [{"mount": [x, y, -0.2], "radius": 0.25}
                                   for x in (0.7, -0.7) for y in (0.5, -0.5)]})
+    # Each kind of joint, with limits and both motors: the joint rows compile with the step.
+    names = world.body_names()
+    world.add_joint({"type": "revolute", "parent": names[0], "child": names[1], "axis": [0, 1, 0],
+                     "lower": -1.0, "upper": 1.0, "motor": {"mode": "position", "max_effort": 10.0}})
+    world.add_joint({"type": "prismatic", "child": names[2], "lower": -0.5,
+                     "motor": {"mode": "velocity", "target": 0.1}})
+    world.add_joint({"type": "fixed", "parent": names[3], "child": names[4]})
+    world.add_joint({"type": "continuous", "parent": names[4], "child": names[0]})
     world.step(8)
+    world.joint(world.joint_names()[0])
     world.cast_rays(np.zeros((2, 3)), np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0]]), 10.0)
     world.contacts()
     world.octree_cells()

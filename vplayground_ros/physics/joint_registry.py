@@ -1,0 +1,112 @@
+"""The World's joints: their validated specs by name and their rows in the arrays the joint
+kernels (joints.py) solve, kept packed in the order they were made (the solver's sweep order).
+The bodies they hold are the World's; this registry knows them by slot, and the World removes a
+body's joints with it, so no joint ever holds a slot another body has since taken."""
+import numpy as np
+
+from .joints import KINDS, MOTORS, PERSISTENT, WORLD_SIDE, allocate_joints, pair_key
+
+
+class JointRegistry:
+    def __init__(self):
+        self.arrays = allocate_joints(4)  # what the kernels take
+        self._names = []  # row order
+        self._specs = {}  # name -> validated spec (parent and child by name)
+
+    def __contains__(self, name):
+        return name in self._specs
+
+    def __len__(self):
+        return len(self._names)
+
+    def names(self):
+        return list(self._names)
+
+    def spec(self, name):
+        self.row(name)  # KeyError naming it
+        return self._specs[name]
+
+    def row(self, name):
+        try:
+            return self._names.index(name)
+        except ValueError:
+            raise KeyError(f"no joint named {name!r}") from None
+
+    def add(self, name, joint, slots, anchors, frames):
+        """Appends a validated joint between body slots (parent, child; WORLD_SIDE for the
+        world), with its anchor and frame (x: the axis) in each side's body frame."""
+        count = len(self._names)
+        if count == len(self.arrays.kind):
+            self._grow(2 * count)
+        a = self.arrays
+        a.kind[count] = KINDS[joint["type"]]
+        a.body_a[count], a.body_b[count] = slots
+        a.anchor_a[count], a.anchor_b[count] = anchors
+        a.frame_a[count], a.frame_b[count] = frames
+        for field in ("position", "wrapped_angle", "speed", "effort"):
+            getattr(a, field)[count] = 0.0
+        a.impulse[count] = 0.0
+        a.count[0] = count + 1
+        self._names.append(name)
+        self._specs[name] = {**joint, "name": name}
+        self.edit(name, joint)
+
+    def edit(self, name, fields):
+        """Applies validated limits, motor and collide_connected."""
+        row, a = self.row(name), self.arrays
+        spec = self._specs[name]
+        spec.update(fields)
+        a.lower[row], a.upper[row] = spec["lower"], spec["upper"]
+        motor = spec["motor"]
+        a.motor_mode[row] = MOTORS[motor["mode"]]
+        a.motor_target[row] = motor["target"]
+        a.max_effort[row], a.max_speed[row] = motor["max_effort"], motor["max_speed"]
+        a.collide_connected[row] = spec["collide_connected"]
+
+    def remove(self, names):
+        """Drops joints, keeping the others packed in their order."""
+        gone = {self.row(name) for name in names}
+        if not gone:
+            return
+        keep = np.array([row for row in range(len(self._names)) if row not in gone], np.int64)
+        a = self.arrays
+        for field in PERSISTENT:
+            values = getattr(a, field)
+            values[:len(keep)] = values[keep]
+        a.count[0] = len(keep)
+        for row in sorted(gone, reverse=True):
+            del self._specs[self._names.pop(row)]
+
+    def holding(self, slots):
+        """The joints that hold any of the body slots."""
+        slots = set(int(slot) for slot in slots)
+        a = self.arrays
+        return [name for row, name in enumerate(self._names)
+                if int(a.body_a[row]) in slots or int(a.body_b[row]) in slots]
+
+    def slots(self, name):
+        row = self.row(name)
+        return int(self.arrays.body_a[row]), int(self.arrays.body_b[row])
+
+    def update_bodies(self, jointed):
+        """Marks the jointed bodies in `jointed` (the bodies' flag array) and lists the pairs
+        that must not collide, sorted, for the broad phase."""
+        a, count = self.arrays, len(self._names)
+        jointed[:] = False
+        excluded = []
+        for row in range(count):
+            pair = [int(a.body_a[row]), int(a.body_b[row])]
+            for slot in pair:
+                if slot != WORLD_SIDE:
+                    jointed[slot] = True
+            if WORLD_SIDE not in pair and not a.collide_connected[row]:
+                excluded.append(pair_key(*pair))
+        self.arrays = a._replace(excluded_pairs=np.array(sorted(set(excluded)), np.int64))
+
+    def _grow(self, capacity):
+        grown = allocate_joints(capacity)
+        old = self.arrays
+        n = len(old.kind)
+        for field in PERSISTENT:
+            getattr(grown, field)[:n] = getattr(old, field)
+        self.arrays = grown._replace(count=old.count, excluded_pairs=old.excluded_pairs)
