@@ -1,5 +1,6 @@
 """Joints against analytic answers (issue 38's accuracy targets), and the World's joint API."""
 import math
+import re
 
 import numpy as np
 import pytest
@@ -317,3 +318,56 @@ def test_differential_drive_robot_drives_its_circle():
     fitted = math.sqrt(c + cx * cx + cy * cy)
     assert fitted == pytest.approx(math.hypot(radius, axle_x), rel=0.02)
     assert np.ptp(np.linalg.norm(points - [cx, cy], axis=1)) < 0.01 * radius  # a circle, not a spiral
+
+
+CHAIN_SCENE = {
+    "version": 1,
+    "settings": {"freezing": {"enabled": False}},
+    "bodies": [{"name": "upper", "size": [0.1, 0.1, 0.6], "mass": 1.0, "position": [0, 0, 2.7]},
+               {"name": "lower", "size": [0.1, 0.1, 0.6], "mass": 2.0, "position": [0, 0, 2.1]},
+               {"name": "slider", "size": [0.2, 0.2, 0.2], "position": [1, 0, 1]}],
+    "joints": [{"name": "shoulder", "type": "revolute", "child": "upper", "anchor": [0, 0, 3],
+                "axis": [1, 0, 0], "lower": -1.0, "upper": 1.0},
+               {"name": "elbow", "type": "continuous", "parent": "upper", "child": "lower",
+                "anchor": [0, 0, 2.4], "axis": [1, 0, 0],
+                "motor": {"mode": "velocity", "target": 2.0, "max_effort": 5.0}},
+               {"name": "rail", "type": "prismatic", "child": "slider", "axis": [0, 1, 0],
+                "lower": -0.5, "upper": 0.5, "motor": {"mode": "position", "target": 0.3}}],
+}
+
+
+def test_scene_joints_load_and_save_whole(tmp_path):
+    from vplayground_ros.scene import load_world, save_world
+    world = load_world(CHAIN_SCENE)
+    world.step(100)  # swinging, the elbow turning, the slider on its way
+    saved = {name: world.joint(name) for name in world.joint_names()}
+    assert saved["shoulder"]["position"] != 0.0 and saved["elbow"]["position"] > 0.5
+    save_world(world, tmp_path / "saved.yaml")
+    again = load_world(tmp_path / "saved.yaml")
+    assert again.joint_names() == ["shoulder", "elbow", "rail"]
+    for name, joint in saved.items():
+        reloaded = again.joint(name)
+        for key in ("type", "lower", "upper", "motor", "collide_connected"):
+            assert reloaded[key] == joint[key]
+        for key in ("position", "velocity"):  # where they were, not back at 0
+            assert reloaded[key] == pytest.approx(joint[key], abs=1e-9)
+        np.testing.assert_allclose(reloaded["anchor"], joint["anchor"], atol=1e-12)
+        np.testing.assert_allclose(reloaded["axis"], joint["axis"], atol=1e-12)
+    # And they go on as the original does (the warm start aside).
+    world.step(64)
+    again.step(64)
+    for name in saved:
+        assert again.joint(name)["position"] == pytest.approx(world.joint(name)["position"], abs=1e-3)
+
+
+@pytest.mark.parametrize("joints, message", [
+    ([{"type": "fixed", "child": "ghost"}], "joints[0].child: no body or vehicle named 'ghost' in the scene"),
+    ([{"name": "j", "type": "fixed", "child": "upper"}, {"name": "j", "type": "fixed", "child": "lower"}],
+     "joints[1].name: duplicate joint name 'j'"),
+    ([{"type": "fixed", "child": "upper", "position": 1.0}], "joints[0].position: a fixed joint has no position"),
+    ("elbow", "joints: expected a list"),
+])
+def test_scene_joint_errors_name_the_key(joints, message):
+    from vplayground_ros.scene import SceneError, load_world
+    with pytest.raises(SceneError, match=re.escape(message)):
+        load_world({**CHAIN_SCENE, "joints": joints})

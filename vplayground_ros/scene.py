@@ -24,7 +24,8 @@ from .robots import validate_robot, world_robots
 from .sensors import validate_sensors
 
 SCENE_VERSION = 1
-TOP_LEVEL_KEYS = {"version", "settings", "ground", "playground", "bodies", "vehicles", "sensors"}
+TOP_LEVEL_KEYS = {"version", "settings", "ground", "playground", "bodies", "vehicles", "joints",
+                  "sensors"}
 PLAYGROUND_KEYS = {"mesh", "position", "rpy", "scale"}
 MAX_PLAYGROUND_TRIANGLES = 500_000  # beyond this the octree and the viewer stop being real-time
 # Files are measured before they are read, so a hostile or mistaken path (a multi-gigabyte file)
@@ -316,7 +317,27 @@ def validate_scene(scene, base, max_bodies=None, directories=None, frames=DEFAUL
             if frame in taken:
                 raise specs.SpecError(f"sensors[{k}].frame_id", f"the frame {specs.quote(frame)} is {taken[frame]}")
             taken[frame] = f"a frame of the sensor {sensor['name']}"
-    return settings, ground, playground, bodies, vehicles, sensors
+    joints = validate_joints(scene, owners)
+    return settings, ground, playground, bodies, vehicles, joints, sensors
+
+
+def validate_joints(scene, owners):
+    """The scene's `joints` (specs.validate_joint), each name given once, between bodies or
+    vehicles of the scene (`owners`: their names)."""
+    joints, names = [], set()
+    for k, raw in enumerate(validate_list(scene, "joints")):
+        path = f"joints[{k}]"
+        joint = specs.validate_joint(raw, path)
+        for key in ("parent", "child"):
+            if key in joint and joint[key] not in owners:
+                raise specs.SpecError(f"{path}.{key}", f"no body or vehicle named {specs.quote(joint[key])} "
+                                                       "in the scene")
+        if "name" in joint:
+            if joint["name"] in names:
+                raise specs.SpecError(f"{path}.name", f"duplicate joint name {specs.quote(joint['name'])}")
+            names.add(joint["name"])
+        joints.append(joint)
+    return joints
 
 
 def load_world(path_or_dict, max_bodies=None, directories=None, frames=DEFAULT_FRAMES):
@@ -325,7 +346,7 @@ def load_world(path_or_dict, max_bodies=None, directories=None, frames=DEFAULT_F
     frame names (parameters.Frames), which no body or sensor may take."""
     scene, label, base = read_scene(path_or_dict)
     try:
-        settings, ground, playground, bodies, vehicles, sensor_specs = validate_scene(
+        settings, ground, playground, bodies, vehicles, joints, sensor_specs = validate_scene(
             scene, base, max_bodies, directories, frames)
     except specs.SpecError as error:
         raise SceneError(f"{label}: {error}", error) from None
@@ -342,7 +363,8 @@ def load_world(path_or_dict, max_bodies=None, directories=None, frames=DEFAULT_F
         if dropped:
             log.warning("%s: playground mesh %s: dropped %d degenerate triangles", label,
                         spec["mesh"], dropped)
-    for key, entries, add in (("bodies", bodies, world.add_body), ("vehicles", vehicles, world.add_vehicle)):
+    for key, entries, add in (("bodies", bodies, world.add_body), ("vehicles", vehicles, world.add_vehicle),
+                              ("joints", joints, world.add_joint)):
         for k, entry in enumerate(entries):
             try:
                 add(entry, f"{key}[{k}]")
@@ -383,6 +405,10 @@ def world_to_scene(world):
                                "mesh": packaged_mesh_name(world.playground_spec["mesh"])}
     scene["bodies"] = [world.body(name) for name in world.body_names() if name not in vehicles]
     scene["vehicles"] = [world.vehicle(name) for name in vehicles]
+    joints = [{key: value for key, value in world.joint(name).items() if key not in ("velocity", "effort")}
+              for name in world.joint_names()]
+    if joints:
+        scene["joints"] = joints
     present = set(world.body_names())
     sensors = [dict(s) for s in world.sensor_specs if s["parent"] == "world" or s["parent"] in present]
     if sensors:

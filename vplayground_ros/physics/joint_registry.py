@@ -34,7 +34,8 @@ class JointRegistry:
 
     def add(self, name, joint, slots, anchors, frames):
         """Appends a validated joint between body slots (parent, child; WORLD_SIDE for the
-        world), with its anchor and frame (x: the axis) in each side's body frame."""
+        world), with its anchor and frame (x: the axis) in each side's body frame, at its
+        `position` (0 unless the spec gives one)."""
         count = len(self._names)
         if count == len(self.arrays.kind):
             self._grow(2 * count)
@@ -43,8 +44,9 @@ class JointRegistry:
         a.body_a[count], a.body_b[count] = slots
         a.anchor_a[count], a.anchor_b[count] = anchors
         a.frame_a[count], a.frame_b[count] = frames
-        for field in ("position", "wrapped_angle", "speed", "effort"):
-            getattr(a, field)[count] = 0.0
+        a.position[count] = joint.get("position", 0.0)
+        a.wrapped_angle[count] = (a.position[count] + np.pi) % (2 * np.pi) - np.pi
+        a.speed[count] = a.effort[count] = 0.0
         a.impulse[count] = 0.0
         a.count[0] = count + 1
         self._names.append(name)

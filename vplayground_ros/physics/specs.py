@@ -433,10 +433,11 @@ def mass_properties(solid, mass, path):
 
 # Joints (World.add_joint): `parent` a body's name or absent (the world), `child` a body's name,
 # `anchor` and `axis` in the world when the joint is made (the anchor defaults to the child's
-# centre of mass), limits along the axis (rad or m; revolute and prismatic), a motor.
+# centre of mass), the joint's coordinate in that pose (`position`, default 0), limits along
+# the axis (rad or m; revolute and prismatic), a motor.
 JOINT_TYPES = ("fixed", "revolute", "continuous", "prismatic")
-JOINT_KEYS = {"name", "type", "parent", "child", "anchor", "axis", "lower", "upper", "motor",
-              "collide_connected"}
+JOINT_KEYS = {"name", "type", "parent", "child", "anchor", "axis", "position", "lower", "upper",
+              "motor", "collide_connected"}
 JOINT_EDIT_KEYS = {"lower", "upper", "motor", "collide_connected"}
 MOTOR_KEYS = {"mode", "target", "max_effort", "max_speed"}
 MOTOR_MODES = ("none", "velocity", "position")
@@ -471,6 +472,10 @@ def validate_joint(raw, path="joint"):
         if length < 1e-6:
             raise SpecError(child(path, "axis"), "has zero length")
         joint["axis"] = [v / length for v in axis]
+    if "position" in raw:
+        if joint["type"] == "fixed":
+            raise SpecError(child(path, "position"), "a fixed joint has no position")
+        joint["position"] = number(raw["position"], child(path, "position"), -MAX_COORDINATE, MAX_COORDINATE)
     return {**joint, **validate_joint_edit({k: raw[k] for k in JOINT_EDIT_KEYS & raw.keys()},
                                            path, joint["type"], joint)}
 
@@ -482,12 +487,13 @@ def validate_joint_edit(raw, path, joint_type, current):
     out = {}
     for key in ("lower", "upper"):
         if key in raw:
+            value = raw[key]
+            if value in (math.inf, -math.inf):  # no limit (how a saved scene writes none)
+                out[key] = float(value)
+                continue
             if joint_type not in ("revolute", "prismatic"):
                 raise SpecError(child(path, key), f"a {joint_type} joint has no limits")
-            value = raw[key]
-            if value not in (math.inf, -math.inf):
-                value = number(value, child(path, key), -MAX_COORDINATE, MAX_COORDINATE)
-            out[key] = float(value)
+            out[key] = number(value, child(path, key), -MAX_COORDINATE, MAX_COORDINATE)
     lower, upper = out.get("lower", current["lower"]), out.get("upper", current["upper"])
     if lower > upper:
         raise SpecError(child(path, "lower" if "lower" in out else "upper"),

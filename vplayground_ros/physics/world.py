@@ -348,16 +348,19 @@ class World(WorldQueries):
                 sides.append(self._slots[joint[key]])
         b = self._bodies
         anchor = np.array(joint.get("anchor", b.position[sides[1]]), dtype=np.float64)
-        joint["anchor"] = anchor.tolist()
-        frame = joint_frame(np.asarray(joint["axis"]))
+        axis = np.asarray(joint["axis"])
+        frame = joint_frame(axis)
+        # The parent's frame and anchor sit `position` back along the axis from the child's.
+        moved = joint.get("position", 0.0)
+        if joint["type"] == "prismatic":
+            placed = ((anchor - moved * axis, frame), (anchor, frame))
+        else:
+            placed = ((anchor, axis_rotation(axis, -moved) @ frame), (anchor, frame))
         anchors, frames = [], []
-        for slot in sides:
-            if slot == WORLD_SIDE:
-                centre, rotation = np.zeros(3), np.eye(3)
-            else:
-                centre, rotation = b.position[slot], quaternions_to_matrices(b.orientation[slot][None])[0]
-            anchors.append(rotation.T @ (anchor - centre))
-            frames.append(matrix_to_quaternion(rotation.T @ frame))
+        for slot, (point, orientation) in zip(sides, placed):
+            centre, rotation = self._pose(slot)
+            anchors.append(rotation.T @ (point - centre))
+            frames.append(matrix_to_quaternion(rotation.T @ orientation))
         self._joints.add(name, joint, sides, anchors, frames)
         self._joints.update_bodies(b.jointed)
         self._forget_contacts([slot for slot in sides if slot != WORLD_SIDE])
@@ -371,15 +374,28 @@ class World(WorldQueries):
         return self._joints.names()
 
     def joint(self, name):
-        """The joint's spec as made (anchor and axis in the world then) and its state now:
-        `position` (rad, turns counted, or m; 0 where it was made), `velocity` (rad/s or m/s)
-        and `effort` (N m or N its motor and limits applied along the axis in the last step)."""
+        """The joint as it is now: its spec with `anchor` (the child's anchor) and `axis` (the
+        parent's) in the world now, `position` (rad, turns counted, or m; what the spec gave
+        where it was made), `velocity` (rad/s or m/s) and `effort` (N m or N its motor and
+        limits applied along the axis in the last step). add_joint(joint(name)) between the
+        same bodies as they are makes the same joint."""
         row = self._joints.row(name)
         arrays = self._joints.arrays
         measure_joints(self._bodies, arrays)
+        parent_centre, parent_rotation = self._pose(int(arrays.body_a[row]))
+        child_centre, child_rotation = self._pose(int(arrays.body_b[row]))
+        axis = parent_rotation @ quaternions_to_matrices(arrays.frame_a[row][None])[0][:, 0]
         spec = self._joints.spec(name)
-        return {**spec, "motor": dict(spec["motor"]), "position": float(arrays.position[row]),
+        return {**spec, "motor": dict(spec["motor"]),
+                "anchor": (child_centre + child_rotation @ arrays.anchor_b[row]).tolist(),
+                "axis": axis.tolist(), "position": float(arrays.position[row]),
                 "velocity": float(arrays.speed[row]), "effort": float(arrays.effort[row])}
+
+    def _pose(self, slot):
+        """(centre of mass, rotation matrix) of a body, or the world's (WORLD_SIDE)."""
+        if slot == WORLD_SIDE:
+            return np.zeros(3), np.eye(3)
+        return self._bodies.position[slot].copy(), quaternions_to_matrices(self._bodies.orientation[slot][None])[0]
 
     def edit_joint(self, name, /, **fields):
         """Changes only the given keys: lower, upper, motor (a partial mapping: mode, target,
@@ -717,6 +733,12 @@ class World(WorldQueries):
             new[:len(old)] = old
         index_manifolds(kept)
         self._contacts = grown
+
+
+def axis_rotation(axis, angle):
+    """The rotation by `angle` about the unit `axis` (Rodrigues)."""
+    k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+    return np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * k @ k
 
 
 def joint_frame(axis):
