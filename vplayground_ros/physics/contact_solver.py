@@ -37,7 +37,7 @@ from .constants import (LINEAR_SLOP, MAX_CORRECTION_SPEED, POSITION_CORRECTION,
                         RESTITUTION_THRESHOLD, SHOCK_SWEEPS, SHOCK_TOLERANCE,
                         STICKING_SPEED)
 from .contact import ARM_A, ARM_B, DIRECTION, TURN_A, TURN_B
-from .joints import solve_joint_sweep
+from .joints import COLLISION_IMPULSE, COLLISION_TARGET, CONTACT_TARGET, IMPULSE, solve_joint_sweep
 from .math3d import cross
 from .solve_schedule import shock_levels, split_chains, support_groups
 
@@ -508,15 +508,20 @@ def work_chains(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, targ
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
-def collision_pass(contacts, joints, bodies, iterations, gravity, threads):
-    if joints.count[0] == 0:
-        solve_rows(bodies.velocity, contacts, iterations, contacts.collision_target,
-                   contacts.collision_impulse, contacts.collision_friction, True, bodies.position,
-                   gravity, threads)
-    else:
-        solve_with_joints(bodies.velocity, contacts, joints, iterations, contacts.collision_target,
-                          contacts.collision_impulse, contacts.collision_friction,
-                          joints.collision_target, joints.collision_impulse, False)
+def collision_pass(contacts, bodies, iterations, gravity, threads):
+    solve_rows(bodies.velocity, contacts, iterations, contacts.collision_target,
+               contacts.collision_impulse, contacts.collision_friction, True, bodies.position,
+               gravity, threads)
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
+def collision_pass_with_joints(contacts, joints, bodies, iterations):
+    """collision_pass in a world with joints (worlds without do not hand the joints over:
+    each array handed to a call costs it)."""
+    solve_with_joints(bodies.velocity, contacts, joints, iterations, contacts.collision_target,
+                      contacts.collision_impulse, contacts.collision_friction,
+                      joints.row_values[:, :, COLLISION_TARGET],
+                      joints.row_values[:, :, COLLISION_IMPULSE], False)
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
@@ -870,17 +875,28 @@ def shock_worker(velocity, rows, row_inv_mass, target, mu, impulse, friction, sh
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
-def contact_pass(contacts, joints, bodies, iterations, gravity, threads):
-    """Velocities (zero elasticity, friction; the joints' rows with them), shock propagation,
-    then the split-impulse position pass on the pseudo velocities; keeps the friction as a world
-    vector for the next step's warm start."""
-    if joints.count[0] == 0:
-        solve_rows(bodies.velocity, contacts, iterations, contacts.contact_target, contacts.impulse,
-                   contacts.friction, True, bodies.position, gravity, threads)
-    else:
-        solve_with_joints(bodies.velocity, contacts, joints, iterations, contacts.contact_target,
-                          contacts.impulse, contacts.friction, joints.contact_target, joints.impulse,
-                          True)
+def contact_pass(contacts, bodies, iterations, gravity, threads):
+    """Velocities (zero elasticity, friction), shock propagation, then the split-impulse
+    position pass on the pseudo velocities; keeps the friction as a world vector for the next
+    step's warm start."""
+    solve_rows(bodies.velocity, contacts, iterations, contacts.contact_target, contacts.impulse,
+               contacts.friction, True, bodies.position, gravity, threads)
+    finish_contact_pass(contacts, bodies, iterations, gravity, threads)
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
+def contact_pass_with_joints(contacts, joints, bodies, iterations, gravity, threads):
+    """contact_pass in a world with joints: their rows in each velocity sweep."""
+    solve_with_joints(bodies.velocity, contacts, joints, iterations, contacts.contact_target,
+                      contacts.impulse, contacts.friction, joints.row_values[:, :, CONTACT_TARGET],
+                      joints.row_values[:, :, IMPULSE], True)
+    finish_contact_pass(contacts, bodies, iterations, gravity, threads)
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH, inline="always")
+def finish_contact_pass(contacts, bodies, iterations, gravity, threads):
+    """The contact pass after its velocity sweeps: shock propagation, the position pass, and
+    the friction kept as world vectors."""
     shock_propagation(contacts, bodies, threads)
     solve_rows(bodies.pseudo_velocity, contacts, iterations, contacts.position_target,
                contacts.position_impulse, contacts.friction, False, bodies.position, gravity, threads)

@@ -12,7 +12,7 @@ import numpy as np
 from numba import njit
 
 from .constants import WAKE_SPEED_FACTOR
-from .joints import find_root
+from .joints import BODY_A, BODY_B, find_root
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True)
@@ -89,7 +89,7 @@ def wake_joint_groups(bodies, joints):
     while changed:  # one pass per link of the longest chain woken from one end
         changed = False
         for j in range(joints.count[0]):
-            a, b = joints.body_a[j], joints.body_b[j]
+            a, b = joints.links[j, BODY_A], joints.links[j, BODY_B]
             if a < 0 or b < 0 or bodies.frozen[a] == bodies.frozen[b]:
                 continue
             sleeper, other = (a, b) if bodies.frozen[a] else (b, a)
@@ -109,18 +109,18 @@ def freeze_joint_groups(bodies, joints, time_to_freeze):
         return 0
     parent = np.arange(len(bodies.active))
     for j in range(count):
-        a, b = joints.body_a[j], joints.body_b[j]
+        a, b = joints.links[j, BODY_A], joints.links[j, BODY_B]
         if a >= 0 and b >= 0 and not bodies.immovable[a] and not bodies.immovable[b]:
             parent[find_root(parent, a)] = find_root(parent, b)
     ready = np.ones(len(bodies.active), np.bool_)
     for j in range(count):
-        for body in (joints.body_a[j], joints.body_b[j]):
+        for body in (joints.links[j, BODY_A], joints.links[j, BODY_B]):
             if body >= 0 and not bodies.immovable[body]:
                 if not (bodies.awake[body] and bodies.freeze_timer[body] >= time_to_freeze):
                     ready[find_root(parent, body)] = False
     frozen = 0
     for j in range(count):
-        for body in (joints.body_a[j], joints.body_b[j]):
+        for body in (joints.links[j, BODY_A], joints.links[j, BODY_B]):
             if body >= 0 and bodies.awake[body] and ready[find_root(parent, body)]:
                 bodies.frozen[body] = True
                 bodies.awake[body] = False

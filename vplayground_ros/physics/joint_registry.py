@@ -4,7 +4,9 @@ The bodies they hold are the World's; this registry knows them by slot, and the 
 body's joints with it, so no joint ever holds a slot another body has since taken."""
 import numpy as np
 
-from .joints import KINDS, MOTORS, PERSISTENT, WORLD_SIDE, allocate_joints, pair_key
+from .joints import (ANCHOR, BODY_A, BODY_B, COLLIDE_CONNECTED, EFFORT, FRAME, IMPULSE, KIND, KINDS,
+                     LOWER, MAX_EFFORT, MAX_SPEED, MOTOR_MODE, MOTOR_TARGET, MOTORS, PER_JOINT,
+                     POSITION, SPEED, UPPER, WORLD_SIDE, WRAPPED_ANGLE, allocate_joints, pair_key)
 
 
 class JointRegistry:
@@ -37,17 +39,19 @@ class JointRegistry:
         world), with its anchor and frame (x: the axis) in each side's body frame, at its
         `position` (0 unless the spec gives one)."""
         count = len(self._names)
-        if count == len(self.arrays.kind):
+        if count == len(self.arrays.links):
             self._grow(2 * count)
         a = self.arrays
-        a.kind[count] = KINDS[joint["type"]]
-        a.body_a[count], a.body_b[count] = slots
-        a.anchor_a[count], a.anchor_b[count] = anchors
-        a.frame_a[count], a.frame_b[count] = frames
-        a.position[count] = joint.get("position", 0.0)
-        a.wrapped_angle[count] = (a.position[count] + np.pi) % (2 * np.pi) - np.pi
-        a.speed[count] = a.effort[count] = 0.0
-        a.impulse[count] = 0.0
+        a.links[count, KIND] = KINDS[joint["type"]]
+        a.links[count, BODY_A], a.links[count, BODY_B] = slots
+        for side in range(2):
+            a.frames[count, side, ANCHOR:ANCHOR + 3] = anchors[side]
+            a.frames[count, side, FRAME:FRAME + 4] = frames[side]
+        position = joint.get("position", 0.0)
+        a.values[count, POSITION] = position
+        a.values[count, WRAPPED_ANGLE] = (position + np.pi) % (2 * np.pi) - np.pi
+        a.values[count, SPEED] = a.values[count, EFFORT] = 0.0
+        a.row_values[count, :, IMPULSE] = 0.0
         a.count[0] = count + 1
         self._names.append(name)
         self._specs[name] = {**joint, "name": name}
@@ -58,12 +62,12 @@ class JointRegistry:
         row, a = self.row(name), self.arrays
         spec = self._specs[name]
         spec.update(fields)
-        a.lower[row], a.upper[row] = spec["lower"], spec["upper"]
+        a.values[row, LOWER], a.values[row, UPPER] = spec["lower"], spec["upper"]
         motor = spec["motor"]
-        a.motor_mode[row] = MOTORS[motor["mode"]]
-        a.motor_target[row] = motor["target"]
-        a.max_effort[row], a.max_speed[row] = motor["max_effort"], motor["max_speed"]
-        a.collide_connected[row] = spec["collide_connected"]
+        a.links[row, MOTOR_MODE] = MOTORS[motor["mode"]]
+        a.values[row, MOTOR_TARGET] = motor["target"]
+        a.values[row, MAX_EFFORT], a.values[row, MAX_SPEED] = motor["max_effort"], motor["max_speed"]
+        a.links[row, COLLIDE_CONNECTED] = spec["collide_connected"]
 
     def remove(self, names):
         """Drops joints, keeping the others packed in their order."""
@@ -72,7 +76,7 @@ class JointRegistry:
             return
         keep = np.array([row for row in range(len(self._names)) if row not in gone], np.int64)
         a = self.arrays
-        for field in PERSISTENT:
+        for field in PER_JOINT:
             values = getattr(a, field)
             values[:len(keep)] = values[keep]
         a.count[0] = len(keep)
@@ -84,11 +88,11 @@ class JointRegistry:
         slots = set(int(slot) for slot in slots)
         a = self.arrays
         return [name for row, name in enumerate(self._names)
-                if int(a.body_a[row]) in slots or int(a.body_b[row]) in slots]
+                if int(a.links[row, BODY_A]) in slots or int(a.links[row, BODY_B]) in slots]
 
     def slots(self, name):
         row = self.row(name)
-        return int(self.arrays.body_a[row]), int(self.arrays.body_b[row])
+        return int(self.arrays.links[row, BODY_A]), int(self.arrays.links[row, BODY_B])
 
     def update_bodies(self, jointed):
         """Marks the jointed bodies in `jointed` (the bodies' flag array) and lists the pairs
@@ -97,18 +101,18 @@ class JointRegistry:
         jointed[:] = False
         excluded = []
         for row in range(count):
-            pair = [int(a.body_a[row]), int(a.body_b[row])]
+            pair = [int(a.links[row, BODY_A]), int(a.links[row, BODY_B])]
             for slot in pair:
                 if slot != WORLD_SIDE:
                     jointed[slot] = True
-            if WORLD_SIDE not in pair and not a.collide_connected[row]:
+            if WORLD_SIDE not in pair and not a.links[row, COLLIDE_CONNECTED]:
                 excluded.append(pair_key(*pair))
         self.arrays = a._replace(excluded_pairs=np.array(sorted(set(excluded)), np.int64))
 
     def _grow(self, capacity):
         grown = allocate_joints(capacity)
         old = self.arrays
-        n = len(old.kind)
-        for field in PERSISTENT:
+        n = len(old.links)
+        for field in PER_JOINT:
             getattr(grown, field)[:n] = getattr(old, field)
         self.arrays = grown._replace(count=old.count, excluded_pairs=old.excluded_pairs)

@@ -63,68 +63,63 @@ MAX_JOINT_CORRECTION_SPEED = 5.0
 # The world's side of a joint to the world.
 WORLD_SIDE = -1
 
+# Columns of JointArrays.links (int64): what a joint is and holds.
+KIND, BODY_A, BODY_B, MOTOR_MODE, COLLIDE_CONNECTED, VELOCITY_A, VELOCITY_B = range(7)
+# Columns of JointArrays.values (float): its settings, its state, and the solver's masses.
+(LOWER, UPPER, MOTOR_TARGET, MAX_EFFORT, MAX_SPEED, POSITION, WRAPPED_ANGLE, SPEED, EFFORT,
+ INV_MASS_A, INV_MASS_B) = range(11)
+# Columns of JointArrays.row_values: per row of a joint.
+(ROW_MASS, COLLISION_TARGET, CONTACT_TARGET, IMPULSE_LOW, IMPULSE_HIGH, COLLISION_IMPULSE,
+ IMPULSE) = range(7)
+# JointArrays.frames[j, side]: the anchor (x, y, z) then the joint frame's quaternion.
+ANCHOR, FRAME = 0, 3
+# Rows of JointArrays.islands.
+ISLAND_JOINTS, ISLAND_START, ISLAND_OFFSET = 0, 1, 2
+
+# A few arrays with named columns rather than one array a field: handing a tuple of arrays to
+# compiled code costs ~0.25 us an array, on every World.step call, and 40 arrays of joints made
+# the call of a world without any 10 us slower.
 JointArrays = namedtuple("JointArrays", [
-    "count",            # (1,) joints in use, rows 0..count-1 (the World keeps them packed)
-    "kind",             # (J,) int64 FIXED ... PRISMATIC
-    "body_a", "body_b",  # (J,) int64 slots (the parent, the child); WORLD_SIDE for the world
-    "anchor_a", "anchor_b",  # (J, 3) the anchor in each body's frame, from its centre of mass
-    "frame_a", "frame_b",    # (J, 4) the joint's frame in each body's frame (x: the axis)
-    "lower", "upper",   # (J,) limits along the axis (rad or m); -inf / inf for none
-    "motor_mode",       # (J,) int64 MOTOR_*
-    "motor_target",     # (J,) rad/s or m/s (velocity), rad or m (position)
-    "max_effort",       # (J,) N m or N the motor may apply (inf: as much as it takes)
-    "max_speed",        # (J,) rad/s or m/s a position motor may move at (inf: no bound)
-    "collide_connected",  # (J,) the two bodies collide with each other
-    "position",         # (J,) the joint's coordinate: angle (turns counted) or slide
-    "wrapped_angle",    # (J,) last measured angle in (-pi, pi], for counting turns
-    "speed",            # (J,) the coordinate's rate, rad/s or m/s
-    "effort",           # (J,) N m or N the motor and limits applied along the axis last step
+    "count",       # (2,) joints in use (rows 0..count-1, kept packed by the World), islands
+    "links",       # (J, 7) int64 KIND ... VELOCITY_B: the kind (FIXED ... PRISMATIC), the body
+                   # slots (parent, child; WORLD_SIDE for the world), MOTOR_*, whether the two
+                   # collide, and (prepare_joints) their rows of the velocity arrays
+    "frames",      # (J, 2, 7) per side (parent, child): the anchor in the body's frame from its
+                   # centre of mass, then the joint's frame in the body's frame (x: the axis)
+    "values",      # (J, 11) LOWER ... INV_MASS_B: limits (rad or m; -inf / inf for none), the
+                   # motor's target (rad/s, m/s; rad, m), max_effort (N m, N; inf: unbounded),
+                   # max_speed, the coordinate (angle with turns counted, or slide), the last
+                   # measured angle in (-pi, pi], its rate, the effort the motor and limits
+                   # applied last step, each side's inverse mass in the solver
     # The solver's view, rebuilt each step (prepare_joints):
-    "velocity_a", "velocity_b",  # (J,) rows of the velocity arrays (the static world's last row)
-    "row_inv_mass",     # (J, 2)
-    "rows",             # (J, JOINT_ROWS, ROW_SIZE)
-    "row_mass",         # (J, JOINT_ROWS) 0 for a row not solved
-    "block_inverse",    # (J, EQUALITY_ROWS, EQUALITY_ROWS) inverse effective mass of rows 0-5
-    # Islands (prepare_joints): the joints grouped by the bodies they share.
-    "island_count",     # (1,)
-    "island_joints",    # (J,) joints, island by island, each in the order they were made
-    "island_start",     # (J + 1,) each island's first place in island_joints
-    "island_offset",    # (J,) where each island's K^-1 starts in island_inverse; -1: joint by joint
+    "rows",        # (J, JOINT_ROWS, ROW_SIZE)
+    "row_values",  # (J, JOINT_ROWS, 7) ROW_MASS (0: not solved) ... IMPULSE: relative velocity
+                   # goals of the two passes, the accumulated impulse's bounds, the impulses
+                   # of the collision pass and of the contact pass (warm-started)
+    "block_inverse",  # (J, EQUALITY_ROWS, EQUALITY_ROWS) inverse effective mass of rows 0-5
+    "islands",     # (3, J + 1) the joints island by island (each in the order they were made),
+                   # each island's first place there, where its K^-1 starts (-1: joint by joint)
     "island_inverse",   # (J * EQUALITY_ROWS * EQUALITY_ROWS * MAX_DIRECT_JOINTS,) K^-1s, row-major
     "island_residual",  # (J * EQUALITY_ROWS,) scratch of the sweeps
-    "collision_target", "contact_target",  # (J, JOINT_ROWS) relative velocity goals
-    "impulse_low", "impulse_high",  # (J, JOINT_ROWS) bounds of each row's accumulated impulse
-    "collision_impulse",  # (J, JOINT_ROWS) accumulated in the collision pass
-    "impulse",          # (J, JOINT_ROWS) accumulated in the contact pass (warm-started)
     "excluded_pairs",   # (E,) sorted pair_key of the jointed pairs that do not collide
 ])
 
 
 def allocate_joints(capacity):
-    f = lambda *shape: np.zeros((capacity,) + shape)  # noqa: E731
-    i = lambda: np.zeros(capacity, np.int64)  # noqa: E731
-    identity = f(4)
-    identity[:, 3] = 1.0
+    frames = np.zeros((capacity, 2, 7))
+    frames[:, :, FRAME + 3] = 1.0
     return JointArrays(
-        count=np.zeros(1, np.int64), kind=i(), body_a=i(), body_b=i(), anchor_a=f(3),
-        anchor_b=f(3), frame_a=identity.copy(), frame_b=identity.copy(), lower=f(), upper=f(),
-        motor_mode=i(), motor_target=f(), max_effort=f(), max_speed=f(),
-        collide_connected=np.zeros(capacity, np.bool_), position=f(), wrapped_angle=f(),
-        speed=f(), effort=f(), velocity_a=i(), velocity_b=i(), row_inv_mass=f(2),
-        rows=f(JOINT_ROWS, ROW_SIZE), row_mass=f(JOINT_ROWS),
-        block_inverse=f(EQUALITY_ROWS, EQUALITY_ROWS), island_count=np.zeros(1, np.int64),
-        island_joints=i(), island_start=np.zeros(capacity + 1, np.int64), island_offset=i(),
+        count=np.zeros(2, np.int64), links=np.zeros((capacity, 7), np.int64), frames=frames,
+        values=np.zeros((capacity, 11)), rows=np.zeros((capacity, JOINT_ROWS, ROW_SIZE)),
+        row_values=np.zeros((capacity, JOINT_ROWS, 7)),
+        block_inverse=np.zeros((capacity, EQUALITY_ROWS, EQUALITY_ROWS)),
+        islands=np.zeros((3, capacity + 1), np.int64),
         island_inverse=np.zeros(capacity * EQUALITY_ROWS * EQUALITY_ROWS * MAX_DIRECT_JOINTS),
-        island_residual=np.zeros(capacity * EQUALITY_ROWS), collision_target=f(JOINT_ROWS),
-        contact_target=f(JOINT_ROWS), impulse_low=f(JOINT_ROWS), impulse_high=f(JOINT_ROWS),
-        collision_impulse=f(JOINT_ROWS), impulse=f(JOINT_ROWS),
-        excluded_pairs=np.zeros(0, np.int64))
+        island_residual=np.zeros(capacity * EQUALITY_ROWS), excluded_pairs=np.zeros(0, np.int64))
 
 
-# The fields that hold each joint from step to step (the rest prepare_joints rebuilds).
-PERSISTENT = ("kind", "body_a", "body_b", "anchor_a", "anchor_b", "frame_a", "frame_b", "lower",
-              "upper", "motor_mode", "motor_target", "max_effort", "max_speed",
-              "collide_connected", "position", "wrapped_angle", "speed", "effort", "impulse")
+# The arrays whose rows are joints, kept from step to step (the rest prepare_joints rebuilds).
+PER_JOINT = ("links", "frames", "values", "row_values")
 
 
 def pair_key(a, b):
@@ -146,14 +141,14 @@ def joint_geometry(bodies, joints, j):
     """The joint's world anchors, arms, frames and coordinate: (anchor A, anchor B, arm A (from
     A's centre to B's anchor), arm B, frame A, frame B, relative rotation of B's frame in A's,
     w >= 0), all tuples."""
-    x_a, q_a = side_pose(bodies, joints.body_a[j])
-    x_b, q_b = side_pose(bodies, joints.body_b[j])
-    r_a = rotate(q_a, joints.anchor_a[j])
-    r_b = rotate(q_b, joints.anchor_b[j])
+    x_a, q_a = side_pose(bodies, joints.links[j, BODY_A])
+    x_b, q_b = side_pose(bodies, joints.links[j, BODY_B])
+    r_a = rotate(q_a, joints.frames[j, 0, ANCHOR:ANCHOR + 3])
+    r_b = rotate(q_b, joints.frames[j, 1, ANCHOR:ANCHOR + 3])
     p_a = (x_a[0] + r_a[0], x_a[1] + r_a[1], x_a[2] + r_a[2])
     p_b = (x_b[0] + r_b[0], x_b[1] + r_b[1], x_b[2] + r_b[2])
-    f_a = quat_multiply(q_a, joints.frame_a[j])
-    f_b = quat_multiply(q_b, joints.frame_b[j])
+    f_a = quat_multiply(q_a, joints.frames[j, 0, FRAME:FRAME + 4])
+    f_b = quat_multiply(q_b, joints.frames[j, 1, FRAME:FRAME + 4])
     rel = quat_multiply(quat_conjugate(f_a), f_b)
     if rel[3] < 0.0:
         rel = (-rel[0], -rel[1], -rel[2], -rel[3])
@@ -174,29 +169,29 @@ def measure_joints(bodies, joints):
     velocity = bodies.velocity
     static_row = len(bodies.active)
     for j in range(joints.count[0]):
-        kind = joints.kind[j]
+        kind = joints.links[j, KIND]
         if kind == FIXED:
-            joints.position[j] = joints.speed[j] = 0.0
+            joints.values[j, POSITION] = joints.values[j, SPEED] = 0.0
             continue
-        a, b = joints.body_a[j], joints.body_b[j]
+        a, b = joints.links[j, BODY_A], joints.links[j, BODY_B]
         row_a = a if a >= 0 else static_row
         row_b = b if b >= 0 else static_row
         p_a, p_b, arm_a, r_b, f_a, f_b, rel = joint_geometry(bodies, joints, j)
         axis = rotate(f_a, (1.0, 0.0, 0.0))
         if kind == PRISMATIC:
-            joints.position[j] = ((p_b[0] - p_a[0]) * axis[0] + (p_b[1] - p_a[1]) * axis[1]
+            joints.values[j, POSITION] = ((p_b[0] - p_a[0]) * axis[0] + (p_b[1] - p_a[1]) * axis[1]
                                   + (p_b[2] - p_a[2]) * axis[2])
             lever_a, lever_b = cross(arm_a, axis), cross(r_b, axis)
             speed = 0.0
             for e in range(3):
                 speed += (axis[e] * (velocity[row_b, e] - velocity[row_a, e])
                           - lever_a[e] * velocity[row_a, 3 + e] + lever_b[e] * velocity[row_b, 3 + e])
-            joints.speed[j] = speed
+            joints.values[j, SPEED] = speed
         else:
             angle = 2.0 * np.arctan2(rel[0], rel[3])
-            joints.position[j] += wrap_angle(angle - joints.wrapped_angle[j])
-            joints.wrapped_angle[j] = angle
-            joints.speed[j] = (axis[0] * (velocity[row_b, 3] - velocity[row_a, 3])
+            joints.values[j, POSITION] += wrap_angle(angle - joints.values[j, WRAPPED_ANGLE])
+            joints.values[j, WRAPPED_ANGLE] = angle
+            joints.values[j, SPEED] = (axis[0] * (velocity[row_b, 3] - velocity[row_a, 3])
                                + axis[1] * (velocity[row_b, 4] - velocity[row_a, 4])
                                + axis[2] * (velocity[row_b, 5] - velocity[row_a, 5]))
 
@@ -217,7 +212,7 @@ def set_row(joints, j, row, direction, arm_a, arm_b, m_a, m_b, inertia_a, inerti
         rows[j, row, ARM_A + e], rows[j, row, ARM_B + e] = arm_a[e], arm_b[e]
         rows[j, row, TURN_A + e], rows[j, row, TURN_B + e] = turn_a, turn_b
         k += arm_a[e] * turn_a + arm_b[e] * turn_b
-    joints.row_mass[j, row] = 1.0 / k if k > 1.0e-12 else 0.0
+    joints.row_values[j, row, ROW_MASS] = 1.0 / k if k > 1.0e-12 else 0.0
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
@@ -225,20 +220,20 @@ def equality_row(joints, j, row, error, inv_dt):
     """An equality row: nothing to hold in the collision pass; the whole error in the contact
     pass (bounded)."""
     correction = min(max(-error * inv_dt, -MAX_JOINT_CORRECTION_SPEED), MAX_JOINT_CORRECTION_SPEED)
-    joints.collision_target[j, row] = 0.0
-    joints.contact_target[j, row] = correction
-    joints.impulse_low[j, row] = -np.inf
-    joints.impulse_high[j, row] = np.inf
+    joints.row_values[j, row, COLLISION_TARGET] = 0.0
+    joints.row_values[j, row, CONTACT_TARGET] = correction
+    joints.row_values[j, row, IMPULSE_LOW] = -np.inf
+    joints.row_values[j, row, IMPULSE_HIGH] = np.inf
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def limit_row(joints, j, row, gap, inv_dt):
     """A one-sided row, `gap` from its limit (negative: past it): it may close the gap this step,
     no more; the contact pass also takes back what is past (bounded)."""
-    joints.collision_target[j, row] = min(-gap * inv_dt, 0.0)
-    joints.contact_target[j, row] = min(-gap * inv_dt, MAX_JOINT_CORRECTION_SPEED)
-    joints.impulse_low[j, row] = 0.0
-    joints.impulse_high[j, row] = np.inf
+    joints.row_values[j, row, COLLISION_TARGET] = min(-gap * inv_dt, 0.0)
+    joints.row_values[j, row, CONTACT_TARGET] = min(-gap * inv_dt, MAX_JOINT_CORRECTION_SPEED)
+    joints.row_values[j, row, IMPULSE_LOW] = 0.0
+    joints.row_values[j, row, IMPULSE_HIGH] = np.inf
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
@@ -253,19 +248,19 @@ def prepare_joints(joints, bodies, dt):
     zero = (0.0, 0.0, 0.0)
     work = np.empty((EQUALITY_ROWS, 2 * EQUALITY_ROWS))
     for j in range(joints.count[0]):
-        a, b, kind = joints.body_a[j], joints.body_b[j], joints.kind[j]
-        joints.velocity_a[j] = a if a >= 0 else static_row
-        joints.velocity_b[j] = b if b >= 0 else static_row
+        a, b, kind = joints.links[j, BODY_A], joints.links[j, BODY_B], joints.links[j, KIND]
+        joints.links[j, VELOCITY_A] = a if a >= 0 else static_row
+        joints.links[j, VELOCITY_B] = b if b >= 0 else static_row
         m_a = inv_mass[a] if a >= 0 else 0.0
         m_b = inv_mass[b] if b >= 0 else 0.0
-        joints.row_inv_mass[j, 0], joints.row_inv_mass[j, 1] = m_a, m_b
+        joints.values[j, INV_MASS_A], joints.values[j, INV_MASS_B] = m_a, m_b
         ia, ib = max(a, 0), max(b, 0)
         p_a, p_b, arm_a, r_b, f_a, f_b, rel = joint_geometry(bodies, joints, j)
         axis = rotate(f_a, (1.0, 0.0, 0.0))
         across = (rotate(f_a, (0.0, 1.0, 0.0)), rotate(f_a, (0.0, 0.0, 1.0)))
         separation = (p_b[0] - p_a[0], p_b[1] - p_a[1], p_b[2] - p_a[2])
         for row in range(JOINT_ROWS):
-            joints.row_mass[j, row] = 0.0
+            joints.row_values[j, row, ROW_MASS] = 0.0
         # Rows 0-2: the anchors.
         if kind == PRISMATIC:
             for k in range(2):
@@ -308,39 +303,39 @@ def prepare_joints(joints, bodies, dt):
                 direction, lever_a, lever_b = zero, axis, axis
             flipped = ((-direction[0], -direction[1], -direction[2]),
                        (-lever_a[0], -lever_a[1], -lever_a[2]), (-lever_b[0], -lever_b[1], -lever_b[2]))
-            position = joints.position[j]
-            if kind != CONTINUOUS and joints.lower[j] > -np.inf:
+            position = joints.values[j, POSITION]
+            if kind != CONTINUOUS and joints.values[j, LOWER] > -np.inf:
                 set_row(joints, j, LOWER_ROW, direction, lever_a, lever_b, m_a, m_b, inertia,
                         inertia, ia, ib)
-                limit_row(joints, j, LOWER_ROW, position - joints.lower[j], inv_dt)
-            if kind != CONTINUOUS and joints.upper[j] < np.inf:
+                limit_row(joints, j, LOWER_ROW, position - joints.values[j, LOWER], inv_dt)
+            if kind != CONTINUOUS and joints.values[j, UPPER] < np.inf:
                 set_row(joints, j, UPPER_ROW, flipped[0], flipped[1], flipped[2], m_a, m_b,
                         inertia, inertia, ia, ib)
-                limit_row(joints, j, UPPER_ROW, joints.upper[j] - position, inv_dt)
-            mode = joints.motor_mode[j]
+                limit_row(joints, j, UPPER_ROW, joints.values[j, UPPER] - position, inv_dt)
+            mode = joints.links[j, MOTOR_MODE]
             if mode != MOTOR_NONE:
                 set_row(joints, j, MOTOR_ROW, direction, lever_a, lever_b, m_a, m_b, inertia,
                         inertia, ia, ib)
                 if mode == MOTOR_VELOCITY:
-                    goal = joints.motor_target[j]
+                    goal = joints.values[j, MOTOR_TARGET]
                 else:
-                    goal = POSITION_MOTOR_RATE * (joints.motor_target[j] - position) * inv_dt
-                goal = min(max(goal, -joints.max_speed[j]), joints.max_speed[j])
-                joints.collision_target[j, MOTOR_ROW] = goal
-                joints.contact_target[j, MOTOR_ROW] = goal
-                bound = joints.max_effort[j] * dt
-                joints.impulse_low[j, MOTOR_ROW] = -bound
-                joints.impulse_high[j, MOTOR_ROW] = bound
+                    goal = POSITION_MOTOR_RATE * (joints.values[j, MOTOR_TARGET] - position) * inv_dt
+                goal = min(max(goal, -joints.values[j, MAX_SPEED]), joints.values[j, MAX_SPEED])
+                joints.row_values[j, MOTOR_ROW, COLLISION_TARGET] = goal
+                joints.row_values[j, MOTOR_ROW, CONTACT_TARGET] = goal
+                bound = joints.values[j, MAX_EFFORT] * dt
+                joints.row_values[j, MOTOR_ROW, IMPULSE_LOW] = -bound
+                joints.row_values[j, MOTOR_ROW, IMPULSE_HIGH] = bound
         for row in range(JOINT_ROWS):
-            joints.collision_impulse[j, row] = 0.0
-            if joints.row_mass[j, row] == 0.0:
-                joints.impulse[j, row] = 0.0
+            joints.row_values[j, row, COLLISION_IMPULSE] = 0.0
+            if joints.row_values[j, row, ROW_MASS] == 0.0:
+                joints.row_values[j, row, IMPULSE] = 0.0
                 joints.rows[j, row, :] = 0.0
-                joints.collision_target[j, row] = joints.contact_target[j, row] = 0.0
+                joints.row_values[j, row, COLLISION_TARGET] = joints.row_values[j, row, CONTACT_TARGET] = 0.0
         invert_block(joints, j, work)
     group_islands(joints, static_row)
-    for island in range(joints.island_count[0]):
-        if joints.island_offset[island] >= 0:
+    for island in range(joints.count[1]):
+        if joints.islands[ISLAND_OFFSET, island] >= 0:
             invert_island(joints, island)
             constrain_bounded_rows(joints, island)
 
@@ -352,11 +347,11 @@ def invert_block(joints, j, work):
     its impulse stays 0; a joint between two static sides gets all zeros."""
     for r in range(EQUALITY_ROWS):
         for c in range(EQUALITY_ROWS):
-            if joints.row_mass[j, r] == 0.0 or joints.row_mass[j, c] == 0.0:
+            if joints.row_values[j, r, ROW_MASS] == 0.0 or joints.row_values[j, c, ROW_MASS] == 0.0:
                 work[r, c] = 1.0 if r == c else 0.0
             else:
                 work[r, c] = shared_response(joints, j, r, j, c)
-    if joints.row_inv_mass[j, 0] == 0.0 and joints.row_inv_mass[j, 1] == 0.0:
+    if joints.values[j, INV_MASS_A] == 0.0 and joints.values[j, INV_MASS_B] == 0.0:
         joints.block_inverse[j] = 0.0
         return
     invert_in_place(work, EQUALITY_ROWS)
@@ -376,8 +371,8 @@ def group_islands(joints, bodies):
     first_joint = np.full(bodies + 1, -1, np.int64)  # a joint holding each velocity row
     for j in range(count):
         for side in range(2):
-            body = joints.velocity_a[j] if side == 0 else joints.velocity_b[j]
-            if joints.row_inv_mass[j, side] == 0.0:
+            body = joints.links[j, VELOCITY_A] if side == 0 else joints.links[j, VELOCITY_B]
+            if joints.values[j, INV_MASS_A + side] == 0.0:
                 continue
             if first_joint[body] >= 0:
                 root_a, root_b = find_root(parent, j), find_root(parent, first_joint[body])
@@ -394,23 +389,23 @@ def group_islands(joints, bodies):
             island_of_root[root] = islands
             islands += 1
         sizes[island_of_root[root]] += 1
-    start = joints.island_start
+    start = joints.islands[ISLAND_START]
     start[0] = 0
     offset = 0
     for island in range(islands):
         start[island + 1] = start[island] + sizes[island]
         if sizes[island] <= MAX_DIRECT_JOINTS:
-            joints.island_offset[island] = offset
+            joints.islands[ISLAND_OFFSET, island] = offset
             offset += (EQUALITY_ROWS * sizes[island]) ** 2
         else:
-            joints.island_offset[island] = -1
+            joints.islands[ISLAND_OFFSET, island] = -1
     filled = sizes  # reused: joints placed so far per island
     filled[:islands] = 0
     for j in range(count):
         island = island_of_root[find_root(parent, j)]
-        joints.island_joints[start[island] + filled[island]] = j
+        joints.islands[ISLAND_JOINTS, start[island] + filled[island]] = j
         filled[island] += 1
-    joints.island_count[0] = islands
+    joints.count[1] = islands
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
@@ -429,13 +424,13 @@ def shared_response(joints, j, row, k, col):
     rows = joints.rows
     total = 0.0
     for side_j in range(2):
-        mass = joints.row_inv_mass[j, side_j]
+        mass = joints.values[j, INV_MASS_A + side_j]
         if mass == 0.0:
             continue
-        body = joints.velocity_a[j] if side_j == 0 else joints.velocity_b[j]
+        body = joints.links[j, VELOCITY_A] if side_j == 0 else joints.links[j, VELOCITY_B]
         for side_k in range(2):
-            other = joints.velocity_a[k] if side_k == 0 else joints.velocity_b[k]
-            if other != body or joints.row_inv_mass[k, side_k] == 0.0:
+            other = joints.links[k, VELOCITY_A] if side_k == 0 else joints.links[k, VELOCITY_B]
+            if other != body or joints.values[k, INV_MASS_A + side_k] == 0.0:
                 continue
             arm = ARM_A if side_j == 0 else ARM_B
             turn = TURN_A if side_k == 0 else TURN_B
@@ -451,22 +446,22 @@ def shared_response(joints, j, row, k, col):
 def invert_island(joints, island):
     """The island's K^-1 into island_inverse (Gauss-Jordan with partial pivoting). A row a
     joint does not use gets a unit diagonal, so its impulse stays 0."""
-    first, last = joints.island_start[island], joints.island_start[island + 1]
+    first, last = joints.islands[ISLAND_START, island], joints.islands[ISLAND_START, island + 1]
     n = EQUALITY_ROWS * (last - first)
     work = np.empty((n, 2 * n))
     for p in range(last - first):
-        j = joints.island_joints[first + p]
+        j = joints.islands[ISLAND_JOINTS, first + p]
         for r in range(EQUALITY_ROWS):
             for q in range(last - first):
-                k = joints.island_joints[first + q]
+                k = joints.islands[ISLAND_JOINTS, first + q]
                 for c in range(EQUALITY_ROWS):
-                    if joints.row_mass[j, r] == 0.0 or joints.row_mass[k, c] == 0.0:
+                    if joints.row_values[j, r, ROW_MASS] == 0.0 or joints.row_values[k, c, ROW_MASS] == 0.0:
                         value = 1.0 if (p == q and r == c) else 0.0
                     else:
                         value = shared_response(joints, j, r, k, c)
                     work[EQUALITY_ROWS * p + r, EQUALITY_ROWS * q + c] = value
     invert_in_place(work, n)
-    offset = joints.island_offset[island]
+    offset = joints.islands[ISLAND_OFFSET, island]
     for r in range(n):
         for c in range(n):
             joints.island_inverse[offset + r * n + c] = work[r, n + c]
@@ -504,38 +499,38 @@ def invert_in_place(work, n):
 def constrain_bounded_rows(joints, island):
     """The effective mass of each motor and limit row of the island through its equalities:
     1 / (j M^-1 j^T - u^T K^-1 u), u = J_eq M^-1 j^T."""
-    first, last = joints.island_start[island], joints.island_start[island + 1]
+    first, last = joints.islands[ISLAND_START, island], joints.islands[ISLAND_START, island + 1]
     n = EQUALITY_ROWS * (last - first)
-    offset = joints.island_offset[island]
+    offset = joints.islands[ISLAND_OFFSET, island]
     u = np.empty(n)
     for p in range(last - first):
-        j = joints.island_joints[first + p]
+        j = joints.islands[ISLAND_JOINTS, first + p]
         for row in (LOWER_ROW, UPPER_ROW, MOTOR_ROW):
-            if joints.row_mass[j, row] == 0.0:
+            if joints.row_values[j, row, ROW_MASS] == 0.0:
                 continue
             for q in range(last - first):
-                k = joints.island_joints[first + q]
+                k = joints.islands[ISLAND_JOINTS, first + q]
                 for c in range(EQUALITY_ROWS):
                     u[EQUALITY_ROWS * q + c] = (shared_response(joints, k, c, j, row)
-                                                if joints.row_mass[k, c] != 0.0 else 0.0)
-            response = 1.0 / joints.row_mass[j, row]
+                                                if joints.row_values[k, c, ROW_MASS] != 0.0 else 0.0)
+            response = 1.0 / joints.row_values[j, row, ROW_MASS]
             for r in range(n):
                 if u[r] == 0.0:
                     continue
                 for c in range(n):
                     response -= u[r] * joints.island_inverse[offset + r * n + c] * u[c]
-            joints.row_mass[j, row] = 1.0 / response if response > 1.0e-12 else 0.0
+            joints.row_values[j, row, ROW_MASS] = 1.0 / response if response > 1.0e-12 else 0.0
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def warm_start_joints(joints, velocity):
     """Applies last step's contact-pass impulses of the rows still in use (prepare_joints)."""
     for j in range(joints.count[0]):
-        a, b = joints.velocity_a[j], joints.velocity_b[j]
-        m_a, m_b = joints.row_inv_mass[j, 0], joints.row_inv_mass[j, 1]
+        a, b = joints.links[j, VELOCITY_A], joints.links[j, VELOCITY_B]
+        m_a, m_b = joints.values[j, INV_MASS_A], joints.values[j, INV_MASS_B]
         for row in range(JOINT_ROWS):
-            if joints.impulse[j, row] != 0.0:
-                apply_row_impulse(velocity, joints.rows, j, row, a, b, m_a, m_b, joints.impulse[j, row])
+            if joints.row_values[j, row, IMPULSE] != 0.0:
+                apply_row_impulse(velocity, joints.rows, j, row, a, b, m_a, m_b, joints.row_values[j, row, IMPULSE])
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
@@ -564,16 +559,16 @@ def row_speed(velocity, rows, j, row, a, b):
 def solve_bounded_row(velocity, joints, target, impulse, j, row):
     """One motor or limit row: its accumulated impulse driven to the target within bounds.
     Returns the impulse it added."""
-    mass = joints.row_mass[j, row]
+    mass = joints.row_values[j, row, ROW_MASS]
     if mass == 0.0:
         return 0.0
-    a, b = joints.velocity_a[j], joints.velocity_b[j]
+    a, b = joints.links[j, VELOCITY_A], joints.links[j, VELOCITY_B]
     old = impulse[j, row]
     new = old + mass * (target[j, row] - row_speed(velocity, joints.rows, j, row, a, b))
-    new = min(max(new, joints.impulse_low[j, row]), joints.impulse_high[j, row])
+    new = min(max(new, joints.row_values[j, row, IMPULSE_LOW]), joints.row_values[j, row, IMPULSE_HIGH])
     impulse[j, row] = new
-    apply_row_impulse(velocity, joints.rows, j, row, a, b, joints.row_inv_mass[j, 0],
-                      joints.row_inv_mass[j, 1], new - old)
+    apply_row_impulse(velocity, joints.rows, j, row, a, b, joints.values[j, INV_MASS_A],
+                      joints.values[j, INV_MASS_B], new - old)
     return new - old
 
 
@@ -584,8 +579,8 @@ def solve_joint_block(velocity, joints, target, impulse, j):
     inverse = joints.block_inverse
     if inverse[j, 0, 0] == 0.0 and inverse[j, 1, 1] == 0.0:
         return  # both sides static
-    rows, a, b = joints.rows, joints.velocity_a[j], joints.velocity_b[j]
-    m_a, m_b = joints.row_inv_mass[j, 0], joints.row_inv_mass[j, 1]
+    rows, a, b = joints.rows, joints.links[j, VELOCITY_A], joints.links[j, VELOCITY_B]
+    m_a, m_b = joints.values[j, INV_MASS_A], joints.values[j, INV_MASS_B]
     e0 = target[j, 0] - row_speed(velocity, rows, j, 0, a, b)
     e1 = target[j, 1] - row_speed(velocity, rows, j, 1, a, b)
     e2 = target[j, 2] - row_speed(velocity, rows, j, 2, a, b)
@@ -602,18 +597,18 @@ def solve_joint_block(velocity, joints, target, impulse, j):
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def solve_island_equalities(velocity, joints, target, impulse, island):
     """Every equality row of the island at once: K^-1 times what they lack (exact)."""
-    first, last = joints.island_start[island], joints.island_start[island + 1]
+    first, last = joints.islands[ISLAND_START, island], joints.islands[ISLAND_START, island + 1]
     n = EQUALITY_ROWS * (last - first)
-    offset, residual, rows = joints.island_offset[island], joints.island_residual, joints.rows
+    offset, residual, rows = joints.islands[ISLAND_OFFSET, island], joints.island_residual, joints.rows
     for p in range(last - first):
-        j = joints.island_joints[first + p]
-        a, b = joints.velocity_a[j], joints.velocity_b[j]
+        j = joints.islands[ISLAND_JOINTS, first + p]
+        a, b = joints.links[j, VELOCITY_A], joints.links[j, VELOCITY_B]
         for row in range(EQUALITY_ROWS):
             residual[EQUALITY_ROWS * p + row] = target[j, row] - row_speed(velocity, rows, j, row, a, b)
     for p in range(last - first):
-        j = joints.island_joints[first + p]
-        a, b = joints.velocity_a[j], joints.velocity_b[j]
-        m_a, m_b = joints.row_inv_mass[j, 0], joints.row_inv_mass[j, 1]
+        j = joints.islands[ISLAND_JOINTS, first + p]
+        a, b = joints.links[j, VELOCITY_A], joints.links[j, VELOCITY_B]
+        m_a, m_b = joints.values[j, INV_MASS_A], joints.values[j, INV_MASS_B]
         for row in range(EQUALITY_ROWS):
             at = offset + (EQUALITY_ROWS * p + row) * n
             d = 0.0
@@ -631,13 +626,13 @@ def solve_joint_sweep(velocity, joints, target, impulse, backwards, with_motors)
     solved whole: each motor and limit row that changes, then its equalities again; then its
     equalities (what the contacts since the last sweep changed). A larger one: joint by joint,
     the motor and limits, then the joint's equality block (what matters most last)."""
-    islands = joints.island_count[0]
+    islands = joints.count[1]
     for step in range(islands):
         island = islands - 1 - step if backwards else step
-        first, last = joints.island_start[island], joints.island_start[island + 1]
-        if joints.island_offset[island] >= 0:
+        first, last = joints.islands[ISLAND_START, island], joints.islands[ISLAND_START, island + 1]
+        if joints.islands[ISLAND_OFFSET, island] >= 0:
             for p in range(first, last):
-                j = joints.island_joints[p]
+                j = joints.islands[ISLAND_JOINTS, p]
                 for row in (MOTOR_ROW, LOWER_ROW, UPPER_ROW):
                     if row == MOTOR_ROW and not with_motors:
                         continue
@@ -646,7 +641,7 @@ def solve_joint_sweep(velocity, joints, target, impulse, backwards, with_motors)
             solve_island_equalities(velocity, joints, target, impulse, island)
         else:
             for p in range(first, last):
-                j = joints.island_joints[last - 1 - (p - first) if backwards else p]
+                j = joints.islands[ISLAND_JOINTS, last - 1 - (p - first) if backwards else p]
                 for row in (MOTOR_ROW, LOWER_ROW, UPPER_ROW):
                     if row != MOTOR_ROW or with_motors:
                         solve_bounded_row(velocity, joints, target, impulse, j, row)
@@ -657,8 +652,8 @@ def solve_joint_sweep(velocity, joints, target, impulse, backwards, with_motors)
 def record_effort(joints, dt):
     """What the motor and limits applied along each joint's axis this step (N m or N)."""
     for j in range(joints.count[0]):
-        impulse = joints.impulse[j]
-        joints.effort[j] = (impulse[MOTOR_ROW] + impulse[LOWER_ROW] - impulse[UPPER_ROW]) / dt
+        impulse = joints.row_values[j, :, IMPULSE]
+        joints.values[j, EFFORT] = (impulse[MOTOR_ROW] + impulse[LOWER_ROW] - impulse[UPPER_ROW]) / dt
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)

@@ -11,7 +11,8 @@ from numba.core.errors import NumbaWarning
 from .broad_phase import build_index, find_body_pairs
 from .constants import STATIC_REINDEX_MIN_PENDING, STATIC_REINDEX_PENDING_FRACTION
 from .contact import index_manifolds, warm_start_from
-from .contact_solver import collision_pass, contact_pass, prepare_contacts, warm_start
+from .contact_solver import (collision_pass, collision_pass_with_joints, contact_pass,
+                             contact_pass_with_joints, prepare_contacts, warm_start)
 from .freezing import freeze_joint_groups, update_freezing, wake_joint_groups, wake_touched
 from .integrate import integrate_positions, integrate_velocities, update_bodies
 from .joints import drop_jointed_pairs, prepare_joints, record_effort, warm_start_joints
@@ -261,7 +262,9 @@ def step_world(steps, ctx):
         prepare_contacts(current, bodies, s.ground_material, s.gravity, s.dt)
         if jointed:
             prepare_joints(joints, bodies, s.dt)
-        collision_pass(current, joints, bodies, s.resolve_iterations, s.gravity, s.solver_threads)
+            collision_pass_with_joints(current, joints, bodies, s.resolve_iterations)
+        else:
+            collision_pass(current, bodies, s.resolve_iterations, s.gravity, s.solver_threads)
         t = lap(profile, stage_ns, np.int64(STAGE_COLLISION), t)
         # 5. Velocity update with external forces: the cars' wheels (springs and dampers see the
         #    velocities before gravity adds its share, or dampers would hold up the cars), then
@@ -274,9 +277,11 @@ def step_world(steps, ctx):
         warm_start(current, bodies)
         if jointed:
             warm_start_joints(joints, bodies.velocity)
-        contact_pass(current, joints, bodies, 2 * s.resolve_iterations, s.gravity, s.solver_threads)
-        if jointed:
+            contact_pass_with_joints(current, joints, bodies, 2 * s.resolve_iterations, s.gravity,
+                                     s.solver_threads)
             record_effort(joints, s.dt)
+        else:
+            contact_pass(current, bodies, 2 * s.resolve_iterations, s.gravity, s.solver_threads)
         t = lap(profile, stage_ns, np.int64(STAGE_CONTACT), t)
         # 7. Positions from velocities.
         integrate_positions(bodies, live, s.dt)

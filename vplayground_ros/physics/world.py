@@ -21,7 +21,7 @@ from .contact import index_manifolds
 from .freezing import wake_body
 from .jit_cache import compile_once
 from .joint_registry import JointRegistry
-from .joints import WORLD_SIDE, measure_joints
+from .joints import ANCHOR, EFFORT, FRAME, POSITION, SPEED, WORLD_SIDE, measure_joints
 from .math3d import matrix_to_quaternion, quaternions_to_matrices, rpy_to_quat
 from .pipeline import (DONE, GROW_CONTACTS, GROW_INDEX, GROW_PAIRS, STAGES, STAT_FROZEN,
                        STAT_PAIRS, STAT_POINTS, STAT_TRIANGLES, STAT_WOKEN, resting_steps,
@@ -382,14 +382,16 @@ class World(WorldQueries):
         row = self._joints.row(name)
         arrays = self._joints.arrays
         measure_joints(self._bodies, arrays)
-        parent_centre, parent_rotation = self._pose(int(arrays.body_a[row]))
-        child_centre, child_rotation = self._pose(int(arrays.body_b[row]))
-        axis = parent_rotation @ quaternions_to_matrices(arrays.frame_a[row][None])[0][:, 0]
+        parent, child = self._joints.slots(name)
+        parent_centre, parent_rotation = self._pose(parent)
+        child_centre, child_rotation = self._pose(child)
+        frames, values = arrays.frames[row], arrays.values[row]
+        axis = parent_rotation @ quaternions_to_matrices(frames[0, FRAME:FRAME + 4][None])[0][:, 0]
         spec = self._joints.spec(name)
         return {**spec, "motor": dict(spec["motor"]),
-                "anchor": (child_centre + child_rotation @ arrays.anchor_b[row]).tolist(),
-                "axis": axis.tolist(), "position": float(arrays.position[row]),
-                "velocity": float(arrays.speed[row]), "effort": float(arrays.effort[row])}
+                "anchor": (child_centre + child_rotation @ frames[1, ANCHOR:ANCHOR + 3]).tolist(),
+                "axis": axis.tolist(), "position": float(values[POSITION]),
+                "velocity": float(values[SPEED]), "effort": float(values[EFFORT])}
 
     def _pose(self, slot):
         """(centre of mass, rotation matrix) of a body, or the world's (WORLD_SIDE)."""
