@@ -48,6 +48,8 @@ def test_two_cubes_side_by_side_weigh_and_turn_as_one_box_about_their_middle():
         frame = world.state()["positions"][0]
         assert np.linalg.norm(frame - [2.0, 2.0, 3.0]) == pytest.approx(1.0, abs=1e-9)
     assert frame[1] != pytest.approx(2.0, abs=0.1)  # it has turned
+    # the frame's origin, 1 m from the axis, moves at w x r
+    assert np.linalg.norm(world.state()["linear_velocities"][0]) == pytest.approx(w[2] * 1.0, rel=1e-9)
 
 
 def test_a_box_with_a_sphere_on_top_sums_its_inertia_about_their_common_centre():
@@ -198,7 +200,7 @@ def test_scene_round_trip_keeps_the_frame_the_parts_and_the_masses(tmp_path):
         assert after["parts"] == before["parts"] and after["mass"] == before["mass"]
         assert after["position"] == pytest.approx(before["position"], abs=1e-12)
         assert after["quaternion"] == before["quaternion"]
-        assert after["linear_velocity"] == before["linear_velocity"]
+        assert after["linear_velocity"] == pytest.approx(before["linear_velocity"], abs=1e-12)
     assert again.body("table")["static_friction"] == 0.9
     assert np.array_equal(again._bodies.inv_inertia[:2], world._bodies.inv_inertia[:2])
 
@@ -257,6 +259,11 @@ def test_editing_a_compound_keeps_its_frame_where_it_is():
     world.edit_body("c", position=[0, 0, 5])
     hits = world.cast_rays(np.array([[0, 10, 5.0]]), np.array([[0, -1, 0.0]]), 20.0)
     assert hits.distance[0] == pytest.approx(10 - 4.5, abs=1e-12)  # the far cube's face at y = 4.5
+    # Set spinning, it turns about its frame's origin, which a linear velocity would move.
+    world.edit_body("c", angular_velocity=[0, 0, 2.0])
+    assert world.body("c")["linear_velocity"] == pytest.approx([0, 0, 0], abs=1e-12)
+    world.step(1)  # (the centre of mass steps along its circle's tangent: (w dt)^2 r / 2 = 4e-4 m off it)
+    assert world.body("c")["position"] == pytest.approx([0, 0, 5], abs=1e-3)  # not the w r dt = 0.05 m a still centre gives
 
 
 def test_a_compound_is_drawn_as_its_parts_on_its_frame():

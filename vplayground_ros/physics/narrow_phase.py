@@ -4,8 +4,9 @@ collide_ground): the box/box separating-axis test and its triangle and ground ve
 the closed forms of spheres and capsules (analytic.py), and the general convex path
 (convex_contact.py) for the rest. Adding a shape means a row in each dispatcher.
 
-A compound body's job is one job per pair of its parts (and the other body's, or the triangle,
-or the ground): collide_pieces, each a manifold with a warm-start key of its own.
+A job in which a compound body takes part is one piece per pair of parts (its parts against the
+other body's parts or whole shape, the triangle or the ground): collide_pieces, each piece a
+manifold with a warm-start key of its own.
 
 Box/box tests the 15 axes (3 face normals of each box, 9 edge crosses) and leaves at the first
 one that separates by more than the speculative margin. On a face axis the incident face of the

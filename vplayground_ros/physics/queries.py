@@ -55,26 +55,32 @@ class WorldQueries:
         return {**self.motion_state(), **self.body_properties()}
 
     def motion_state(self):
-        """What stepping changes, one row per body (copies): positions (of the bodies' frames: a
-        compound's is not its centre of mass), quaternions, linear_velocities (of the centres
-        of mass), angular_velocities, frozen."""
+        """What stepping changes, one row per body (copies): positions and linear_velocities of
+        the bodies' frames (a compound's is not its centre of mass), quaternions,
+        angular_velocities, frozen."""
         b, layout = self._bodies, self._current_layout()
         position, orientation, velocity, frozen = (gather(array, layout.rows) for array in
                                                    (b.position, b.orientation, b.velocity, b.frozen))
         if len(layout.compound_rows):
             turns = quaternions_to_matrices(orientation[layout.compound_rows])
-            position[layout.compound_rows] -= np.einsum("kij,kj->ki", turns, layout.compound_centres)
+            offsets = np.einsum("kij,kj->ki", turns, layout.compound_centres)
+            position[layout.compound_rows] -= offsets
+            velocity[layout.compound_rows, :3] -= np.cross(velocity[layout.compound_rows, 3:], offsets)
         return {"positions": position, "quaternions": orientation,
                 "linear_velocities": velocity[:, :3], "angular_velocities": velocity[:, 3:], "frozen": frozen}
 
     def body_properties(self):
         """What only adding, removing and editing change (see layout_version), one row per
         body (copies): shapes (codes of physics.shapes), dimensions (each shape's three
-        numbers), sizes (full edges of the body-frame bounding box), masses, immovable."""
-        b, rows = self._bodies, self._current_layout().rows
-        return {"shapes": gather(b.shape, rows), "dimensions": gather(b.dimensions, rows),
-                "sizes": 2.0 * gather(b.half_extents, rows), "masses": gather(b.mass, rows),
-                "immovable": gather(b.immovable, rows)}
+        numbers), sizes (full edges of a box about the body's frame, in its axes, that holds it:
+        a compound's is its centre of mass' box grown by the offset of that centre), masses,
+        immovable."""
+        b, layout = self._bodies, self._current_layout()
+        half = gather(b.half_extents, layout.rows)
+        half[layout.compound_rows] += np.abs(layout.compound_centres)
+        return {"shapes": gather(b.shape, layout.rows), "dimensions": gather(b.dimensions, layout.rows),
+                "sizes": 2.0 * half, "masses": gather(b.mass, layout.rows),
+                "immovable": gather(b.immovable, layout.rows)}
 
     def compound_parts(self):
         """Each compound body's parts in its frame (shapes.compound.FrameParts: shape codes,
@@ -113,8 +119,7 @@ class WorldQueries:
 
     def body(self, name):
         """Everything a scene file holds about one body (the SPEC 3 keys), as plain Python: the
-        pose of its frame (a compound's is not its centre of mass), the velocity of its centre
-        of mass."""
+        pose and velocity of its frame (a compound's is not its centre of mass)."""
         slot = self._slot(name)
         b = self._bodies
         shape = self._shape(slot)
@@ -122,7 +127,7 @@ class WorldQueries:
             "name": name, "shape": shape.name, **shape.fields,
             "position": self._frame_position(slot).tolist(),
             "quaternion": b.orientation[slot].tolist(),
-            "linear_velocity": b.velocity[slot, :3].tolist(),
+            "linear_velocity": self._frame_velocity(slot).tolist(),
             "angular_velocity": b.velocity[slot, 3:].tolist(),
             "mass": float(b.mass[slot]),
             "elasticity": float(b.elasticity[slot]),

@@ -175,6 +175,7 @@ class World(WorldQueries):
         self._set_solid(slot, body["shape"], solid)
         b.position[slot] = self._centre_of_mass(slot, body["position"])
         self._set_fields(slot, body, mass)
+        b.velocity[slot, :3] = self._centre_velocity(slot, b.velocity[slot, :3])
         self._names[slot] = name
         self._slots[name] = slot
         self.layout_version += 1
@@ -255,9 +256,9 @@ class World(WorldQueries):
 
     def edit_body(self, name, /, **fields):
         """Changes only the given SPEC 3 body keys (not name or shape). Size changes keep the
-        mass unless mass or density is given too. A compound's frame stays where it is unless
-        its position is given (new parts or a turn move its centre of mass about it). Wakes the
-        body and whatever touches it, unless the edit freezes it (`frozen=True`)."""
+        mass unless mass or density is given too. A compound's frame keeps its position and
+        velocity unless they are given (new parts or a turn move its centre of mass about it).
+        Wakes the body and whatever touches it, unless the edit freezes it (`frozen=True`)."""
         slot = self._slot(name)
         body = specs.validate_body_fields(fields, name, specs.BODY_KEYS - {"name", "shape"})
         shape = self._shape(slot)
@@ -279,6 +280,7 @@ class World(WorldQueries):
         self._wake_touching([slot])
         self._forget_contacts([slot])
         frame = body["position"] if "position" in body else self._frame_position(slot)
+        frame_velocity = body["linear_velocity"] if "linear_velocity" in body else self._frame_velocity(slot)
         if "rpy" in body:
             b.orientation[slot] = rpy_to_quat(body["rpy"])
         if "quaternion" in body:
@@ -288,6 +290,8 @@ class World(WorldQueries):
         if "position" in body or solid.compound is not None:
             b.position[slot] = self._centre_of_mass(slot, frame)
         self._set_fields(slot, body, mass)
+        if solid.compound is not None and not (b.immovable[slot] or b.frozen[slot]):
+            b.velocity[slot, :3] = self._centre_velocity(slot, frame_velocity)
         self.layout_version += 1  # sizes, masses, flags
         if not body.get("frozen", False):
             self._wake(slot)
@@ -542,30 +546,38 @@ class World(WorldQueries):
             [s.compound if s is not None else None for s in solids], len(solids))
         self._hulls = shapes.convex.pack_hulls([s.hull if s is not None else None for s in solids] + part_hulls)
 
-    def _frame_centre(self, slot):
-        """The body's centre of mass in its frame: a compound's parts put it there; the other
-        shapes' frames are their centres of mass."""
+    def _frame_to_centre(self, slot):
+        """The world vector from the body's frame to its centre of mass, which a compound's parts
+        put off its frame's origin; None for the other shapes (their frames are their centres)."""
         compound = self._solids[slot][1].compound
-        return compound.centre if compound is not None else None
+        if compound is None:
+            return None
+        r = np.empty((3, 3))
+        quat_to_matrix(self._bodies.orientation[slot], r)
+        return r @ compound.centre
 
     def _centre_of_mass(self, slot, frame_position):
         """Where the body's centre of mass is with its frame at `frame_position` (world)."""
-        centre = self._frame_centre(slot)
-        if centre is None:
-            return frame_position
-        r = np.empty((3, 3))
-        quat_to_matrix(self._bodies.orientation[slot], r)
-        return np.asarray(frame_position, float) + r @ centre
+        offset = self._frame_to_centre(slot)
+        return frame_position if offset is None else np.asarray(frame_position, float) + offset
 
     def _frame_position(self, slot):
-        """Where the body's frame is (world): its centre of mass, less a compound's offset."""
-        b = self._bodies
-        centre = self._frame_centre(slot)
-        if centre is None:
-            return b.position[slot].copy()
-        r = np.empty((3, 3))
-        quat_to_matrix(b.orientation[slot], r)
-        return b.position[slot] - r @ centre
+        """Where the body's frame is (world)."""
+        offset = self._frame_to_centre(slot)
+        position = self._bodies.position[slot]
+        return position.copy() if offset is None else position - offset
+
+    def _centre_velocity(self, slot, frame_velocity):
+        """The velocity of the body's centre of mass when its frame's origin moves at
+        `frame_velocity` (the body turning at its angular velocity)."""
+        offset = self._frame_to_centre(slot)
+        return frame_velocity if offset is None else frame_velocity + np.cross(self._bodies.velocity[slot, 3:], offset)
+
+    def _frame_velocity(self, slot):
+        """The velocity of the body's frame's origin (world)."""
+        offset = self._frame_to_centre(slot)
+        velocity = self._bodies.velocity[slot, :3]
+        return velocity.copy() if offset is None else velocity - np.cross(self._bodies.velocity[slot, 3:], offset)
 
     def _shape(self, slot):
         """The body's shape: name, module, dimensions and their spec keys (`size: [...]`)."""
