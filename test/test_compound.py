@@ -218,6 +218,17 @@ def test_results_are_bit_identical_run_to_run():
         assert first[key].tobytes() == second[key].tobytes()
 
 
+def test_a_convex_part_takes_its_points_from_a_mesh(tmp_path):
+    (tmp_path / "wedge.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n")
+    (tmp_path / "scene.yaml").write_text(
+        "version: 1\nbodies:\n  - {name: c, shape: compound, parts: [{size: [1, 1, 1]}, "
+        "{shape: convex, mesh: wedge.obj, position: [2, 0, 0]}]}\n")
+    part = load_world(tmp_path / "scene.yaml").body("c")["parts"][1]
+    assert "mesh" not in part and sorted(map(tuple, part["points"])) == [(0, 0, 0), (0, 0, 1), (0, 1, 0), (1, 0, 0)]
+    with pytest.raises(ValueError, match=re.escape("bodies[0].parts[0].mesh: only a convex body takes a mesh")):
+        load_world({"version": 1, "bodies": [{"shape": "compound", "parts": [{"mesh": "wedge.obj"}]}]})
+
+
 @pytest.mark.parametrize("parts, problem", [
     ("a box", "bodies[1].parts: expected a list of 1 to 64 parts"),
     ([], "bodies[1].parts: expected a list of 1 to 64 parts"),
