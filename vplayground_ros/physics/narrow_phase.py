@@ -452,46 +452,69 @@ def piece(parts, shape, position, rotation, dimensions, half_extents, body, k):
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
+def near_pieces(parts, shape, position, rotation, dimensions, half_extents, a, b, triangle, margin,
+                ground_height, triangles, triangle_normals, spheres, out):
+    """The pieces of a job in which a compound takes part that may touch, in `out`; returns
+    their count. Piece i * pieces_b + j is part i of body a (or a whole) against part j of body
+    b (or b whole), or against playground triangle `triangle` (b PLAYGROUND) or the ground (b
+    GROUND), j 0. A piece is kept when the parts' bounding spheres come within the margin of
+    each other, of the triangle's plane or of the ground: a table's legs meet the ground, not
+    the box on its top, and the rest cost no call of their own. `spheres` (MAX_PARTS, 4) holds
+    B's parts' centres and radii meanwhile."""
+    pieces_a = parts.count[a] if shape[a] == COMPOUND else 1
+    pieces_b = parts.count[b] if b >= 0 and shape[b] == COMPOUND else 1
+    if b >= 0:
+        for j in range(pieces_b):
+            _, pb, _, _, _, radius_b = piece(parts, shape, position, rotation, dimensions, half_extents, b, j)
+            spheres[j, 0], spheres[j, 1], spheres[j, 2], spheres[j, 3] = pb[0], pb[1], pb[2], radius_b
+    count = 0
+    for i in range(pieces_a):
+        _, pa, _, _, _, radius_a = piece(parts, shape, position, rotation, dimensions, half_extents, a, i)
+        if b >= 0:
+            for j in range(pieces_b):
+                gap = (spheres[j, 0] - pa[0], spheres[j, 1] - pa[1], spheres[j, 2] - pa[2])
+                reach = radius_a + spheres[j, 3] + margin
+                if gap[0] * gap[0] + gap[1] * gap[1] + gap[2] * gap[2] <= reach * reach:
+                    out[count] = i * pieces_b + j
+                    count += 1
+            continue
+        if b == PLAYGROUND:
+            v, n = triangles[triangle, 0], triangle_normals[triangle]
+            above = (pa[0] - v[0]) * n[0] + (pa[1] - v[1]) * n[1] + (pa[2] - v[2]) * n[2]
+            near = -radius_a <= above <= radius_a + margin  # not off its plane, nor wholly behind it
+        else:
+            near = pa[2] - radius_a <= ground_height + margin
+        if near:
+            out[count] = i
+            count += 1
+    return count
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def collide_pieces(hulls, parts, shape, position, rotation, dimensions, half_extents, a, b, triangle,
                    job_piece, pieces_b, margin, ground_height, triangles, triangle_normals, scratch,
                    out_point, out_depth):
-    """Manifold of piece `job_piece` of a job in which a compound takes part: part i of body a
-    (or a whole) against part j of body b (or b whole), playground triangle `triangle` (b
-    PLAYGROUND) or the ground (b GROUND). Returns (point count, normal A -> B, and the
-    manifold's warm-start keys). Pieces whose bounding spheres are farther apart than the margin
-    are skipped: a table's legs meet the ground, not the box on its top.
+    """Manifold of piece `job_piece` (see near_pieces) of a job in which a compound takes part.
+    Returns (point count, normal A -> B, and the manifold's warm-start keys).
 
     The keys tell the parts apart, so no two manifolds of one pair of bodies share impulses:
     key A is -2 - (a * MAX_PARTS + i), below every body slot (and the hash table's empty -1),
     so compound keys never meet the other manifolds'; key B is b * MAX_PARTS + j for a body,
     the ground's or the triangle's key otherwise."""
     i, j = job_piece // pieces_b, job_piece % pieces_b
-    kind_a, pa, ra, da, hull_a, radius_a = piece(parts, shape, position, rotation, dimensions, half_extents, a, i)
+    kind_a, pa, ra, da, hull_a, _ = piece(parts, shape, position, rotation, dimensions, half_extents, a, i)
     key_a = -2 - (a * MAX_PARTS + i)
     if b >= 0:
-        kind_b, pb, rb, db, hull_b, radius_b = piece(parts, shape, position, rotation, dimensions, half_extents, b, j)
-        key_b = b * MAX_PARTS + j
-        gap = (pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2])
-        reach = radius_a + radius_b + margin
-        if gap[0] * gap[0] + gap[1] * gap[1] + gap[2] * gap[2] > reach * reach:
-            return 0, (0.0, 0.0, 0.0), key_a, key_b
+        kind_b, pb, rb, db, hull_b, _ = piece(parts, shape, position, rotation, dimensions, half_extents, b, j)
         n, normal = collide_pair(hulls, kind_a, pa, ra, da, hull_a, kind_b, pb, rb, db, hull_b, margin,
                                  scratch, out_point, out_depth)
-        return n, normal, key_a, key_b
+        return n, normal, key_a, b * MAX_PARTS + j
     if b == PLAYGROUND:
-        tri, tri_normal = matrix3(triangles, triangle), vector3(triangle_normals, triangle)
-        above = ((pa[0] - tri[0][0]) * tri_normal[0] + (pa[1] - tri[0][1]) * tri_normal[1]
-                 + (pa[2] - tri[0][2]) * tri_normal[2])
-        if above > radius_a + margin or above < -radius_a:  # off its plane, or wholly behind it
-            return 0, (0.0, 0.0, 0.0), key_a, triangle_key(triangle)
-        n, normal = collide_triangle(hulls, kind_a, pa, ra, da, hull_a, tri, tri_normal, margin, scratch,
-                                     out_point, out_depth)
+        n, normal = collide_triangle(hulls, kind_a, pa, ra, da, hull_a, matrix3(triangles, triangle),
+                                     vector3(triangle_normals, triangle), margin, scratch, out_point, out_depth)
         return n, normal, key_a, triangle_key(triangle)
-    down = (0.0, 0.0, -1.0)
-    if pa[2] - radius_a > ground_height + margin:
-        return 0, down, key_a, GROUND
     n = collide_ground(hulls, kind_a, pa, ra, da, hull_a, ground_height, margin, scratch, out_point, out_depth)
-    return n, down, key_a, GROUND
+    return n, (0.0, 0.0, -1.0), key_a, GROUND
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
@@ -507,7 +530,8 @@ def collide(contacts, bodies, hulls, parts, broad, playground, ground_enabled, g
     reason boxes go straight to the first rows of collide_pair, collide_triangle and
     collide_ground: through the dispatchers (whose arguments include the convex path's scratch
     arrays) a falling pile of boxes spent 40 % longer here. A job with a compound body is one
-    piece per pair of parts (collide_pieces), the others one piece."""
+    piece per pair of its parts that may touch (near_pieces, collide_pieces), the others one
+    piece."""
     contacts.count[0] = 0
     contacts.manifold_count[0] = 0
     scratch = allocate_scratch()
@@ -515,6 +539,7 @@ def collide(contacts, bodies, hulls, parts, broad, playground, ground_enabled, g
     scratch_point = np.empty((MAX_CLIP_POINTS, 3))
     scratch_depth = np.empty(MAX_CLIP_POINTS)
     keep = np.empty(4, np.int64)
+    spheres, near = np.empty((MAX_PARTS, 4)), np.empty(MAX_PARTS * MAX_PARTS, np.int64)
     reach, awake = bodies.speculative_reach, bodies.awake
     position, rotation, dimensions, shape = (bodies.position, bodies.rotation, bodies.dimensions,
                                              bodies.shape)
@@ -549,13 +574,16 @@ def collide(contacts, bodies, hulls, parts, broad, playground, ground_enabled, g
             margin = CONTACT_MARGIN + reach[a]
         pieces_b = part_count[b] if b >= 0 and shape[b] == COMPOUND else 1
         compound = shape[a] == COMPOUND or (b >= 0 and shape[b] == COMPOUND)
-        pieces = (part_count[a] if shape[a] == COMPOUND else 1) * pieces_b
+        pieces = 1
+        if compound:
+            pieces = near_pieces(parts, shape, position, rotation, dimensions, bodies.half_extents, a, b, t,
+                                 margin, ground_height, playground.triangles, playground.normals, spheres, near)
         for job_piece in range(pieces):
             key_a = a
             if compound:
                 n, normal, key_a, key_b = collide_pieces(
                     hulls, parts, shape, position, rotation, dimensions, bodies.half_extents, a, b, t,
-                    job_piece, pieces_b, margin, ground_height, playground.triangles,
+                    near[job_piece], pieces_b, margin, ground_height, playground.triangles,
                     playground.normals, scratch, scratch_point, scratch_depth)
             elif job < body_pairs:
                 if shape[a] == BOX and shape[b] == BOX:
