@@ -124,6 +124,16 @@ def test_a_table_stands_on_its_legs_without_sinking_and_freezes():
     assert m == 4 and len(keys) == 4
 
 
+def test_a_table_stands_on_a_playground_across_its_seam():
+    world = World(ground=None)
+    world.set_playground(np.array([[-4.0, -4.0, 0.0], [4.0, -4.0, 0.0], [4.0, 4.0, 0.0], [-4.0, 4.0, 0.0]]),
+                         np.array([[0, 1, 2], [0, 2, 3]]))  # the diagonal seam runs under the table
+    world.add_body({**TABLE, "name": "table", "rpy": [0, 0, 0.3]})
+    heights = frame_heights(world, "table", 3.0)
+    assert np.abs(heights).max() < 1e-3
+    assert world.state()["frozen"][0]
+
+
 def test_a_box_dropped_on_the_table_rests_on_its_top_not_in_it():
     world = World()
     world.add_body({**TABLE, "name": "table"})
@@ -299,3 +309,15 @@ def test_a_compound_is_drawn_as_its_parts_on_its_frame():
     # the hull's points about its centre, 1 m along the frame's -x: (0, -1, 1) in the world
     hull_centre = np.array([0.075, 0.075, 0.075])
     assert poses[3, :3] == pytest.approx([-hull_centre[1], -1 + hull_centre[0], 1 + hull_centre[2]], abs=1e-12)
+
+
+def test_a_compound_is_bounded_by_a_box_about_its_frame():
+    """The standard services' bounds and ~/get_entities' are boxes about an entity's pose: a
+    compound's holds its parts however it turns about its frame."""
+    from vplayground_ros.api.descriptions import describe
+    world = World(ground=None, settings=WEIGHTLESS)
+    world.add_body({"name": "pair", "shape": "compound", "parts": [
+        {"size": [1, 1, 1], "position": [0.5, 0, 0]}, {"size": [1, 1, 1], "position": [1.5, 0, 0]}]})
+    # the parts span x = 0..2 about a centre of mass at x = 1: 1 m either side of it, 2 of the frame
+    assert describe(world, "pair")["bounds"]["size"] == pytest.approx([4, 1, 1])
+    assert world.body_properties()["sizes"][0] == pytest.approx([4, 1, 1])
