@@ -59,15 +59,14 @@ def combine(parts, half_extents_of):
     mass = float(masses.sum())
     centres = np.array([part.centre for part in parts])
     centre = (masses[:, None] * centres).sum(axis=0) / mass
-    inertia = np.zeros((3, 3))
+    inertia, reach = np.zeros((3, 3)), np.zeros(3)
     for part, offset in zip(parts, centres - centre):
         turn = part_rotation(part)
+        # its own tensor turned into the body's axes, and the parallel axis term
         inertia += part.mass * (turn @ part.solid.unit_inertia @ turn.T)
         inertia += part.mass * (offset @ offset * np.eye(3) - np.outer(offset, offset))
-    reach = np.zeros(3)
-    for part, offset in zip(parts, centres - centre):
-        turn = np.abs(part_rotation(part))
-        reach = np.maximum(reach, np.abs(offset) + turn @ np.asarray(half_extents_of(part.code, part.solid.dimensions)))
+        # its bounding box turned into the body's axes, about the centre of mass
+        reach = np.maximum(reach, np.abs(offset) + np.abs(turn) @ np.asarray(half_extents_of(part.code, part.solid.dimensions)))
     volume = float(sum(part.solid.volume for part in parts))
     return Compound(parts, centre, mass), tuple(float(r) for r in reach), volume, inertia / mass
 
