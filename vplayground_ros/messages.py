@@ -190,13 +190,6 @@ def shape_marker_poses(layout, poses):
     return placed
 
 
-def shape_markers(shape_codes, dimensions, poses, ids, hull_triangles=None, parts=None):
-    """The markers that draw bodies: (body row of each marker, type, id, pose (M, 7), scale
-    (M, 3)); see shape_marker_layout for the last two arguments."""
-    layout = shape_marker_layout(shape_codes, dimensions, ids, hull_triangles, parts)
-    return layout.rows, layout.types, layout.ids, shape_marker_poses(layout, poses), layout.scales
-
-
 # What one body-marker topic draws, kept while the layout and the bodies at rest stay: `key` the
 # layout's arrays (by identity), `at_rest` the flags it was made for and `frozen` the array they
 # came from (a settled world's snapshots share it), `rows` the bodies drawn.
@@ -205,7 +198,7 @@ MarkerLayout = namedtuple("MarkerLayout", "key at_rest frozen rows namespaces ma
 
 class BodyMarkers:
     """One of the two topics that draw the bodies: DELETEALL, then each body's shape
-    (shape_markers; ns = category, ids stable per name, frozen grey). `resting` draws the bodies
+    (shape_marker_layout; ns = category, ids stable per name, frozen grey). `resting` draws the bodies
     at rest (frozen or immovable: ~/bodies/resting_markers, latched), else the others
     (~/bodies/markers, every round), so what does not move is not re-sent every round. Neither
     draws the vehicles: ~/<name>/markers draws each with its wheels, and two markers at one

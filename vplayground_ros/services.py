@@ -129,8 +129,8 @@ def entity_marker(runtime, name, description):
 
 
 def shape_markers(description):
-    """The markers that draw an entity in its own frame (messages.shape_markers: a capsule is a
-    cylinder and two spheres, a compound its parts; a sensor a small cube)."""
+    """The markers that draw an entity in its own frame (messages.shape_marker_layout: a capsule
+    is a cylinder and two spheres, a compound its parts; a sensor a small cube)."""
     shape, hull, parts = description["shape"], None, None
     if shape == "box":
         dimensions = 0.5 * np.asarray(description["bounds"]["size"], float)
