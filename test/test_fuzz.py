@@ -430,15 +430,20 @@ CUBE = [[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)
 SHAPE_KEYS = {"box": {"size": lambda v: [v, v, v]}, "sphere": {"radius": lambda v: v},
               "capsule": {"radius": lambda v: v, "length": lambda v: v},
               "cylinder": {"radius": lambda v: v, "length": lambda v: v},
-              "convex": {"points": lambda v: [[v * c for c in p] for p in CUBE]}}
+              "convex": {"points": lambda v: [[v * c for c in p] for p in CUBE]},
+              # a part sized by the value beside one placed and weighed by it
+              "compound": {"parts": lambda v: [{"size": [v, v, v]},
+                                               {"shape": "sphere", "radius": 0.5, "position": [v, 0.0, 0.0], "mass": v}]}}
 EDGE_CASES = [(shape, key, value) for shape, keys in SHAPE_KEYS.items()
               for key in [*keys, "mass", "density"] for value in EDGE_FLOATS]
+# What a body of the shape needs besides the value tried (the shapes whose size has no default).
+REQUIRED_KEYS = {"convex": {"points": CUBE}, "compound": {"parts": [{"size": [1.0, 1.0, 1.0]}]}}
 
 
 def edge_fields(shape, key, value):
     if key in SHAPE_KEYS[shape]:
         return {key: SHAPE_KEYS[shape][key](value)}
-    return {key: value, **({"points": CUBE} if shape == "convex" else {})}
+    return {key: value, **REQUIRED_KEYS.get(shape, {})}
 
 
 def check_edge_reply(ok, message, key):
@@ -457,8 +462,7 @@ def test_spawn_at_the_edges_of_floating_point(harness, shape, key, value):
 def test_edit_at_the_edges_of_floating_point(harness, shape, key, value):
     name = f"edge_{shape}"
     if not harness.sim.call(lambda world: name in world.body_names()):  # an accepted edit resets the scene
-        shape_keys = {"points": CUBE} if shape == "convex" else {}
-        ok, message = harness.requests.spawn(json.dumps({"name": name, "shape": shape, **shape_keys,
+        ok, message = harness.requests.spawn(json.dumps({"name": name, "shape": shape, **REQUIRED_KEYS.get(shape, {}),
                                                          "position": [30.0, -30.0 + 6 * len(name), 1.0]}))
         assert ok, message
     request = {"entity": name, **edge_fields(shape, key, value)}

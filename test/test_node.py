@@ -203,6 +203,29 @@ def test_entity_services_and_codes(ros):
     assert ros.text("remove", "{entity: node_box}")[1].startswith("RESULT_NOT_FOUND:")
 
 
+def test_a_spawned_compound_is_drawn_and_described_as_its_parts(ros):
+    from visualization_msgs.msg import MarkerArray
+    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    ros.listen(MarkerArray, f"{NS}/bodies/resting_markers", latched)
+    spec = ("{name: node_table, shape: compound, immovable: true, position: [8, -8, 5], parts: ["
+            "{size: [1.2, 0.8, 0.05], position: [0, 0, 0.725]}, "
+            "{shape: cylinder, radius: 0.05, length: 0.7, position: [0, 0, 0.35]}]}")
+    assert ros.text("spawn", spec) == (True, "RESULT_OK: node_table")
+
+    def drawn():  # (type, position) of the resting markers on the table's spot
+        markers = ros.latest[f"{NS}/bodies/resting_markers"].markers[1:] if f"{NS}/bodies/resting_markers" in ros.latest else []
+        return sorted((m.type, round(m.pose.position.x, 9), round(m.pose.position.y, 9), round(m.pose.position.z, 9))
+                      for m in markers if abs(m.pose.position.x - 8) < 1 and abs(m.pose.position.y + 8) < 1)
+    assert wait_for(lambda: drawn() == [(1, 8, -8, 5.725), (3, 8, -8, 5.35)]), drawn()
+    entities = ros.call(GetInteractiveMarkers, f"{NS}/get_entities", GetInteractiveMarkers.Request())
+    marker = next(m for m in entities.markers if m.name == "node_table")
+    description = yaml.safe_load(marker.description)
+    assert description["shape"] == "compound" and len(description["properties"]["parts"]) == 2
+    assert [(m.type, round(m.pose.position.z, 9)) for m in marker.controls[0].markers] == [(1, 0.725), (3, 0.35)]
+    assert [round(v, 9) for v in (marker.pose.position.x, marker.pose.position.y, marker.pose.position.z)] == [8, -8, 5]
+    assert ros.text("remove", "{entity: node_table}") == (True, "RESULT_OK: node_table")
+
+
 def test_a_reply_repeating_what_utf8_cannot_carry_still_arrives(ros):
     """An unknown key written as a JSON escape of a lone surrogate: the coded error repeats it,
     and rclpy's send_response raised on encoding it, which stopped the node. Such characters (and

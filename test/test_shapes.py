@@ -6,7 +6,7 @@ import re
 import numpy as np
 import pytest
 
-from vplayground_ros.messages import shape_markers
+from vplayground_ros.messages import shape_marker_layout, shape_marker_poses
 from vplayground_ros.physics import World
 from vplayground_ros.physics import shapes
 from vplayground_ros.scene import load_world, save_world
@@ -230,7 +230,7 @@ def test_shapes_save_and_reload(tmp_path):
     ({"shape": "box", "radius": 1.0}, "body.radius: a box has no radius (its keys: size)"),
     ({"shape": "cylinder", "radius": 1.0, "length": 0.0}, "body.length: must be >= 0.001 for a cylinder, got 0"),
     ({"shape": "sphere", "radius": -1.0}, "body.radius: must be >= 0.0005, got -1"),
-    ({"shape": "cone"}, "body.shape: unsupported shape 'cone' (supported: box, sphere, capsule, cylinder, convex)"),
+    ({"shape": "cone"}, "body.shape: unsupported shape 'cone' (supported: box, sphere, capsule, cylinder, convex, compound)"),
 ])
 def test_bad_shape_keys_are_refused_naming_the_key(spec, problem):
     world = World()
@@ -257,7 +257,8 @@ def test_markers_draw_each_shape():
     dims = np.array([[0.5, 0.25, 0.1], [0.4, 0, 0], [0.3, 0.4, 0], [0.4, 0.3, 0]])
     poses = np.array([[0, 0, 0, 0, 0, 0, 1.0]] * 3 + [[0, 0, 0, 0, math.sin(math.pi / 4), 0, math.cos(math.pi / 4)]])
     poses[2, :3] = [5, 0, 1]
-    rows, types, ids, where, scales = shape_markers(codes, dims, poses, np.array([1, 2, 3, 4]))
+    layout = shape_marker_layout(codes, dims, np.array([1, 2, 3, 4]))
+    rows, types, ids, where, scales = layout.rows, layout.types, layout.ids, shape_marker_poses(layout, poses), layout.scales
     # CUBE, SPHERE, CYLINDER (a capsule's middle), CYLINDER, then the capsule's two end spheres
     assert list(types) == [1, 2, 3, 3, 2, 2] and list(rows) == [0, 1, 2, 3, 2, 2]
     assert len(set(ids)) == 6
@@ -364,15 +365,13 @@ def test_a_mesh_on_another_shape_is_refused(tmp_path):
 
 
 def test_a_convex_body_is_drawn_as_its_hull_triangles():
-    from vplayground_ros.messages import hull_points
     world = World()
     world.add_body({"name": "c", "shape": "convex", "points": BRICK})
     world.add_body({"name": "b", "size": [1, 1, 1], "position": [3, 0, 1]})
     props = world.body_properties()
-    rows, types, _, _, scales = shape_markers(props["shapes"], props["dimensions"],
-                                              np.array([[0, 0, 0, 0, 0, 0, 1.0]] * 2), np.array([1, 2]))
-    assert list(types) == [11, 1] and scales[0].tolist() == [1, 1, 1]
-    points = hull_points(world.hull_triangles())
+    layout = shape_marker_layout(props["shapes"], props["dimensions"], np.array([1, 2]), world.hull_triangles())
+    assert list(layout.types) == [11, 1] and layout.scales[0].tolist() == [1, 1, 1]
+    points = layout.points
     assert points[1] is None and points[0].shape == (36, 3)  # a brick's 12 triangles
     assert np.allclose(np.abs(points[0]), [0.5, 0.25, 0.1])  # its corners, in its frame
 

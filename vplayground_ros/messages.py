@@ -107,49 +107,87 @@ def categories(snapshot):
 
 # The marker that draws each shape; a capsule is its cylinder plus a SPHERE on each end, whose
 # ids are the body's with CAPSULE_END_ID_BITS set (body ids stay far below them).
-# A convex body is its hull's triangles (a TRIANGLE_LIST in its frame, scale 1).
+# A convex body is its hull's triangles (a TRIANGLE_LIST in its frame, scale 1). A compound body
+# is its parts, each drawn as its shape at its pose in the body's frame, with the part's index
+# from PART_ID_SHIFT up in its id (below the capsule ends' bits).
 SHAPE_MARKER_TYPES = np.array([CUBE, SPHERE, CAPSULE_MARKER, CYLINDER, TRIANGLE_LIST], np.int32)
 CAPSULE_END_ID_BITS = (1 << 29, 1 << 30)
+PART_ID_SHIFT = 23
 
 # What drawing bodies' shapes takes beyond their poses (it changes only with the layout): the
-# body row of each marker, its type, id and scale, and the capsules (rows, half lengths).
-ShapeMarkerLayout = namedtuple("ShapeMarkerLayout", "rows types ids scales capsules capsule_half")
+# body row of each marker, its type, id and scale, the markers drawn off their body's pose (a
+# capsule's ends, a compound's parts) with those poses in the body's frame, and each marker's
+# TRIANGLE_LIST points (None for the other markers; None when no marker has any).
+ShapeMarkerLayout = namedtuple("ShapeMarkerLayout", "rows types ids scales offset_markers offset_poses points")
+IDENTITY_POSE = np.array(IDENTITY)
 
 
-def shape_marker_layout(shape_codes, dimensions, ids):
-    """Vectorised (no Python loop per body: the node draws thousands at marker_rate). A convex
-    body's marker takes its hull's triangles as points (hull_points)."""
+def shape_marker_layout(shape_codes, dimensions, ids, hull_triangles=None, parts=None):
+    """Vectorised over the bodies that are one shape (no Python loop per body: the node draws
+    thousands at marker_rate); a compound's parts are taken one by one. hull_triangles: each
+    row's convex hull (T, 3, 3) or None; parts: each row's shapes.compound.FrameParts or None
+    (both needed when such shapes are drawn)."""
+    ids = np.asarray(ids, np.int32).reshape(-1)
+    rows = np.arange(len(shape_codes))
+    compounds = np.nonzero(shape_codes == shapes.COMPOUND)[0]
+    local, hulls = np.zeros((0, 7)), list(hull_triangles) if hull_triangles is not None else [None] * len(rows)
+    if len(compounds):  # each compound's row gives way to its parts'
+        whole = np.nonzero(shape_codes != shapes.COMPOUND)[0]
+        frames = [parts[row] for row in compounds.tolist()]
+        owner = np.repeat(compounds, [len(f.codes) for f in frames])
+        index = np.concatenate([np.arange(len(f.codes)) for f in frames])
+        hulls = [hulls[row] for row in whole.tolist()] + [t for f in frames for t in f.hull_triangles]
+        rows = np.concatenate([whole, owner])
+        ids = np.concatenate([ids[whole], ids[owner] | (index << PART_ID_SHIFT).astype(np.int32)])
+        shape_codes = np.concatenate([shape_codes[whole], *[f.codes for f in frames]])
+        dimensions = np.concatenate([dimensions[whole], *[f.dimensions for f in frames]])
+        local = np.concatenate([f.poses for f in frames])
+    offset = np.arange(len(rows) - len(local), len(rows))
     r, half = dimensions[:, 0], dimensions[:, 1]
     scales = np.where((shape_codes == shapes.BOX)[:, None], 2.0 * dimensions,
                       np.stack([2.0 * r, 2.0 * r, np.where(shape_codes == shapes.SPHERE, 2.0 * r, 2.0 * half)], 1))
     scales[shape_codes == shapes.CONVEX] = 1.0
-    rows = np.arange(len(shape_codes))
-    types, marker_ids = SHAPE_MARKER_TYPES[shape_codes], np.asarray(ids, np.int32).reshape(-1)
+    types = SHAPE_MARKER_TYPES[shape_codes]
     capsules = np.nonzero(shape_codes == shapes.CAPSULE)[0]
     diameter = np.repeat(2.0 * r[capsules, None], 3, axis=1)
+    # Where each capsule (or capsule part) is in its body's frame, and its ends beside it.
+    centre = np.tile(IDENTITY_POSE, (len(rows), 1))
+    centre[offset] = local
+    ends = []
+    for sign in (1.0, -1.0):
+        along = np.zeros((len(capsules), 7))
+        along[:, 2], along[:, 6] = sign * half[capsules], 1.0
+        ends.append(compose_poses(centre[capsules], along))
+    points = None
+    if any(h is not None for h in hulls):
+        points = tuple(h.reshape(-1, 3) if h is not None else None for h in hulls) + (None,) * (2 * len(capsules))
     return ShapeMarkerLayout(
-        np.concatenate([rows, capsules, capsules]),
+        np.concatenate([rows, rows[capsules], rows[capsules]]),
         np.concatenate([types, np.full(2 * len(capsules), SPHERE, np.int32)]),
-        np.concatenate([marker_ids, marker_ids[capsules] | CAPSULE_END_ID_BITS[0],
-                        marker_ids[capsules] | CAPSULE_END_ID_BITS[1]]),
-        np.concatenate([scales, diameter, diameter]), capsules, half[capsules])
+        np.concatenate([ids, ids[capsules] | CAPSULE_END_ID_BITS[0], ids[capsules] | CAPSULE_END_ID_BITS[1]]),
+        np.concatenate([scales, diameter, diameter]),
+        np.concatenate([offset, len(rows) + np.arange(2 * len(capsules))]).astype(np.int64),
+        np.concatenate([local, *ends]), points)
+
+
+def compose_poses(outer, inner):
+    """Poses (K, 7) xyz + xyzw of frames at `inner` in frames at `outer`, both (K, 7)."""
+    turns = quaternions_to_matrices(outer[:, 3:])
+    (ax, ay, az, aw), (bx, by, bz, bw) = outer[:, 3:].T, inner[:, 3:].T
+    turned = np.stack([aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
+                       aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz], 1)
+    return np.concatenate([outer[:, :3] + np.einsum("kij,kj->ki", turns, inner[:, :3]), turned], axis=1)
 
 
 def shape_marker_poses(layout, poses):
-    """The markers' poses (M, 7) from the bodies' (N, 7): a capsule's ends beside it."""
-    if len(layout.capsules) == 0:
-        return poses
-    capsules = layout.capsules
-    axis = quaternions_to_matrices(poses[capsules, 3:])[:, :, 2] * layout.capsule_half[:, None]
-    ends = [np.concatenate([poses[capsules, :3] + sign * axis, poses[capsules, 3:]], axis=1) for sign in (1.0, -1.0)]
-    return np.concatenate([poses, *ends])
-
-
-def shape_markers(shape_codes, dimensions, poses, ids):
-    """The markers that draw bodies: (body row of each marker, type, id, pose (M, 7), scale
-    (M, 3))."""
-    layout = shape_marker_layout(shape_codes, dimensions, ids)
-    return layout.rows, layout.types, layout.ids, shape_marker_poses(layout, poses), layout.scales
+    """The markers' poses (M, 7) from the bodies' (N, 7): a capsule's ends beside it, a
+    compound's parts where they are on it."""
+    if len(layout.offset_markers) == 0:
+        return poses  # one marker a body, at its pose
+    placed = poses[layout.rows]
+    moved = layout.offset_markers
+    placed[moved] = compose_poses(placed[moved], layout.offset_poses)
+    return placed
 
 
 # What one body-marker topic draws, kept while the layout and the bodies at rest stay: `key` the
@@ -160,7 +198,7 @@ MarkerLayout = namedtuple("MarkerLayout", "key at_rest frozen rows namespaces ma
 
 class BodyMarkers:
     """One of the two topics that draw the bodies: DELETEALL, then each body's shape
-    (shape_markers; ns = category, ids stable per name, frozen grey). `resting` draws the bodies
+    (shape_marker_layout; ns = category, ids stable per name, frozen grey). `resting` draws the bodies
     at rest (frozen or immovable: ~/bodies/resting_markers, latched), else the others
     (~/bodies/markers, every round), so what does not move is not re-sent every round. Neither
     draws the vehicles: ~/<name>/markers draws each with its wheels, and two markers at one
@@ -179,10 +217,10 @@ class BodyMarkers:
 
     def layout(self, snapshot, ids):
         s = snapshot.state
-        key = (snapshot.names, s["immovable"], s["shapes"], s["dimensions"], s["hull_triangles"], ids,
+        key = (snapshot.names, s["immovable"], s["shapes"], s["dimensions"], s["hull_triangles"], s["parts"], ids,
                tuple(snapshot.vehicles))
         cached = self._layout
-        if cached is not None and all(a is b for a, b in zip(key[:6], cached.key[:6])) and key[6:] == cached.key[6:]:
+        if cached is not None and all(a is b for a, b in zip(key[:7], cached.key[:7])) and key[7:] == cached.key[7:]:
             if s["frozen"] is cached.frozen or np.array_equal(s["frozen"] | s["immovable"], cached.at_rest):
                 return cached
         at_rest = s["frozen"] | s["immovable"]
@@ -190,15 +228,15 @@ class BodyMarkers:
         drawn[[snapshot.names.index(name) for name in snapshot.vehicles]] = False
         rows = np.nonzero(drawn)[0]
         kinds = categories(snapshot)[rows]
-        markers = shape_marker_layout(s["shapes"][rows], s["dimensions"][rows], np.asarray(ids)[rows])
+        picked = rows.tolist()
+        markers = shape_marker_layout(s["shapes"][rows], s["dimensions"][rows], np.asarray(ids)[rows],
+                                      [s["hull_triangles"][row] for row in picked], [s["parts"][row] for row in picked])
         namespaces = CATEGORIES[kinds[markers.rows]]
         colours = CATEGORY_COLOURS[np.where(s["frozen"][rows], FROZEN, kinds)][markers.rows]
-        for array in (at_rest, rows, namespaces, colours, *markers):
+        for array in (at_rest, rows, namespaces, colours, *markers[:-1]):
             array.flags.writeable = False
-        hulls = hull_points([s["hull_triangles"][row] for row in rows.tolist()])
-        points = None if hulls is None else tuple(
-            b"" if hulls[row] is None else np.ascontiguousarray(hulls[row], "<f8").tobytes()
-            for row in markers.rows.tolist())
+        points = None if markers.points is None else tuple(
+            b"" if p is None else np.ascontiguousarray(p, "<f8").tobytes() for p in markers.points)
         self._layout = MarkerLayout(key, at_rest, s["frozen"], rows, namespaces, markers, colours, points)
         return self._layout
 
@@ -221,14 +259,6 @@ class BodyMarkers:
         markers = layout.markers
         return self.encoder.encode(snapshot.time, frame, layout.namespaces, markers.types, markers.ids,
                                    shape_marker_poses(markers, drawn), markers.scales, layout.colours, layout.points)
-
-
-def hull_points(hull_triangles):
-    """Each row's TRIANGLE_LIST points (a convex body's hull triangles, (3T, 3)), None for the
-    other shapes; None when no body is convex."""
-    if all(t is None for t in hull_triangles):
-        return None
-    return [t.reshape(-1, 3) if t is not None else None for t in hull_triangles]
 
 
 def marker_array(seconds, frame, markers):

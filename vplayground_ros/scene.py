@@ -231,7 +231,11 @@ def validate_list(raw, key):
 
 def body_mesh_points(raw, path, base, directories=None):
     """A convex body's `mesh:` (a file, found as the playground's is) read into its `points`
-    (the vertices its triangles use); any other body as it is."""
+    (the vertices its triangles use), and a compound's convex parts' likewise; any other body as
+    it is."""
+    if isinstance(raw, dict) and raw.get("shape") == "compound" and isinstance(raw.get("parts"), list):
+        raw = {**raw, "parts": [body_mesh_points(part, specs.child(specs.child(path, "parts"), k), base, directories)
+                                for k, part in enumerate(raw["parts"])]}
     if not isinstance(raw, dict) or "mesh" not in raw:
         return raw
     key = f"{path}.mesh"

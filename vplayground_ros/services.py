@@ -12,6 +12,7 @@ from .api import MAP_SUCCESS, UNDEFINED_FAILURE
 from .api.results import internal_error
 from .messages import header
 from .physics.shapes import SHAPES, solid
+from .physics.shapes.compound import frame_parts
 
 # `aside`: the handler may take long (it waits for steps, or answers for every entity): the ROS
 # node runs it on a thread of its own so that its executor serves everything else meanwhile.
@@ -128,18 +129,21 @@ def entity_marker(runtime, name, description):
 
 
 def shape_markers(description):
-    """The markers that draw an entity in its own frame (messages.shape_markers: a capsule is a
-    cylinder and two spheres; a sensor a small cube)."""
-    shape, hull = description["shape"], None
+    """The markers that draw an entity in its own frame (messages.shape_marker_layout: a capsule
+    is a cylinder and two spheres, a compound its parts; a sensor a small cube)."""
+    shape, hull, parts = description["shape"], None, None
     if shape == "box":
         dimensions = 0.5 * np.asarray(description["bounds"]["size"], float)
     else:
         solid_shape = solid(shape, description["properties"])
         dimensions, hull = np.asarray(solid_shape.dimensions, float), solid_shape.hull
-    _, types, _, poses, scales = messages.shape_markers(
-        np.array([SHAPES[shape].code]), dimensions[None], np.array([[0.0] * 6 + [1.0]]), [0])
+        parts = None if solid_shape.compound is None else frame_parts(solid_shape.compound)
+    layout = messages.shape_marker_layout(np.array([SHAPES[shape].code]), dimensions[None], [0],
+                                          [None if hull is None else hull.triangles], [parts])
+    poses = messages.shape_marker_poses(layout, np.array([[0.0] * 6 + [1.0]]))
+    points = layout.points or (None,) * len(poses)
     return [{"type": int(t), "action": 0,  # ADD
              "pose": {"position": dict(zip("xyz", map(float, pose[:3]))), "orientation": dict(zip("xyzw", map(float, pose[3:])))},
              "scale": dict(zip("xyz", map(float, scale))),
-             "points": [] if hull is None else [dict(zip("xyz", map(float, p))) for p in hull.triangles.reshape(-1, 3)]}
-            for t, pose, scale in zip(types, poses, scales)]
+             "points": [] if p is None else [dict(zip("xyz", map(float, v))) for v in p]}
+            for t, pose, scale, p in zip(layout.types, poses, layout.scales, points)]

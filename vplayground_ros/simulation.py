@@ -416,6 +416,7 @@ class Simulation:
             for array in properties.values():
                 array.flags.writeable = False
             properties["hull_triangles"] = world.hull_triangles()
+            properties["parts"] = world.compound_parts()
             vehicle_names = world.vehicle_names()
             scenery = layout.scenery if layout is not None and layout.world is world else None
             if scenery is None or scenery.version != world.scenery_version:

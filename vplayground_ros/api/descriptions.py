@@ -16,7 +16,11 @@ def describe(world, name, vehicles=None):
     is_vehicle = name in (world.vehicle_names() if vehicles is None else vehicles)
     props = world.vehicle(name) if is_vehicle else world.body(name)
     body = world.body(name)
-    size = 2.0 * np.asarray(half_extents(SHAPES[body["shape"]].code, solid(body["shape"], body).dimensions))
+    shape = solid(body["shape"], body)
+    half = np.asarray(half_extents(SHAPES[body["shape"]].code, shape.dimensions))
+    if shape.compound is not None:  # about its frame, where its pose is, not its centre of mass
+        half = half + np.abs(shape.compound.centre)
+    size = 2.0 * half
     return {
         "name": name,
         "category": "vehicle" if is_vehicle else ("immovable" if body["immovable"] else "box"),

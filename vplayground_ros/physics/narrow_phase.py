@@ -4,6 +4,10 @@ collide_ground): the box/box separating-axis test and its triangle and ground ve
 the closed forms of spheres and capsules (analytic.py), and the general convex path
 (convex_contact.py) for the rest. Adding a shape means a row in each dispatcher.
 
+A job in which a compound body takes part is one piece per pair of parts (its parts against the
+other body's parts or whole shape, the triangle or the ground): collide_pieces, each piece a
+manifold with a warm-start key of its own.
+
 Box/box tests the 15 axes (3 face normals of each box, 9 edge crosses) and leaves at the first
 one that separates by more than the speculative margin. On a face axis the incident face of the
 other box is clipped against the reference face's side planes (up to 8 points), and the points
@@ -18,7 +22,8 @@ from .constants import CONTACT_MARGIN, EDGE_AXIS_TOLERANCE, SEAM_TOLERANCE
 from .convex_contact import (MAX_CLIP_POINTS, allocate_scratch, clip_polygon, convex_ground,
                      convex_pair, convex_triangle)
 from .ids import GROUND, PLAYGROUND, triangle_key
-from .shapes import BOX, CAPSULE, SPHERE
+from .shapes import BOX, CAPSULE, COMPOUND, SPHERE
+from .shapes.compound import MAX_PARTS, part_pose
 
 FACE_AXIS_TOLERANCE = 1e-3  # B's face must beat A's by this to become the reference (no flip-flop)
 
@@ -433,7 +438,87 @@ def collide_ground(hulls, kind, p, r, dims, slot, height, margin, scratch, out_p
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
-def collide(contacts, bodies, hulls, broad, playground, ground_enabled, ground_height, live):
+def piece(parts, shape, position, rotation, dimensions, half_extents, body, k):
+    """Body `body` as the narrow phase takes a shape, or its part k when it is a compound:
+    (shape code, position, rotation rows, dimensions, hull row, radius of a sphere about the
+    position holding it)."""
+    p, r = vector3(position, body), matrix3(rotation, body)
+    if shape[body] == COMPOUND:
+        row = parts.start[body] + k
+        kind, pp, pr, pd, hull = part_pose(parts, row, p, r)
+        return kind, pp, pr, pd, hull, parts.radius[row]
+    h = half_extents[body]
+    return shape[body], p, r, vector3(dimensions, body), body, np.sqrt(h[0] * h[0] + h[1] * h[1] + h[2] * h[2])
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
+def near_pieces(parts, shape, position, rotation, dimensions, half_extents, a, b, triangle, margin,
+                ground_height, triangles, triangle_normals, spheres, out):
+    """The pieces of a job in which a compound takes part that may touch, in `out`; returns
+    their count. Piece i * pieces_b + j is part i of body a (or a whole) against part j of body
+    b (or b whole), or against playground triangle `triangle` (b PLAYGROUND) or the ground (b
+    GROUND), j 0. A piece is kept when the parts' bounding spheres come within the margin of
+    each other, of the triangle's plane or of the ground: a table's legs meet the ground, not
+    the box on its top, and the rest cost no call of their own. `spheres` (MAX_PARTS, 4) holds
+    B's parts' centres and radii meanwhile."""
+    pieces_a = parts.count[a] if shape[a] == COMPOUND else 1
+    pieces_b = parts.count[b] if b >= 0 and shape[b] == COMPOUND else 1
+    if b >= 0:
+        for j in range(pieces_b):
+            _, pb, _, _, _, radius_b = piece(parts, shape, position, rotation, dimensions, half_extents, b, j)
+            spheres[j, 0], spheres[j, 1], spheres[j, 2], spheres[j, 3] = pb[0], pb[1], pb[2], radius_b
+    count = 0
+    for i in range(pieces_a):
+        _, pa, _, _, _, radius_a = piece(parts, shape, position, rotation, dimensions, half_extents, a, i)
+        if b >= 0:
+            for j in range(pieces_b):
+                gap = (spheres[j, 0] - pa[0], spheres[j, 1] - pa[1], spheres[j, 2] - pa[2])
+                reach = radius_a + spheres[j, 3] + margin
+                if gap[0] * gap[0] + gap[1] * gap[1] + gap[2] * gap[2] <= reach * reach:
+                    out[count] = i * pieces_b + j
+                    count += 1
+            continue
+        if b == PLAYGROUND:
+            v, n = triangles[triangle, 0], triangle_normals[triangle]
+            above = (pa[0] - v[0]) * n[0] + (pa[1] - v[1]) * n[1] + (pa[2] - v[2]) * n[2]
+            near = -radius_a <= above <= radius_a + margin  # not off its plane, nor wholly behind it
+        else:
+            near = pa[2] - radius_a <= ground_height + margin
+        if near:
+            out[count] = i
+            count += 1
+    return count
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
+def collide_pieces(hulls, parts, shape, position, rotation, dimensions, half_extents, a, b, triangle,
+                   job_piece, pieces_b, margin, ground_height, triangles, triangle_normals, scratch,
+                   out_point, out_depth):
+    """Manifold of piece `job_piece` (see near_pieces) of a job in which a compound takes part.
+    Returns (point count, normal A -> B, and the manifold's warm-start keys).
+
+    The keys tell the parts apart, so no two manifolds of one pair of bodies share impulses:
+    key A is -2 - (a * MAX_PARTS + i), below every body slot (and the hash table's empty -1),
+    so compound keys never meet the other manifolds'; key B is b * MAX_PARTS + j for a body,
+    the ground's or the triangle's key otherwise."""
+    i, j = job_piece // pieces_b, job_piece % pieces_b
+    kind_a, pa, ra, da, hull_a, _ = piece(parts, shape, position, rotation, dimensions, half_extents, a, i)
+    key_a = -2 - (a * MAX_PARTS + i)
+    if b >= 0:
+        kind_b, pb, rb, db, hull_b, _ = piece(parts, shape, position, rotation, dimensions, half_extents, b, j)
+        n, normal = collide_pair(hulls, kind_a, pa, ra, da, hull_a, kind_b, pb, rb, db, hull_b, margin,
+                                 scratch, out_point, out_depth)
+        return n, normal, key_a, b * MAX_PARTS + j
+    if b == PLAYGROUND:
+        n, normal = collide_triangle(hulls, kind_a, pa, ra, da, hull_a, matrix3(triangles, triangle),
+                                     vector3(triangle_normals, triangle), margin, scratch, out_point, out_depth)
+        return n, normal, key_a, triangle_key(triangle)
+    n = collide_ground(hulls, kind_a, pa, ra, da, hull_a, ground_height, margin, scratch, out_point, out_depth)
+    return n, (0.0, 0.0, -1.0), key_a, GROUND
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
+def collide(contacts, bodies, hulls, parts, broad, playground, ground_enabled, ground_height, live):
     """Manifolds of every candidate pair, of every (body, playground triangle) candidate and of
     every awake body among `live` (slots, ascending) with the ground, each reduced to at most 4 points and appended to
     `contacts`. Returns False when the contact buffers are full (nothing of the step has been
@@ -444,7 +529,9 @@ def collide(contacts, bodies, hulls, broad, playground, ground_enabled, ground_h
     more than the geometry when a helper took `contacts` and `bodies` per manifold. For the same
     reason boxes go straight to the first rows of collide_pair, collide_triangle and
     collide_ground: through the dispatchers (whose arguments include the convex path's scratch
-    arrays) a falling pile of boxes spent 40 % longer here."""
+    arrays) a falling pile of boxes spent 40 % longer here. A job with a compound body is one
+    piece per pair of its parts that may touch (near_pieces, collide_pieces), the others one
+    piece."""
     contacts.count[0] = 0
     contacts.manifold_count[0] = 0
     scratch = allocate_scratch()
@@ -452,6 +539,7 @@ def collide(contacts, bodies, hulls, broad, playground, ground_enabled, ground_h
     scratch_point = np.empty((MAX_CLIP_POINTS, 3))
     scratch_depth = np.empty(MAX_CLIP_POINTS)
     keep = np.empty(4, np.int64)
+    spheres, near = np.empty((MAX_PARTS, 4)), np.empty(MAX_PARTS * MAX_PARTS, np.int64)
     reach, awake = bodies.speculative_reach, bodies.awake
     position, rotation, dimensions, shape = (bodies.position, bodies.rotation, bodies.dimensions,
                                              bodies.shape)
@@ -460,79 +548,99 @@ def collide(contacts, bodies, hulls, broad, playground, ground_enabled, ground_h
     manifold_start, manifold_size = contacts.manifold_start, contacts.manifold_size
     manifold_a, manifold_b = contacts.manifold_a, contacts.manifold_b
     pair_a, pair_b = broad.pair_a, broad.pair_b
+    part_count = parts.count
     body_pairs, mesh_pairs = broad.pair_count[0], broad.playground_count[0]
     ground_jobs = len(live) if ground_enabled else 0
     down = (0.0, 0.0, -1.0)
     count = manifolds = 0
     for job in range(body_pairs + mesh_pairs + ground_jobs):
+        t = -1
         if job < body_pairs:
             a, b = pair_a[job], pair_b[job]
             if not awake[a]:
                 a, b = b, a  # the moving body first: the ground-contact code and solver expect it
             key_b = b
             margin = CONTACT_MARGIN + reach[a] + reach[b]
-            if shape[a] == BOX and shape[b] == BOX:
-                n, normal = box_box(vector3(position, a), matrix3(rotation, a),
-                                    vector3(dimensions, a), vector3(position, b),
-                                    matrix3(rotation, b), vector3(dimensions, b), margin, poly_a,
-                                    poly_b, scratch_point, scratch_depth)
-            else:
-                n, normal = collide_pair(hulls, shape[a], vector3(position, a),
-                                         matrix3(rotation, a), vector3(dimensions, a), a,
-                                         shape[b], vector3(position, b), matrix3(rotation, b),
-                                         vector3(dimensions, b), b, margin, scratch,
-                                         scratch_point, scratch_depth)
         elif job < body_pairs + mesh_pairs:
             a, t = broad.playground_body[job - body_pairs], broad.playground_triangle[job - body_pairs]
             # Each triangle is its own manifold (its own warm-start key); all are the PLAYGROUND.
             b, key_b = PLAYGROUND, triangle_key(t)
-            if shape[a] == BOX:
-                n, normal = box_triangle(vector3(position, a), matrix3(rotation, a),
-                                         vector3(dimensions, a), matrix3(playground.triangles, t),
-                                         vector3(playground.normals, t), CONTACT_MARGIN + reach[a],
-                                         poly_a, poly_b, scratch_point, scratch_depth)
-            else:
-                n, normal = collide_triangle(hulls, shape[a], vector3(position, a),
-                                             matrix3(rotation, a), vector3(dimensions, a), a,
-                                             matrix3(playground.triangles, t),
-                                             vector3(playground.normals, t),
-                                             CONTACT_MARGIN + reach[a], scratch, scratch_point,
-                                             scratch_depth)
+            margin = CONTACT_MARGIN + reach[a]
         else:
             a = live[job - body_pairs - mesh_pairs]
             if not awake[a] or bodies.aabb_min[a, 2] > ground_height + 0.5 * CONTACT_MARGIN:
                 continue
-            b, key_b, normal = GROUND, GROUND, down
-            if shape[a] == BOX:
-                n = box_ground(vector3(position, a), matrix3(rotation, a), vector3(dimensions, a),
-                               ground_height, CONTACT_MARGIN + reach[a], scratch_point,
-                               scratch_depth)
+            b, key_b = GROUND, GROUND
+            margin = CONTACT_MARGIN + reach[a]
+        pieces_b = part_count[b] if b >= 0 and shape[b] == COMPOUND else 1
+        compound = shape[a] == COMPOUND or (b >= 0 and shape[b] == COMPOUND)
+        pieces = 1
+        if compound:
+            pieces = near_pieces(parts, shape, position, rotation, dimensions, bodies.half_extents, a, b, t,
+                                 margin, ground_height, playground.triangles, playground.normals, spheres, near)
+        for job_piece in range(pieces):
+            key_a = a
+            if compound:
+                n, normal, key_a, key_b = collide_pieces(
+                    hulls, parts, shape, position, rotation, dimensions, bodies.half_extents, a, b, t,
+                    near[job_piece], pieces_b, margin, ground_height, playground.triangles,
+                    playground.normals, scratch, scratch_point, scratch_depth)
+            elif job < body_pairs:
+                if shape[a] == BOX and shape[b] == BOX:
+                    n, normal = box_box(vector3(position, a), matrix3(rotation, a),
+                                        vector3(dimensions, a), vector3(position, b),
+                                        matrix3(rotation, b), vector3(dimensions, b), margin, poly_a,
+                                        poly_b, scratch_point, scratch_depth)
+                else:
+                    n, normal = collide_pair(hulls, shape[a], vector3(position, a),
+                                             matrix3(rotation, a), vector3(dimensions, a), a,
+                                             shape[b], vector3(position, b), matrix3(rotation, b),
+                                             vector3(dimensions, b), b, margin, scratch,
+                                             scratch_point, scratch_depth)
+            elif job < body_pairs + mesh_pairs:
+                if shape[a] == BOX:
+                    n, normal = box_triangle(vector3(position, a), matrix3(rotation, a),
+                                             vector3(dimensions, a), matrix3(playground.triangles, t),
+                                             vector3(playground.normals, t), margin,
+                                             poly_a, poly_b, scratch_point, scratch_depth)
+                else:
+                    n, normal = collide_triangle(hulls, shape[a], vector3(position, a),
+                                                 matrix3(rotation, a), vector3(dimensions, a), a,
+                                                 matrix3(playground.triangles, t),
+                                                 vector3(playground.normals, t),
+                                                 margin, scratch, scratch_point,
+                                                 scratch_depth)
             else:
-                n = collide_ground(hulls, shape[a], vector3(position, a), matrix3(rotation, a),
-                                   vector3(dimensions, a), a, ground_height,
-                                   CONTACT_MARGIN + reach[a], scratch, scratch_point,
-                                   scratch_depth)
-        if n == 0:
-            continue
-        kept = reduce_manifold(scratch_point, scratch_depth, n, normal, keep)
-        if count + kept > len(body_a) or manifolds >= len(manifold_start):
-            return False
-        for k in range(kept):
-            c = count + k
-            src = keep[k]
-            body_a[c], body_b[c] = a, b
-            for e in range(3):
-                point[c, e] = scratch_point[src, e]
-                normal_out[c, e] = normal[e]
-            depth[c] = scratch_depth[src]
-            dx = scratch_point[src, 0] - position[a, 0]
-            dy = scratch_point[src, 1] - position[a, 1]
-            dz = scratch_point[src, 2] - position[a, 2]
-            for e in range(3):  # the point in A's frame: its identity for the warm start
-                local_a[c, e] = rotation[a, 0, e] * dx + rotation[a, 1, e] * dy + rotation[a, 2, e] * dz
-        manifold_start[manifolds], manifold_size[manifolds] = count, kept
-        manifold_a[manifolds], manifold_b[manifolds] = a, key_b
-        count += kept
-        manifolds += 1
-        contacts.count[0], contacts.manifold_count[0] = count, manifolds
+                normal = down
+                if shape[a] == BOX:
+                    n = box_ground(vector3(position, a), matrix3(rotation, a), vector3(dimensions, a),
+                                   ground_height, margin, scratch_point, scratch_depth)
+                else:
+                    n = collide_ground(hulls, shape[a], vector3(position, a), matrix3(rotation, a),
+                                       vector3(dimensions, a), a, ground_height,
+                                       margin, scratch, scratch_point,
+                                       scratch_depth)
+            if n == 0:
+                continue
+            kept = reduce_manifold(scratch_point, scratch_depth, n, normal, keep)
+            if count + kept > len(body_a) or manifolds >= len(manifold_start):
+                return False
+            for k in range(kept):
+                c = count + k
+                src = keep[k]
+                body_a[c], body_b[c] = a, b
+                for e in range(3):
+                    point[c, e] = scratch_point[src, e]
+                    normal_out[c, e] = normal[e]
+                depth[c] = scratch_depth[src]
+                dx = scratch_point[src, 0] - position[a, 0]
+                dy = scratch_point[src, 1] - position[a, 1]
+                dz = scratch_point[src, 2] - position[a, 2]
+                for e in range(3):  # the point in A's frame: its identity for the warm start
+                    local_a[c, e] = rotation[a, 0, e] * dx + rotation[a, 1, e] * dy + rotation[a, 2, e] * dz
+            manifold_start[manifolds], manifold_size[manifolds] = count, kept
+            manifold_a[manifolds], manifold_b[manifolds] = key_a, key_b
+            count += kept
+            manifolds += 1
+            contacts.count[0], contacts.manifold_count[0] = count, manifolds
     return True

@@ -116,10 +116,11 @@ def reindex_limit(indexed, stale):
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
-def detect(bodies, hulls, broad, playground, contacts, settings, moving_ids, excluded_pairs):
+def detect(bodies, hulls, parts, broad, playground, contacts, settings, moving_ids, excluded_pairs):
     """Broad phase then narrow phase for the current positions of the live bodies `moving_ids`
-    (list_live_bodies); `hulls` is the World's hull table of convex bodies; pairs whose key is
-    in `excluded_pairs` (jointed, sorted) are not collided. Returns a status."""
+    (list_live_bodies); `hulls` and `parts` are the World's hull table (of convex bodies and
+    parts) and parts table (of compound bodies); pairs whose key is in `excluded_pairs`
+    (jointed, sorted) are not collided. Returns a status."""
     s = settings
     if not build_index(broad.moving, moving_ids, bodies.aabb_min, bodies.aabb_max,
                        bodies.octree_level, s.root_min, s.root_size):
@@ -137,7 +138,7 @@ def detect(bodies, hulls, broad, playground, contacts, settings, moving_ids, exc
     if pairs < 0:
         return GROW_PAIRS
     broad.playground_count[0] = pairs
-    if not collide(contacts, bodies, hulls, broad, playground, s.ground_enabled, s.ground_height,
+    if not collide(contacts, bodies, hulls, parts, broad, playground, s.ground_enabled, s.ground_height,
                    moving_ids):
         return GROW_CONTACTS
     return DONE
@@ -239,7 +240,7 @@ def step_world(steps, ctx):
         t = lap(profile, stage_ns, np.int64(STAGE_DERIVED), t)
         # 2. Collision detection (octree broad phase, narrow phase per shape pair) at the current
         #    positions, with speculative margins covering this step's motion.
-        status = detect(bodies, ctx.hulls, broad, playground, current, s, live, joints.excluded_pairs)
+        status = detect(bodies, ctx.hulls, ctx.parts, broad, playground, current, s, live, joints.excluded_pairs)
         if status != DONE:
             return done, status
         t = lap(profile, stage_ns, np.int64(STAGE_DETECTION), t)
@@ -252,7 +253,7 @@ def step_world(steps, ctx):
             live = list_live_bodies(bodies, broad, np.bool_(False))
             update_bodies(bodies, live, s.dt, s.root_size, s.octree_depth)
             broad.stale[0] += stale
-            status = detect(bodies, ctx.hulls, broad, playground, current, s, live, joints.excluded_pairs)
+            status = detect(bodies, ctx.hulls, ctx.parts, broad, playground, current, s, live, joints.excluded_pairs)
             if status != DONE:
                 return done, status
         t = lap(profile, stage_ns, np.int64(STAGE_WAKE), t)
@@ -269,7 +270,7 @@ def step_world(steps, ctx):
         # 5. Velocity update with external forces: the cars' wheels (springs and dampers see the
         #    velocities before gravity adds its share, or dampers would hold up the cars), then
         #    gravity and pushes.
-        drive_vehicles(ctx.vehicles, bodies, ctx.hulls, broad, playground, s)
+        drive_vehicles(ctx.vehicles, bodies, ctx.hulls, ctx.parts, broad, playground, s)
         integrate_velocities(bodies, live, s.gravity, s.dt)
         t = lap(profile, stage_ns, np.int64(STAGE_FORCES), t)
         # 6. Contact pass: zero elasticity, twice the iterations, split-impulse penetration fix;

@@ -8,8 +8,10 @@ between steps, never while it steps.
 import numpy as np
 
 from .broad_phase import cell_centres
+from .math3d import quaternions_to_matrices
 from .pipeline import STAGES
 from .ray_batch import RayScene
+from .shapes.compound import frame_parts
 from .step_context import newest_contacts
 
 # contacts() of a step without any (a world at rest: frozen bodies make none), which the node
@@ -39,7 +41,7 @@ class WorldQueries:
         """What rays can hit now (every body, the playground, the ground), for casting any
         number of batches at this instant: RayScene.cast(origins, directions, max_range,
         exclude). Stale once the world steps or changes."""
-        return RayScene(self._bodies, self._hulls, self._playground, self.ground, dict(self._slots))
+        return RayScene(self._bodies, self._hulls, self._parts, self._playground, self.ground, dict(self._slots))
 
     def cast_rays(self, origins, directions, max_range, exclude=()):
         """RayHits (distance, point, normal, body row or GROUND/PLAYGROUND/NOTHING) of a batch
@@ -53,22 +55,39 @@ class WorldQueries:
         return {**self.motion_state(), **self.body_properties()}
 
     def motion_state(self):
-        """What stepping changes, one row per body (copies): positions, quaternions,
-        linear_velocities, angular_velocities, frozen."""
-        b, rows = self._bodies, self._current_layout().rows
-        position, orientation, velocity, frozen = (gather(array, rows) for array in
+        """What stepping changes, one row per body (copies): positions and linear_velocities of
+        the bodies' frames (a compound's is not its centre of mass), quaternions,
+        angular_velocities, frozen."""
+        b, layout = self._bodies, self._current_layout()
+        position, orientation, velocity, frozen = (gather(array, layout.rows) for array in
                                                    (b.position, b.orientation, b.velocity, b.frozen))
+        if len(layout.compound_rows):
+            turns = quaternions_to_matrices(orientation[layout.compound_rows])
+            offsets = np.einsum("kij,kj->ki", turns, layout.compound_centres)
+            position[layout.compound_rows] -= offsets
+            velocity[layout.compound_rows, :3] -= np.cross(velocity[layout.compound_rows, 3:], offsets)
         return {"positions": position, "quaternions": orientation,
                 "linear_velocities": velocity[:, :3], "angular_velocities": velocity[:, 3:], "frozen": frozen}
 
     def body_properties(self):
         """What only adding, removing and editing change (see layout_version), one row per
         body (copies): shapes (codes of physics.shapes), dimensions (each shape's three
-        numbers), sizes (full edges of the body-frame bounding box), masses, immovable."""
-        b, rows = self._bodies, self._current_layout().rows
-        return {"shapes": gather(b.shape, rows), "dimensions": gather(b.dimensions, rows),
-                "sizes": 2.0 * gather(b.half_extents, rows), "masses": gather(b.mass, rows),
-                "immovable": gather(b.immovable, rows)}
+        numbers), sizes (full edges of a box about the body's frame, in its axes, that holds it:
+        a compound's is its centre of mass' box grown by the offset of that centre), masses,
+        immovable."""
+        b, layout = self._bodies, self._current_layout()
+        half = gather(b.half_extents, layout.rows)
+        half[layout.compound_rows] += np.abs(layout.compound_centres)
+        return {"shapes": gather(b.shape, layout.rows), "dimensions": gather(b.dimensions, layout.rows),
+                "sizes": 2.0 * half, "masses": gather(b.mass, layout.rows),
+                "immovable": gather(b.immovable, layout.rows)}
+
+    def compound_parts(self):
+        """Each compound body's parts in its frame (shapes.compound.FrameParts: shape codes,
+        dimensions, poses, hull triangles), one row per body (None for the other shapes), as a
+        tuple; for drawing."""
+        return tuple(frame_parts(self._solids[slot][1].compound) if self._solids[slot][1].compound is not None
+                     else None for slot in self._current_layout().slots.tolist())
 
     def hull_triangles(self):
         """Each body's hull as triangles (T, 3, 3) in its frame, one row per body (None for the
@@ -99,15 +118,16 @@ class WorldQueries:
         }
 
     def body(self, name):
-        """Everything a scene file holds about one body (the SPEC 3 keys), as plain Python."""
+        """Everything a scene file holds about one body (the SPEC 3 keys), as plain Python: the
+        pose and velocity of its frame (a compound's is not its centre of mass)."""
         slot = self._slot(name)
         b = self._bodies
         shape = self._shape(slot)
         return {
             "name": name, "shape": shape.name, **shape.fields,
-            "position": b.position[slot].tolist(),
+            "position": self._frame_position(slot).tolist(),
             "quaternion": b.orientation[slot].tolist(),
-            "linear_velocity": b.velocity[slot, :3].tolist(),
+            "linear_velocity": self._frame_velocity(slot).tolist(),
             "angular_velocity": b.velocity[slot, 3:].tolist(),
             "mass": float(b.mass[slot]),
             "elasticity": float(b.elasticity[slot]),

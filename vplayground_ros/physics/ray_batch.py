@@ -212,15 +212,15 @@ def build_ray_grid(active, position, orientation, half_extents, triangles, tri_m
     return RayGrid(lower, np.array((cell,)), dims, cell_start, items, wide, block_items, rotation)
 
 
-ASK_HULL = -1.0  # test_item's answer for a convex body: ask ray_body with the hull table
+ASK_HULL = -1.0  # test_item's answer for a convex or compound body: ask ray_body with the tables
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
 def test_item(item, o, d, limit, excluded, geometry, triangles, normals):
     """(t, what, normal) of grid item `item` (a body slot, or capacity + a triangle) if the ray
-    hits it nearer than `limit`, else t NO_HIT; t ASK_HULL for a convex body the ray may hit,
-    which the caller tests with the hull table (handed to this inlined test, its arrays' reference
-    counts cost every item a quarter of the rays' speed)."""
+    hits it nearer than `limit`, else t NO_HIT; t ASK_HULL for a convex or compound body the ray
+    may hit, which the caller tests with the hull and parts tables (handed to this inlined test,
+    their arrays' reference counts cost every item a quarter of the rays' speed)."""
     capacity = len(excluded)
     if item < capacity:
         if excluded[item]:
@@ -234,7 +234,7 @@ def test_item(item, o, d, limit, excluded, geometry, triangles, normals):
         radius2, away2 = h[0] * h[0] + h[1] * h[1] + h[2] * h[2], vx * vx + vy * vy + vz * vz
         if away2 - along * along > radius2 + 1e-9 * (radius2 + away2):
             return NO_HIT, item, (0.0, 0.0, 0.0)
-        if geometry.shape[item] == shapes.CONVEX:
+        if geometry.shape[item] == shapes.CONVEX or geometry.shape[item] == shapes.COMPOUND:
             return ASK_HULL, item, (0.0, 0.0, 0.0)
         t, face = ray_body_without_hull(o, d, limit, geometry, item)
         return t, item, face
@@ -271,7 +271,7 @@ def axis_step(d):
 # error_model "numpy": no zero-division checks (every division here is guarded or meant to give
 # inf), which cost the walk a branch each.
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, error_model="numpy")
-def cast_chunk(start, stop, origins, directions, max_range, excluded, grid, geometry, hulls,
+def cast_chunk(start, stop, origins, directions, max_range, excluded, grid, geometry, hulls, parts,
                triangles, normals, ground_enabled, ground_height, row_of_slot, distance, point, normal, hit):
     """cast_ray_batch for rays start..stop; returns how many of them were invalid (a zero or
     non-finite direction, a non-finite origin, a NaN range): those are left unwritten."""
@@ -305,7 +305,7 @@ def cast_chunk(start, stop, origins, directions, max_range, excluded, grid, geom
         for k in range(len(wide)):
             t, obj, face = test_item(wide[k], o, d, limit, excluded, geometry, triangles, normals)
             if t == ASK_HULL:
-                t, face = ray_body(o, d, limit, geometry, hulls, obj)
+                t, face = ray_body(o, d, limit, geometry, hulls, parts, obj)
             if t < limit:
                 best, limit, what, n = t, t, obj, face
         # The ray's part inside the grid box, [t0, t1]. Per axis the direction of travel and
@@ -366,7 +366,7 @@ def cast_chunk(start, stop, origins, directions, max_range, excluded, grid, geom
                 tested_by[item] = i
                 t, obj, face = test_item(item, o, d, limit, excluded, geometry, triangles, normals)
                 if t == ASK_HULL:
-                    t, face = ray_body(o, d, limit, geometry, hulls, obj)
+                    t, face = ray_body(o, d, limit, geometry, hulls, parts, obj)
                 if t < limit:
                     best, limit, what, n = t, t, obj, face
             cell_exit = min(next_x, next_y, next_z)
@@ -399,7 +399,7 @@ def cast_chunk(start, stop, origins, directions, max_range, excluded, grid, geom
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, parallel=True, error_model="numpy")
-def cast_ray_batch(origins, directions, max_range, excluded, grid, geometry, hulls, triangles,
+def cast_ray_batch(origins, directions, max_range, excluded, grid, geometry, hulls, parts, triangles,
                    normals, ground_enabled, ground_height, row_of_slot, distance, point, normal,
                    hit):
     """Nearest hit of each ray origins[i] + t directions[i] (normalised here), 0 <= t <=
@@ -412,7 +412,7 @@ def cast_ray_batch(origins, directions, max_range, excluded, grid, geometry, hul
     for chunk in prange(chunks):
         invalid[chunk] = cast_chunk(chunk * RAY_CHUNK, min(len(directions), (chunk + 1) * RAY_CHUNK),
                                     origins, directions, max_range, excluded, grid, geometry,
-                                    hulls, triangles, normals, ground_enabled, ground_height,
+                                    hulls, parts, triangles, normals, ground_enabled, ground_height,
                                     row_of_slot, distance, point, normal, hit)
     return invalid.sum()
 
@@ -429,7 +429,7 @@ class RayScene:
     """What rays can hit at one instant (World.ray_scene()): the grid is filed once, and any
     number of batches (the sensors due at that instant) cast through it."""
 
-    def __init__(self, bodies, hulls, playground, ground, slots):
+    def __init__(self, bodies, hulls, parts, playground, ground, slots):
         self._bodies, self._playground, self._slots = bodies, playground, slots
         self._ground = ground
         self._grid = build_ray_grid(bodies.active, bodies.position, bodies.orientation,
@@ -437,7 +437,7 @@ class RayScene:
                                     playground.aabb_min, playground.aabb_max)
         self._geometry = RayBodies(bodies.position, self._grid.rotation, bodies.half_extents,
                                    bodies.shape, bodies.dimensions)
-        self._hulls = hulls
+        self._hulls, self._parts = hulls, parts
         self._row_of_slot = np.cumsum(bodies.active) - 1
 
     def cast(self, origins, directions, max_range, exclude=(), out=None):
@@ -466,7 +466,7 @@ class RayScene:
             raise ValueError(f"cast_rays: out holds {len(out.distance)} rays, not {count}")
         g = self._ground
         invalid = cast_ray_batch(origins, directions, max_range, excluded, self._grid,
-                                 self._geometry, self._hulls, self._playground.triangles,
+                                 self._geometry, self._hulls, self._parts, self._playground.triangles,
                                  self._playground.normals, g is not None,
                                  float(g["height"]) if g else 0.0, self._row_of_slot, *out)
         if invalid:

@@ -20,13 +20,13 @@ RayBodies = namedtuple("RayBodies", "position rotation half_extents shape dimens
 # where they are called: a scan runs them millions of times a second, and every row view handed
 # to a call costs Numba reference counting that would outweigh the test itself.
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
-def ray_body(origin, direction, reach, geometry, hulls, j):
-    """The ray against body j of RayBodies `geometry` (and the hull table): (distance, outward
-    normal in the world), NO_HIT when it misses or starts inside. Every shape is asked in its
-    own frame (physics.shapes)."""
+def ray_body(origin, direction, reach, geometry, hulls, parts, j):
+    """The ray against body j of RayBodies `geometry` (and the hull and parts tables):
+    (distance, outward normal in the world), NO_HIT when it misses or starts inside. Every
+    shape is asked in its own frame (physics.shapes)."""
     o, d = body_frame_ray(origin, direction, geometry, j)
     dims = (geometry.dimensions[j, 0], geometry.dimensions[j, 1], geometry.dimensions[j, 2])
-    return world_normal(shapes.ray(geometry.shape[j], dims, hulls, j, o, d, reach), geometry.rotation, j)
+    return world_normal(shapes.ray(geometry.shape[j], dims, hulls, parts, j, o, d, reach), geometry.rotation, j)
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
@@ -89,7 +89,7 @@ def ray_triangle(origin, direction, reach, triangles, normals, j):
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
-def cast_ray(origin, direction, reach, exclude, query_id, bodies, hulls, broad, playground, s):
+def cast_ray(origin, direction, reach, exclude, query_id, bodies, hulls, parts, broad, playground, s):
     """Nearest hit of the segment origin + t direction, 0 <= t <= reach (direction unit), with
     anything in the world of the StepContext's parts (`s` its Settings) but body `exclude`: (t,
     what: a body slot, GROUND or PLAYGROUND, normal), t NO_HIT when nothing is hit. `query_id`
@@ -115,7 +115,7 @@ def cast_ray(origin, direction, reach, exclude, query_id, bodies, hulls, broad, 
             j = broad.scratch[m]
             if j == exclude or not bodies.active[j]:
                 continue
-            t, normal = ray_body(origin, direction, reach, geometry, hulls, j)
+            t, normal = ray_body(origin, direction, reach, geometry, hulls, parts, j)
             if t < best:
                 best, hit, best_normal = t, j, normal
     if len(playground.triangles):

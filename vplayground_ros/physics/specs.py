@@ -12,6 +12,7 @@ from collections import namedtuple
 import numpy as np
 
 from .shapes import SHAPES
+from .shapes.compound import MAX_PARTS
 
 NAME_PATTERN = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]{0,63}$")
 
@@ -221,6 +222,9 @@ DIMENSION_KEYS = {key for shape in SHAPES.values() for key in shape.module.SPEC_
 BODY_KEYS = {"name", "shape", "position", "rpy", "quaternion", "linear_velocity",
              "angular_velocity", "density", "mass", "elasticity", "static_friction",
              "dynamic_friction", "immovable", "allow_freezing", "frozen"} | DIMENSION_KEYS
+# A compound's part: a shape at a pose in the body's frame, with its own mass or density (else
+# the body's density). Material and motion are the body's.
+PART_KEYS = {"shape", "position", "rpy", "quaternion", "mass", "density"} | DIMENSION_KEYS - {"parts"}
 
 
 def validate_body_fields(raw, path, allowed=BODY_KEYS):
@@ -245,6 +249,8 @@ def validate_body_fields(raw, path, allowed=BODY_KEYS):
             if not isinstance(value, (list, tuple)) or not 4 <= len(value) <= MAX_POINTS:
                 raise SpecError(p, f"expected a list of 4 to {MAX_POINTS} points [x, y, z], got {quote(value)}")
             out[key] = [vector(point, child(p, k), 3, -MAX_SIZE, MAX_SIZE) for k, point in enumerate(value)]
+        elif key == "parts":
+            out[key] = validate_parts(value, p)
         elif key == "mass":
             out[key] = number(value, p, MIN_MASS, MAX_MASS)
         elif key == "density":
@@ -272,6 +278,28 @@ def check_dimension_keys(shape, body, path):
     if shape == "convex" and "points" not in body:
         raise SpecError(child(path, "points"), "missing (a convex body's vertices; in a scene file "
                                                "`mesh:` names a file to take them from)")
+    if shape == "compound" and "parts" not in body:
+        raise SpecError(child(path, "parts"), "missing (a compound body's shapes, each at a pose in its frame)")
+
+
+def validate_parts(raw, path):
+    """A compound's `parts`: 1 to MAX_PARTS part specs, each checked as a body's keys are and
+    completed with its shape's defaults (shape box, position at the frame's origin)."""
+    if not isinstance(raw, (list, tuple)) or not 1 <= len(raw) <= MAX_PARTS:
+        raise SpecError(path, f"expected a list of 1 to {MAX_PARTS} parts (shape, its size keys, position, rpy, "
+                              f"mass or density), got {quote(raw)}")
+    parts = []
+    for k, part in enumerate(raw):
+        p = child(path, k)
+        fields = validate_body_fields(part, p, PART_KEYS)
+        shape = fields.setdefault("shape", "box")
+        if shape == "compound":
+            raise SpecError(child(p, "shape"), "a part is one shape (box, sphere, capsule, cylinder or convex)")
+        if "position" in fields:
+            vector(fields["position"], child(p, "position"), 3, -MAX_SIZE, MAX_SIZE)
+        check_dimension_keys(shape, fields, p)
+        parts.append({**SHAPES[shape].module.DEFAULTS, "position": [0.0, 0.0, 0.0], **fields})
+    return parts
 
 
 def validate_body(raw, path="body"):

@@ -27,7 +27,7 @@ ContactBuffers = namedtuple("ContactBuffers", [
 ])
 
 StepContext = namedtuple("StepContext", [
-    "bodies", "hulls", "playground", "vehicles", "broad", "contacts",  # ContactBuffers
+    "bodies", "hulls", "parts", "playground", "vehicles", "broad", "contacts",  # ContactBuffers
     "joints",    # joints.JointArrays
     "settings",
     "stats",     # (STAT_*,) int64 counters summed over the steps (the caller zeroes them)

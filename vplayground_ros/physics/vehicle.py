@@ -134,7 +134,7 @@ def ackermann(vehicles, v, w):
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
-def drive_vehicles(vehicles, bodies, hulls, broad, playground, settings):
+def drive_vehicles(vehicles, bodies, hulls, parts, broad, playground, settings):
     """Controller, wheel ray casts, suspension and tyre forces of every vehicle for one step,
     applied as impulses to the chassis (and the opposite to any box a wheel stands on). The four
     springs are evaluated on the same state, then applied; the tyres follow one by one, each
@@ -178,7 +178,7 @@ def drive_vehicles(vehicles, bodies, hulls, broad, playground, settings):
                      position[c, 2] + r[2, 0] * m[0] + r[2, 1] * m[1] + r[2, 2] * m[2])
             reach = vehicles.spring_length[v, w] + vehicles.radius[v, w]
             t, hit, normal = cast_ray(mount, down, reach, c, wheel_query(v, w, WHEELS),
-                                     bodies, hulls, broad, playground, settings)
+                                     bodies, hulls, parts, broad, playground, settings)
             vehicles.in_contact[v, w] = t != NO_HIT
             if t == NO_HIT:
                 vehicles.compression[v, w] = vehicles.compression_rate[v, w] = 0.0

@@ -22,7 +22,7 @@ from .freezing import wake_body
 from .jit_cache import compile_once
 from .joint_registry import JointRegistry
 from .joints import ANCHOR, EFFORT, FRAME, POSITION, SPEED, WORLD_SIDE, measure_joints
-from .math3d import matrix_to_quaternion, quaternions_to_matrices, rpy_to_quat
+from .math3d import matrix_to_quaternion, quat_to_matrix, quaternions_to_matrices, rpy_to_quat
 from .pipeline import (DONE, GROW_CONTACTS, GROW_INDEX, GROW_PAIRS, STAGES, STAT_FROZEN,
                        STAT_PAIRS, STAT_POINTS, STAT_TRIANGLES, STAT_WOKEN, resting_steps,
                        step_world)
@@ -45,8 +45,10 @@ MIN_ROOT_SIZE = 16.0
 # Which bodies there are, in row order, and what depends only on that: rebuilt when
 # World.layout_version changes, not every batch. slots: (N,) the rows' slots; rows: what selects
 # them from a body array (a slice when they are 0..N-1, the common case, so gathers are copies);
-# names, vehicle_names: tuples; row_of_slot: (capacity,) each slot's row (-1 for free slots).
-Layout = namedtuple("Layout", "version slots rows names vehicle_names row_of_slot")
+# names, vehicle_names: tuples; row_of_slot: (capacity,) each slot's row (-1 for free slots);
+# compound_rows (K,) the rows of compound bodies and compound_centres (K, 3) their centres of
+# mass in their frames (what turns the engine's positions into the frames' poses).
+Layout = namedtuple("Layout", "version slots rows names vehicle_names row_of_slot compound_rows compound_centres")
 
 BodyShape = namedtuple("BodyShape", "name module dimensions fields")
 
@@ -60,8 +62,12 @@ def prepare_body(spec, path="body"):
     """A SPEC 3 body spec checked whole before any world is touched: (validated spec, its
     shapes.Solid, its specs.MassProperties). Errors name the key from `path`."""
     body = specs.validate_body(spec, path)
-    solid = shapes.solid(body["shape"], body, path)
-    mass = body["mass"] if "mass" in body else body.get("density", specs.DEFAULT_DENSITY) * solid.volume
+    density = body.get("density", specs.DEFAULT_DENSITY)
+    solid = shapes.solid(body["shape"], body, path, density)
+    if "mass" in body:  # a compound's parts keep their shares of it
+        mass = body["mass"]
+    else:
+        mass = solid.compound.mass if solid.compound is not None else density * solid.volume
     return body, solid, specs.mass_properties(solid, mass, mass_key(body, path))
 
 
@@ -97,7 +103,7 @@ class World(WorldQueries):
         self._bodies = allocate_bodies(capacity)
         self._names = [None] * capacity
         self._solids = [None] * capacity  # (shape name, shapes.Solid) per slot
-        self._hulls = shapes.convex.pack_hulls(self._solids)  # convex bodies' hulls, by slot
+        self._pack_shapes()  # self._hulls (convex bodies' by slot, then parts'), self._parts
         self._slots = {}
         self._free = list(range(capacity))
         self._generated = 0
@@ -168,11 +174,12 @@ class World(WorldQueries):
         slot = heapq.heappop(self._free)
         b = self._bodies
         b.active[slot] = True
-        b.position[slot] = body["position"]
         b.orientation[slot] = body["quaternion"] if "quaternion" in body else rpy_to_quat(body.get("rpy", (0, 0, 0)))
         b.shape[slot] = shapes.SHAPES[body["shape"]].code
         self._set_solid(slot, body["shape"], solid)
+        b.position[slot] = self._centre_of_mass(slot, body["position"])
         self._set_fields(slot, body, mass)
+        b.velocity[slot, :3] = self._centre_velocity(slot, b.velocity[slot, :3])
         self._names[slot] = name
         self._slots[name] = slot
         self.layout_version += 1
@@ -253,8 +260,9 @@ class World(WorldQueries):
 
     def edit_body(self, name, /, **fields):
         """Changes only the given SPEC 3 body keys (not name or shape). Size changes keep the
-        mass unless mass or density is given too. Wakes the body and whatever touches it,
-        unless the edit freezes it (`frozen=True`)."""
+        mass unless mass or density is given too. A compound's frame keeps its position and
+        velocity unless they are given (new parts or a turn move its centre of mass about it).
+        Wakes the body and whatever touches it, unless the edit freezes it (`frozen=True`)."""
         slot = self._slot(name)
         body = specs.validate_body_fields(fields, name, specs.BODY_KEYS - {"name", "shape"})
         shape = self._shape(slot)
@@ -262,7 +270,8 @@ class World(WorldQueries):
         if "position" in body:
             self.check_inside(body["position"], f"{name}.position")
         resized = sorted(shape.fields.keys() & body.keys())
-        solid = shapes.solid(shape.name, {**shape.fields, **body}, name) if resized else self._solids[slot][1]
+        solid = (shapes.solid(shape.name, {**shape.fields, **body}, name, body.get("density", specs.DEFAULT_DENSITY))
+                 if resized else self._solids[slot][1])
         b = self._bodies
         if "mass" in body or "density" in body:
             mass = body["mass"] if "mass" in body else body["density"] * solid.volume
@@ -274,15 +283,19 @@ class World(WorldQueries):
             mass = specs.mass_properties(solid, float(b.mass[slot]), specs.child(name, (resized or ["mass"])[0]))
         self._wake_touching([slot])
         self._forget_contacts([slot])
-        if "position" in body:
-            b.position[slot] = body["position"]
+        frame = body["position"] if "position" in body else self._frame_position(slot)
+        frame_velocity = body["linear_velocity"] if "linear_velocity" in body else self._frame_velocity(slot)
         if "rpy" in body:
             b.orientation[slot] = rpy_to_quat(body["rpy"])
         if "quaternion" in body:
             b.orientation[slot] = body["quaternion"]
         if resized:
             self._set_solid(slot, shape.name, solid)
+        if "position" in body or solid.compound is not None:
+            b.position[slot] = self._centre_of_mass(slot, frame)
         self._set_fields(slot, body, mass)
+        if solid.compound is not None and not (b.immovable[slot] or b.frozen[slot]):
+            b.velocity[slot, :3] = self._centre_velocity(slot, frame_velocity)
         self.layout_version += 1  # sizes, masses, flags
         if not body.get("frozen", False):
             self._wake(slot)
@@ -319,10 +332,10 @@ class World(WorldQueries):
         del self._slots[name]
         self._vehicles.remove(name)
         self._names[slot] = None
-        convex = self._solids[slot][1].hull is not None
+        packed = self._solids[slot][1].hull is not None or self._solids[slot][1].compound is not None
         self._solids[slot] = None
-        if convex:
-            self._pack_hulls()
+        if packed:
+            self._pack_shapes()
         self.layout_version += 1
         heapq.heappush(self._free, slot)
 
@@ -542,9 +555,10 @@ class World(WorldQueries):
         counters = np.zeros(5, np.int64)
         done = 0
         while done < n:
-            ctx = StepContext(self._bodies, self._hulls, self._playground, self._vehicles.arrays, self._broad,
-                              self._contacts, self._joints.arrays, kernel_settings(self.settings, self.ground, specs.DEFAULT_GROUND,
-                                                              self._root, self._solver_threads),
+            ctx = StepContext(self._bodies, self._hulls, self._parts, self._playground, self._vehicles.arrays,
+                              self._broad, self._contacts, self._joints.arrays,
+                              kernel_settings(self.settings, self.ground, specs.DEFAULT_GROUND,
+                                              self._root, self._solver_threads),
                               counters, self._stage_ns, self.profiling)
             started = time.thread_time()
             steps, status = step_world(n - done, ctx)
@@ -577,10 +591,14 @@ class World(WorldQueries):
             names = tuple(self._names[s] for s in slots.tolist())
             row_of_slot = np.cumsum(active) - 1
             row_of_slot[~active] = -1
-            for array in (slots, row_of_slot):
+            compound_rows = np.nonzero(self._bodies.shape[slots] == shapes.COMPOUND)[0]
+            centres = np.array([self._solids[slot][1].compound.centre for slot in slots[compound_rows].tolist()],
+                               float).reshape(-1, 3)
+            for array in (slots, row_of_slot, compound_rows, centres):
                 array.flags.writeable = False  # shared by every caller until the next change
             self._layout = Layout(self.layout_version, slots, rows, names,
-                                  tuple(name for name in names if name in self._vehicles), row_of_slot)
+                                  tuple(name for name in names if name in self._vehicles), row_of_slot,
+                                  compound_rows, centres)
         return self._layout
 
     def _slot(self, name):
@@ -620,18 +638,57 @@ class World(WorldQueries):
             self._broad.stale[0] += 1
 
     def _set_solid(self, slot, name, solid):
-        """The body's shape from a shapes.Solid (the hull table follows a convex body's)."""
+        """The body's shape from a shapes.Solid (the hull and parts tables follow a convex or
+        compound body's)."""
         b = self._bodies
-        was_convex = self._solids[slot] is not None and self._solids[slot][1].hull is not None
+        old = self._solids[slot][1] if self._solids[slot] is not None else None
         self._solids[slot] = (name, solid)
         b.dimensions[slot] = solid.dimensions
         b.half_extents[slot] = shapes.half_extents(int(b.shape[slot]), solid.dimensions)
-        if was_convex or solid.hull is not None:
-            self._pack_hulls()
+        if (old is not None and (old.hull is not None or old.compound is not None)
+                or solid.hull is not None or solid.compound is not None):
+            self._pack_shapes()
 
-    def _pack_hulls(self):
-        self._hulls = shapes.convex.pack_hulls(
-            [entry[1].hull if entry is not None else None for entry in self._solids])
+    def _pack_shapes(self):
+        """The hull table (each convex body's at its slot, then the convex parts') and the parts
+        table of the compound bodies, from the solids."""
+        solids = [entry[1] if entry is not None else None for entry in self._solids]
+        self._parts, part_hulls = shapes.compound.pack_parts(
+            [s.compound if s is not None else None for s in solids], len(solids))
+        self._hulls = shapes.convex.pack_hulls([s.hull if s is not None else None for s in solids] + part_hulls)
+
+    def _frame_to_centre(self, slot):
+        """The world vector from the body's frame to its centre of mass, which a compound's parts
+        put off its frame's origin; None for the other shapes (their frames are their centres)."""
+        compound = self._solids[slot][1].compound
+        if compound is None:
+            return None
+        r = np.empty((3, 3))
+        quat_to_matrix(self._bodies.orientation[slot], r)
+        return r @ compound.centre
+
+    def _centre_of_mass(self, slot, frame_position):
+        """Where the body's centre of mass is with its frame at `frame_position` (world)."""
+        offset = self._frame_to_centre(slot)
+        return frame_position if offset is None else np.asarray(frame_position, float) + offset
+
+    def _frame_position(self, slot):
+        """Where the body's frame is (world)."""
+        offset = self._frame_to_centre(slot)
+        position = self._bodies.position[slot]
+        return position.copy() if offset is None else position - offset
+
+    def _centre_velocity(self, slot, frame_velocity):
+        """The velocity of the body's centre of mass when its frame's origin moves at
+        `frame_velocity` (the body turning at its angular velocity)."""
+        offset = self._frame_to_centre(slot)
+        return frame_velocity if offset is None else frame_velocity + np.cross(self._bodies.velocity[slot, 3:], offset)
+
+    def _frame_velocity(self, slot):
+        """The velocity of the body's frame's origin (world)."""
+        offset = self._frame_to_centre(slot)
+        velocity = self._bodies.velocity[slot, :3]
+        return velocity.copy() if offset is None else velocity - np.cross(self._bodies.velocity[slot, 3:], offset)
 
     def _shape(self, slot):
         """The body's shape: name, module, dimensions and their spec keys (`size: [...]`)."""
@@ -761,10 +818,12 @@ def warm_up():
     world.set_playground(np.array([[-4.0, -4.0, 0.0], [4.0, -4.0, 0.0], [4.0, 4.0, 0.5],
                                    [-4.0, 4.0, 0.5]]), np.array([[0, 1, 2], [0, 2, 3]]))
     cube = [[x, y, z] for x in (-0.2, 0.2) for y in (-0.2, 0.2) for z in (-0.2, 0.2)]
+    dumbbell = [{"shape": "sphere", "radius": 0.2, "position": [0.0, 0.0, 0.0]},
+                {"shape": "convex", "points": cube, "position": [0.5, 0.0, 0.0], "rpy": [0.0, 0.0, 0.3]}]
     for k, shape in enumerate(({"size": [0.5, 0.5, 0.5]}, {"shape": "sphere", "radius": 0.3},
                                {"shape": "capsule", "radius": 0.2, "length": 0.5},
                                {"shape": "cylinder", "radius": 0.3, "length": 0.4},
-                               {"shape": "convex", "points": cube})):
+                               {"shape": "convex", "points": cube}, {"shape": "compound", "parts": dumbbell})):
         world.add_body({**shape, "position": [1.2 * k - 2.4, 0.0, 1.0 + 0.3 * k]})
     world.add_vehicle({"name": "car", "position": [0.0, 2.5, 1.0],
                        "chassis": {"size": [2.0, 1.0, 0.4], "mass": 400.0},

@@ -1,12 +1,15 @@
 """Body shapes. A body's shape is a code in `bodies.shape` and three numbers in
 `bodies.dimensions` (what they mean is the shape module's: half extents of a box, a radius and
-a half length); a convex body's hull is in the World's Hulls table at the body's slot. Every
-shape-dependent question is answered here, by one dispatch each, from the shape's module.
+a half length); a convex body's hull is in the World's Hulls table at the body's slot, a
+compound body's parts in its Parts table (compound.py). Every shape-dependent question is
+answered here, by one dispatch each, from the shape's module.
 
 Adding a shape: a module like box.py (spec keys, mass properties, bounds, support mapping and
 supporting face for the narrow phase's convex path, ray cast; all in the body's frame) and a
 row in SHAPES and in each dispatcher below. The compiled dispatchers take the hull table and
-the body's slot (`hulls, h`) whatever the shape; only convex bodies read them.
+the body's slot (`hulls, h`) whatever the shape; only convex bodies read them. The narrow phase
+asks a compound's parts one by one (each a shape of its own), so the convex path's dispatchers
+never see a compound; the bounds and ray casts answer for one as a whole.
 """
 from collections import namedtuple
 
@@ -14,15 +17,16 @@ import numpy as np
 from numba import njit
 
 from ..math3d import quat_to_matrix
+from .geometry import NO_HIT
 
-from . import box, capsule, convex, cylinder, sphere
+from . import box, capsule, compound, convex, cylinder, sphere
 
-BOX, SPHERE, CAPSULE, CYLINDER, CONVEX = 0, 1, 2, 3, 4
+BOX, SPHERE, CAPSULE, CYLINDER, CONVEX, COMPOUND = 0, 1, 2, 3, 4, 5
 
 Shape = namedtuple("Shape", "code module")
 SHAPES = {"box": Shape(BOX, box), "sphere": Shape(SPHERE, sphere),
           "capsule": Shape(CAPSULE, capsule), "cylinder": Shape(CYLINDER, cylinder),
-          "convex": Shape(CONVEX, convex)}
+          "convex": Shape(CONVEX, convex), "compound": Shape(COMPOUND, compound)}
 SHAPE_NAMES = {shape.code: name for name, shape in SHAPES.items()}
 
 # The most points a supporting face has: a cylinder's end, or up to this many corners of a
@@ -47,9 +51,9 @@ def half_extents(kind, dims):
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def world_extent(kind, dims, r, e):
     """Half the extent along world axis e of the shape turned by rotation r (3x3, columns the
-    body axes): the exact bounding box, not the box around the body-frame one (a hull's is the
-    box around its body-frame bounding box)."""
-    if kind == BOX or kind == CONVEX:  # a hull: its bounding box's
+    body axes): the exact bounding box, not the box around the body-frame one (a hull's and a
+    compound's is the box around its body-frame bounding box)."""
+    if kind == BOX or kind == CONVEX or kind == COMPOUND:  # a hull, the parts: their bounding box's
         return abs(r[e, 0]) * dims[0] + abs(r[e, 1]) * dims[1] + abs(r[e, 2]) * dims[2]
     if kind == SPHERE:
         return dims[0]
@@ -112,12 +116,43 @@ def supporting_face(kind, dims, hulls, h, d, out):
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
-def ray(kind, dims, hulls, h, o, d, reach):
+def ray(kind, dims, hulls, parts, h, o, d, reach):
     """The ray o + t d (body frame, d unit, 0 <= t <= reach) against the shape: (t, outward
-    normal), t NO_HIT when it misses or starts inside."""
+    normal), t NO_HIT when it misses or starts inside (a compound: the nearest part it enters)."""
+    if kind == COMPOUND:
+        return compound_ray(hulls, parts, h, o, d, reach)
+    return part_ray(kind, dims, hulls, h, o, d, reach)
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
+def part_ray(kind, dims, hulls, h, o, d, reach):
+    """ray() for every shape but a compound (what its parts are)."""
     if kind == CONVEX:
         return convex.ray(hulls, h, o, d, reach)
     return ray_without_hull(kind, dims, o, d, reach)
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
+def compound_ray(hulls, parts, h, o, d, reach):
+    """ray() of compound body h: each part asked in its own frame, the nearest hit kept."""
+    best, normal = NO_HIT, (0.0, 0.0, 0.0)
+    q, t = parts.position, parts.rotation
+    for k in range(parts.start[h], parts.start[h] + parts.count[h]):
+        v = (o[0] - q[k, 0], o[1] - q[k, 1], o[2] - q[k, 2])
+        local_o = (v[0] * t[k, 0, 0] + v[1] * t[k, 1, 0] + v[2] * t[k, 2, 0],
+                   v[0] * t[k, 0, 1] + v[1] * t[k, 1, 1] + v[2] * t[k, 2, 1],
+                   v[0] * t[k, 0, 2] + v[1] * t[k, 1, 2] + v[2] * t[k, 2, 2])
+        local_d = (d[0] * t[k, 0, 0] + d[1] * t[k, 1, 0] + d[2] * t[k, 2, 0],
+                   d[0] * t[k, 0, 1] + d[1] * t[k, 1, 1] + d[2] * t[k, 2, 1],
+                   d[0] * t[k, 0, 2] + d[1] * t[k, 1, 2] + d[2] * t[k, 2, 2])
+        dims = (parts.dimensions[k, 0], parts.dimensions[k, 1], parts.dimensions[k, 2])
+        hit, n = part_ray(parts.shape[k], dims, hulls, parts.hull[k], local_o, local_d, min(best, reach))
+        if hit < best:
+            best = hit
+            normal = (t[k, 0, 0] * n[0] + t[k, 0, 1] * n[1] + t[k, 0, 2] * n[2],
+                      t[k, 1, 0] * n[0] + t[k, 1, 1] * n[1] + t[k, 1, 2] * n[2],
+                      t[k, 2, 0] * n[0] + t[k, 2, 1] * n[1] + t[k, 2, 2] * n[2])
+    return best, normal
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
@@ -133,17 +168,24 @@ def ray_without_hull(kind, dims, o, d, reach):
     return cylinder.ray(dims, o, d, reach)
 
 
-Solid = namedtuple("Solid", "dimensions fields volume unit_inertia hull")
+Solid = namedtuple("Solid", "dimensions fields volume unit_inertia hull compound")
 
 
-def solid(name, spec, path="body"):
+def solid(name, spec, path="body", density=None):
     """What a shape spec (its SPEC_KEYS, validated) makes: dimensions, the keys as a scene
     holds them, volume (m^3), inertia per kg (3, 3) about the centre of mass in the body frame,
-    and the hull (convex.Hull, convex bodies only)."""
+    the hull (convex.Hull, convex bodies only) and the parts (compound.Compound, compound
+    bodies only, whose parts without a mass or density of their own take `density`)."""
     if name == "convex":
         hull = convex.build_hull(spec["points"], f"{path}.points")
-        return Solid(convex.dimensions(hull), convex.spec_fields(hull), hull.volume, hull.unit_inertia, hull)
+        return Solid(convex.dimensions(hull), convex.spec_fields(hull), hull.volume, hull.unit_inertia, hull, None)
+    if name == "compound":
+        parts = [compound.make_part(part, SHAPES[part["shape"]].code, solid(part["shape"], part, f"{path}.parts[{k}]"),
+                                    density)
+                 for k, part in enumerate(spec["parts"])]
+        whole, dims, volume, unit_inertia = compound.combine(parts, half_extents)
+        return Solid(dims, compound.spec_fields(whole), volume, unit_inertia, None, whole)
     module = SHAPES[name].module
     dims = module.dimensions(spec)
-    return Solid(dims, module.spec_fields(dims), module.volume(dims), np.diag(module.unit_inertia(dims)), None)
+    return Solid(dims, module.spec_fields(dims), module.volume(dims), np.diag(module.unit_inertia(dims)), None, None)
 
