@@ -264,7 +264,7 @@ def test_a_compound_needs_parts_and_its_own_keys():
     world = World()
     with pytest.raises(ValueError, match=re.escape("body.parts: missing")):
         world.add_body({"shape": "compound"})
-    with pytest.raises(ValueError, match=re.escape("body.size: a compound has no size (its keys: parts)")):
+    with pytest.raises(ValueError, match=re.escape("body.size: a compound has no size (its keys: parts, inertial)")):
         world.add_body({"shape": "compound", "size": [1, 1, 1], "parts": [{}]})
     assert world.body_names() == []
 

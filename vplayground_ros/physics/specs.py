@@ -224,7 +224,8 @@ BODY_KEYS = {"name", "shape", "position", "rpy", "quaternion", "linear_velocity"
              "dynamic_friction", "immovable", "allow_freezing", "frozen"} | DIMENSION_KEYS
 # A compound's part: a shape at a pose in the body's frame, with its own mass or density (else
 # the body's density). Material and motion are the body's.
-PART_KEYS = {"shape", "position", "rpy", "quaternion", "mass", "density"} | DIMENSION_KEYS - {"parts"}
+PART_KEYS = {"shape", "position", "rpy", "quaternion", "mass", "density"} | DIMENSION_KEYS - {"parts", "inertial"}
+INERTIAL_KEYS = {"mass", "centre", "inertia"}
 
 
 def validate_body_fields(raw, path, allowed=BODY_KEYS):
@@ -251,6 +252,8 @@ def validate_body_fields(raw, path, allowed=BODY_KEYS):
             out[key] = [vector(point, child(p, k), 3, -MAX_SIZE, MAX_SIZE) for k, point in enumerate(value)]
         elif key == "parts":
             out[key] = validate_parts(value, p)
+        elif key == "inertial":
+            out[key] = validate_inertial(value, p)
         elif key == "mass":
             out[key] = number(value, p, MIN_MASS, MAX_MASS)
         elif key == "density":
@@ -263,6 +266,9 @@ def validate_body_fields(raw, path, allowed=BODY_KEYS):
             out[key] = boolean(value, p)
     if "rpy" in out and "quaternion" in out:
         raise SpecError(path, "give either rpy or quaternion, not both")
+    for key in ("mass", "density"):
+        if key in out and "inertial" in out:
+            raise SpecError(child(path, key), "the inertial gives the mass: give one or the other")
     return out
 
 
@@ -280,6 +286,30 @@ def check_dimension_keys(shape, body, path):
                                                "`mesh:` names a file to take them from)")
     if shape == "compound" and "parts" not in body:
         raise SpecError(child(path, "parts"), "missing (a compound body's shapes, each at a pose in its frame)")
+
+
+def validate_inertial(raw, path):
+    """A compound's mass properties as given (a URDF link's inertial) instead of its parts'
+    sums: `mass` (kg), `centre` of mass in the body's frame, `inertia` about it in the body's
+    axes (3 x 3, symmetric, positive definite, each principal moment at most the other two's
+    sum: a real body's)."""
+    mapping(raw, path, INERTIAL_KEYS)
+    for key in sorted(INERTIAL_KEYS - raw.keys()):
+        raise SpecError(child(path, key), "missing (an inertial gives mass, centre and inertia)")
+    inertia_path = child(path, "inertia")
+    rows = raw["inertia"]
+    if not isinstance(rows, (list, tuple)) or len(rows) != 3:
+        raise SpecError(inertia_path, f"expected 3 rows of 3 numbers (kg m^2), got {quote(rows)}")
+    tensor = np.array([vector(row, child(inertia_path, k), 3, -MAX_MASS, MAX_MASS) for k, row in enumerate(rows)])
+    if not np.allclose(tensor, tensor.T, rtol=1e-9, atol=1e-12 * np.abs(tensor).max()):
+        raise SpecError(inertia_path, "is not symmetric")
+    moments = np.linalg.eigvalsh(tensor)
+    if not (moments.min() > 0.0 and 2.0 * moments.max() <= moments.sum() * (1.0 + 1e-9)):
+        raise SpecError(inertia_path, f"principal moments {', '.join(f'{m:g}' for m in moments)} kg m^2 are "
+                                      "not a real body's: each must be positive and none more than the other two together")
+    return {"mass": number(raw["mass"], child(path, "mass"), MIN_MASS, MAX_MASS),
+            "centre": vector(raw["centre"], child(path, "centre"), 3, -MAX_SIZE, MAX_SIZE),
+            "inertia": tensor.tolist()}
 
 
 def validate_parts(raw, path):
@@ -434,6 +464,9 @@ def validate_vehicle(raw, path="vehicle"):
             out[key] = [validate_wheel(w, child(p, k)) for k, w in enumerate(value)]
     if "rpy" in out and "quaternion" in out:
         raise SpecError(path, "give either rpy or quaternion, not both")
+    for key in ("mass", "density"):
+        if key in out and "inertial" in out:
+            raise SpecError(child(path, key), "the inertial gives the mass: give one or the other")
     return out
 
 

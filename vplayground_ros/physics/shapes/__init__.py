@@ -183,7 +183,7 @@ def solid(name, spec, path="body", density=None):
         parts = [compound.make_part(part, SHAPES[part["shape"]].code, solid(part["shape"], part, f"{path}.parts[{k}]"),
                                     density)
                  for k, part in enumerate(spec["parts"])]
-        whole, dims, volume, unit_inertia = compound.combine(parts, half_extents)
+        whole, dims, volume, unit_inertia = compound.combine(parts, half_extents, spec.get("inertial"))
         return Solid(dims, compound.spec_fields(whole), volume, unit_inertia, None, whole)
     module = SHAPES[name].module
     dims = module.dimensions(spec)

@@ -23,7 +23,7 @@ from numba import njit
 
 from ..math3d import quat_to_matrix, rpy_to_quat
 
-SPEC_KEYS = ("parts",)
+SPEC_KEYS = ("parts", "inertial")
 DEFAULTS = {}
 
 # Parts of one body at most: the narrow phase's warm-start keys hold a part's index in 6 bits.
@@ -44,21 +44,25 @@ Parts = namedtuple("Parts", [
 Part = namedtuple("Part", "spec code solid centre quaternion mass")
 
 # What a compound body is beyond a shapes.Solid's numbers: its parts, its centre of mass in its
-# frame, and the mass of the parts (which a body's `mass` key scales).
-Compound = namedtuple("Compound", "parts centre mass")
+# frame, the mass of the parts (which a body's `mass` key scales), and its `inertial` spec when
+# the mass properties are given rather than the parts' (a URDF link's), else None.
+Compound = namedtuple("Compound", "parts centre mass inertial")
 
 # A compound's parts as drawn (frame_parts).
 FrameParts = namedtuple("FrameParts", "codes dimensions poses hull_triangles")
 
 
-def combine(parts, half_extents_of):
+def combine(parts, half_extents_of, inertial=None):
     """The Compound of `parts` (Part), and the body's (dimensions, volume, inertia per kg (3, 3)
     about the centre of mass in the body's axes). `half_extents_of(code, dims)` is
-    shapes.half_extents."""
+    shapes.half_extents. A validated `inertial` (mass, centre, inertia) replaces the parts'
+    sums."""
     masses = np.array([part.mass for part in parts])
     mass = float(masses.sum())
     centres = np.array([part.centre for part in parts])
     centre = (masses[:, None] * centres).sum(axis=0) / mass
+    if inertial is not None:
+        mass, centre = float(inertial["mass"]), np.asarray(inertial["centre"], dtype=np.float64)
     inertia, reach = np.zeros((3, 3)), np.zeros(3)
     for part, offset in zip(parts, centres - centre):
         turn = part_rotation(part)
@@ -67,8 +71,10 @@ def combine(parts, half_extents_of):
         inertia += part.mass * (offset @ offset * np.eye(3) - np.outer(offset, offset))
         # its bounding box turned into the body's axes, about the centre of mass
         reach = np.maximum(reach, np.abs(offset) + np.abs(turn) @ np.asarray(half_extents_of(part.code, part.solid.dimensions)))
+    if inertial is not None:
+        inertia = np.asarray(inertial["inertia"], dtype=np.float64)
     volume = float(sum(part.solid.volume for part in parts))
-    return Compound(parts, centre, mass), tuple(float(r) for r in reach), volume, inertia / mass
+    return Compound(parts, centre, mass, inertial), tuple(float(r) for r in reach), volume, inertia / mass
 
 
 def part_rotation(part):
@@ -95,7 +101,10 @@ def make_part(spec, code, solid, density):
 
 def spec_fields(compound):
     """The keys a scene holds: each part as given, with its mass."""
-    return {"parts": [dict(part.spec) for part in compound.parts]}
+    fields = {"parts": [dict(part.spec) for part in compound.parts]}
+    if compound.inertial is not None:
+        fields["inertial"] = compound.inertial
+    return fields
 
 
 def pack_parts(compounds, first_hull):

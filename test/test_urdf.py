@@ -1,0 +1,164 @@
+"""Robots from URDF (issue 38): real descriptions no one here wrote (pybullet_data's KUKA iiwa
+and Clearpath Husky), the mass properties they give, and what is refused."""
+import math
+import os
+import re
+import sys
+
+import numpy as np
+import pytest
+
+from vplayground_ros.physics import World
+from vplayground_ros.physics.specs import SpecError
+from vplayground_ros.urdf_import import UrdfError, add_robot, robot_model
+
+pybullet_data = pytest.importorskip("pybullet_data")
+KUKA = os.path.join(pybullet_data.getDataPath(), "kuka_iiwa", "model.urdf")
+HUSKY = os.path.join(pybullet_data.getDataPath(), "husky", "husky.urdf")
+RATE = 128
+
+
+def loaded(path, name, **placement):
+    world = World({"freezing": {"enabled": False}})
+    model = robot_model(path, name, **placement)
+    add_robot(world, model)
+    return world, model
+
+
+def test_kuka_loads_as_its_links_and_joints():
+    world, model = loaded(KUKA, "kuka")
+    assert world.body_names() == [f"kuka.lbr_iiwa_link_{k}" for k in range(8)]
+    assert world.joint_names() == [f"kuka.lbr_iiwa_joint_{k}" for k in range(1, 8)]
+    assert world.body("kuka.lbr_iiwa_link_0")["immovable"]  # its root has no mass: fixed
+    joint = world.joint("kuka.lbr_iiwa_joint_2")
+    assert joint["type"] == "revolute"
+    assert (joint["lower"], joint["upper"]) == pytest.approx((-2.09439510239, 2.09439510239))
+    assert joint["motor"]["max_effort"] == 300.0 and joint["motor"]["max_speed"] == 10.0
+    link = world.body("kuka.lbr_iiwa_link_1")
+    assert link["mass"] == 4.0  # as its inertial gives, not its mesh's volume
+    # The link's frame where the joint chain puts it (joint 1 at z 0.1575 on the base).
+    assert link["position"] == pytest.approx([0.0, 0.0, 0.1575], abs=1e-9)
+
+
+def test_kuka_holds_a_pose_under_gravity_with_position_motors():
+    world, model = loaded(KUKA, "kuka")
+    target = [0.3, 0.5, -0.2, -1.0, 0.4, 0.6, 0.1]
+    for joint, angle in zip(world.joint_names(), target):
+        world.edit_joint(joint, motor={"mode": "position", "target": angle})
+    world.step(RATE)
+    for _ in range(3):
+        world.step(RATE)
+        for joint, angle in zip(world.joint_names(), target):
+            assert math.degrees(abs(world.joint(joint)["position"] - angle)) < 0.01
+    # Held against gravity: the shoulder's motor carries the arm's moment.
+    assert abs(world.joint("kuka.lbr_iiwa_joint_2")["effort"]) > 10.0
+
+
+def test_kuka_without_motors_falls_on_its_joints():
+    world, model = loaded(KUKA, "kuka")
+    start = world.body("kuka.lbr_iiwa_link_7")["position"]
+    world.step(RATE)
+    assert world.body("kuka.lbr_iiwa_link_7")["position"][2] < start[2] - 0.05
+    # Every joint's anchors still meet (the joint reports where its child's anchor is; the
+    # parent's is computed here from the model's pose the same way).
+    for joint in world.joint_names():
+        assert np.isfinite(world.joint(joint)["position"])
+
+
+def test_husky_stands_on_its_wheels_and_drives_straight():
+    world, model = loaded(HUSKY, "husky", position=[0, 0, 0.02])
+    assert [b["name"] for b in model.bodies][0] == "husky.base_footprint"  # base_link lumped in
+    assert not world.body("husky.base_footprint")["immovable"]
+    world.step(RATE)
+    base = world.body("husky.base_footprint")
+    assert base["position"][2] == pytest.approx(0.0, abs=0.01)  # wheel radius over the ground
+    speed = 0.6
+    for joint in world.joint_names():
+        world.edit_joint(joint, motor={"mode": "velocity", "target": speed / 0.17775, "max_effort": 100.0})
+    world.step(2 * RATE)
+    start = np.array(world.body("husky.base_footprint")["position"])
+    world.step(2 * RATE)
+    moved = np.array(world.body("husky.base_footprint")["position"]) - start
+    assert moved[0] / 2.0 == pytest.approx(speed, rel=0.02)
+    assert abs(moved[1]) < 0.01
+
+
+def test_inertial_gives_the_mass_properties():
+    world = World()
+    tensor = [[0.6022, -0.02364, -0.1197], [-0.02364, 1.7386, -0.001544], [-0.1197, -0.001544, 2.0296]]
+    world.add_body({"name": "b", "shape": "compound", "position": [0, 0, 1],
+                    "parts": [{"size": [1.0, 0.57, 0.27], "position": [0, 0, 0.12]}],
+                    "inertial": {"mass": 33.455, "centre": [-0.087, -0.0008, 0.099], "inertia": tensor}})
+    body = world.body("b")
+    assert body["mass"] == 33.455
+    slot = world._slots["b"]
+    np.testing.assert_allclose(world._bodies.inv_inertia[slot], np.linalg.inv(tensor), rtol=1e-12)
+    # The engine moves the centre of mass; the frame is where the spec put it.
+    np.testing.assert_allclose(world._bodies.position[slot], [-0.087, -0.0008, 1.099], atol=1e-12)
+    assert body["position"] == pytest.approx([0, 0, 1], abs=1e-12)
+
+
+@pytest.mark.parametrize("inertial, message", [
+    ({"mass": 1.0, "centre": [0, 0, 0]}, "inertial.inertia: missing"),
+    ({"mass": 1.0, "centre": [0, 0, 0], "inertia": [[1, 0, 0], [0, 1, 0], [0, 0, 3]]},
+     "not a real body's"),
+    ({"mass": 1.0, "centre": [0, 0, 0], "inertia": [[1, 0.5, 0], [0, 1, 0], [0, 0, 1]]}, "is not symmetric"),
+    ({"mass": 0.0, "centre": [0, 0, 0], "inertia": [[1, 0, 0], [0, 1, 0], [0, 0, 1]]}, "inertial.mass: must be >="),
+])
+def test_bad_inertials_are_refused(inertial, message):
+    with pytest.raises(SpecError, match=message):
+        World().add_body({"shape": "compound", "parts": [{}], "inertial": inertial})
+
+
+def test_inertial_is_a_compounds_and_excludes_a_mass():
+    with pytest.raises(SpecError, match="a box has no inertial"):
+        World().add_body({"inertial": {"mass": 1, "centre": [0, 0, 0], "inertia": np.eye(3).tolist()}})
+    with pytest.raises(SpecError, match="body.mass: the inertial gives the mass"):
+        World().add_body({"shape": "compound", "parts": [{}], "mass": 2.0,
+                          "inertial": {"mass": 1, "centre": [0, 0, 0], "inertia": np.eye(3).tolist()}})
+
+
+ARM = """<robot name="arm">
+  <link name="base"><collision><geometry><box size="0.2 0.2 0.2"/></geometry></collision>
+    <inertial><mass value="2"/><inertia ixx="0.1" iyy="0.1" izz="0.1" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="upper"><collision><geometry><cylinder radius="0.05" length="0.5"/></geometry></collision>
+    <inertial><mass value="{mass}"/><inertia ixx="0.02" iyy="0.02" izz="0.001" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <joint name="shoulder" type="{kind}"><parent link="base"/><child link="upper"/>
+    <origin xyz="0 0 0.4"/><axis xyz="0 1 0"/><limit lower="-1" upper="1" effort="10" velocity="2"/></joint>
+</robot>"""
+
+
+@pytest.mark.parametrize("text, message", [
+    (ARM.format(mass=0, kind="revolute"), "link 'upper': no inertial"),
+    (ARM.format(mass=-1, kind="revolute"), "link 'upper': mass -1 kg is not physical"),
+    (ARM.format(mass=1, kind="floating"), "joint 'shoulder': type 'floating' is not supported"),
+    (ARM.format(mass=1, kind="revolute").replace('<child link="upper"/>', '<child link="elbow"/>'),
+     "joint 'shoulder': no link named 'elbow'"),
+    (ARM.format(mass=1, kind="revolute").replace("</robot>", '<joint name="back" type="fixed"><parent link="upper"/>'
+                                                             '<child link="base"/></joint></robot>'),
+     "no root link (a loop)"),
+    (ARM.format(mass=1, kind="revolute").replace('<box size="0.2 0.2 0.2"/>', '<mesh filename="gone.stl"/>'),
+     "link 'base': mesh 'gone.stl' not found"),
+    ("<robot", "not a URDF robot yourdfpy can read"),
+])
+def test_bad_descriptions_name_the_link_or_joint(text, message):
+    with pytest.raises(UrdfError, match=re.escape(message)):
+        robot_model(text, "arm")
+
+
+def test_xacro_without_the_package_is_refused_clearly(monkeypatch):
+    monkeypatch.setitem(sys.modules, "xacro", None)  # import xacro raises ImportError
+    with pytest.raises(UrdfError, match="the xacro package is not installed: pip install xacro"):
+        robot_model(HUSKY, "husky")
+
+
+def test_a_robot_is_added_whole_or_not_at_all():
+    world = World()
+    world.add_body({"name": "arm.upper", "position": [5, 0, 1]})
+    with pytest.raises(UrdfError, match="a body named 'arm.upper' already exists"):
+        add_robot(world, robot_model(ARM.format(mass=1, kind="revolute"), "arm"))
+    assert world.body_names() == ["arm.upper"] and world.joint_names() == []
+    model = robot_model(ARM.format(mass=1, kind="revolute"), "arm2", position=[0, 0, 5000.0])
+    with pytest.raises(ValueError, match="outside the world"):
+        add_robot(world, model)
+    assert world.body_names() == ["arm.upper"] and world.joint_names() == []

@@ -1,0 +1,319 @@
+"""Robots from URDF (issue 38): a robot description as the World's bodies and joints.
+
+Each link becomes a compound body (its collision elements the parts: box, sphere, cylinder, and
+meshes as their convex hulls) with the link's inertial as given; links held by fixed joints are
+lumped into their parent's body (their parts and inertia added), as Gazebo does, so a sensor
+frame costs no body and no joint. Revolute, continuous and prismatic joints become the World's
+joints with their limits (effort and velocity bound the motors a controller sets later). The
+robot stands where its spec puts its root link, every joint at 0. Names: `<robot>.<link>` for
+bodies, `<robot>.<joint>` for joints.
+
+A file is read with yourdfpy; xacro (`.xacro`, or `$(...)`/`${...}` in a .urdf) is expanded
+when the xacro package is installed, else refused saying so. Everything is checked before the
+World is touched: what is wrong names the file and the link or joint.
+"""
+import math
+import os
+import re
+from collections import namedtuple
+from pathlib import Path
+
+import numpy as np
+
+from .physics import specs
+from .physics.math3d import matrix_to_quaternion, quaternions_to_matrices, rpy_to_quat
+from .physics.shapes.convex import MAX_HULL_POINTS
+from .scene import read_mesh
+
+# What a robot description becomes: body specs (the root's first), joint specs, each link's body
+# and pose in that body's frame (4x4), and the description's text (for robot_description).
+RobotModel = namedtuple("RobotModel", "bodies joints link_frames description")
+
+JOINT_TYPES = {"revolute": "revolute", "continuous": "continuous", "prismatic": "prismatic"}
+MAX_LINKS = 256
+
+
+class UrdfError(ValueError):
+    """A robot description that cannot be loaded: the message names the file and what is wrong."""
+
+
+def read_description(source, label):
+    """The URDF text of `source` (a path, or the text itself when it starts with '<'), xacro
+    expanded. Returns (text, folder relative paths are taken from)."""
+    if isinstance(source, str) and source.lstrip().startswith("<"):
+        text, folder = source, Path.cwd()
+    else:
+        path = Path(source)
+        try:
+            text = path.read_text(encoding="utf-8")
+        except OSError as error:
+            raise UrdfError(f"{label}: cannot read it: {error.strerror or error}") from None
+        folder = path.resolve().parent
+    if Path(str(source)).suffix == ".xacro" or re.search(r"\$[({]", text):
+        text = expand_xacro(text, label)
+    return text, folder
+
+
+def expand_xacro(text, label):
+    try:
+        import xacro
+    except ImportError:
+        raise UrdfError(f"{label}: it uses xacro ($(...) or ${{...}}), and the xacro package is not "
+                        "installed: pip install xacro, or expand it first (xacro file.xacro > file.urdf)") from None
+    from xml.dom.minidom import parseString
+    try:
+        document = parseString(text)
+        xacro.process_doc(document)
+    except Exception as error:  # xacro raises its own and the XML parser's errors
+        raise UrdfError(f"{label}: xacro could not expand it: {error}") from None
+    return document.toxml()
+
+
+def parse(text, label):
+    import yourdfpy
+    from io import StringIO
+    try:
+        return yourdfpy.URDF.load(StringIO(text), build_scene_graph=False, load_meshes=False,
+                                  load_collision_meshes=False).robot
+    except Exception as error:  # yourdfpy raises what its XML and number parsing raise
+        raise UrdfError(f"{label}: not a URDF robot yourdfpy can read: {error}") from None
+
+
+def origin(element):
+    """An element's origin as a 4x4 transform (identity when it has none)."""
+    return np.eye(4) if element is None or element.origin is None else np.asarray(element.origin, dtype=np.float64)
+
+
+def pose_matrix(position, rotation):
+    matrix = np.eye(4)
+    matrix[:3, :3], matrix[:3, 3] = rotation, position
+    return matrix
+
+
+def resolve_mesh_file(filename, folder, label, link):
+    """A mesh's file: `package://<package>/<path>` in the package's share folder (AMENT_PREFIX_PATH)
+    or in a folder of that name above the description; `file://` and plain paths relative to
+    the description's folder."""
+    if filename.startswith("package://"):
+        package, _, rest = filename[len("package://"):].partition("/")
+        candidates = [Path(prefix) / "share" / package / rest
+                      for prefix in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if prefix]
+        candidates += [parent / rest for parent in [folder, *folder.parents] if parent.name == package]
+    else:
+        path = Path(filename[len("file://"):] if filename.startswith("file://") else filename)
+        candidates = [path if path.is_absolute() else folder / path]
+    for candidate in candidates:
+        if candidate.is_file():
+            return candidate
+    raise UrdfError(f"{label}: link {link!r}: mesh {filename!r} not found (looked in "
+                    f"{', '.join(str(c) for c in candidates) or 'no package folder'})")
+
+
+def hull_points(vertices):
+    """At most MAX_HULL_POINTS points whose convex hull stands for a collision mesh: its hull's
+    vertices, thinned by farthest-point sampling when there are more (the hull of the kept ones
+    lies inside the mesh's, by at most the gaps between them)."""
+    from scipy.spatial import ConvexHull
+    points = np.asarray(vertices, dtype=np.float64)[ConvexHull(vertices).vertices]
+    if len(points) <= MAX_HULL_POINTS:
+        return points
+    kept = [int(np.argmax(np.linalg.norm(points - points.mean(axis=0), axis=1)))]
+    distance = np.linalg.norm(points - points[kept[0]], axis=1)
+    while len(kept) < MAX_HULL_POINTS:
+        kept.append(int(np.argmax(distance)))
+        distance = np.minimum(distance, np.linalg.norm(points - points[kept[-1]], axis=1))
+    return points[kept]
+
+
+def collision_part(collision, pose, folder, label, link):
+    """A compound part spec for one collision element at `pose` (4x4) in the body's frame."""
+    geometry = collision.geometry
+    placed = pose @ origin(collision)
+    part = {"position": placed[:3, 3].tolist(),
+            "quaternion": matrix_to_quaternion(placed[:3, :3]).tolist()}
+    if geometry.box is not None:
+        return {**part, "shape": "box", "size": [float(v) for v in geometry.box.size]}
+    if geometry.sphere is not None:
+        return {**part, "shape": "sphere", "radius": float(geometry.sphere.radius)}
+    if geometry.cylinder is not None:  # along z in URDF as here
+        return {**part, "shape": "cylinder", "radius": float(geometry.cylinder.radius),
+                "length": float(geometry.cylinder.length)}
+    if geometry.mesh is not None:
+        path = resolve_mesh_file(geometry.mesh.filename, folder, label, link)
+        try:
+            vertices, _ = read_mesh(path, f"link {link!r} mesh")
+        except ValueError as error:
+            raise UrdfError(f"{label}: {error}") from None
+        scale = geometry.mesh.scale if geometry.mesh.scale is not None else 1.0
+        return {**part, "shape": "convex", "points": hull_points(np.asarray(vertices) * scale).tolist()}
+    raise UrdfError(f"{label}: link {link!r}: a collision element without a geometry")
+
+
+def link_inertial(link, label):
+    """(mass, centre (3,), inertia (3, 3) about the centre, in the link's axes) of a link, or
+    None without an inertial. A mass that is not positive, or an inertia tensor that is not
+    positive definite or breaks the triangle inequality, is refused naming the link."""
+    inertial = link.inertial
+    if inertial is None or inertial.mass is None or inertial.mass == 0.0:
+        return None
+    mass = float(inertial.mass)
+    frame = origin(inertial)
+    tensor = np.asarray(inertial.inertia if inertial.inertia is not None else np.zeros((3, 3)), dtype=np.float64)
+    tensor = frame[:3, :3] @ tensor @ frame[:3, :3].T
+    moments = np.linalg.eigvalsh(0.5 * (tensor + tensor.T))
+    if not (math.isfinite(mass) and mass > 0.0):
+        raise UrdfError(f"{label}: link {link.name!r}: mass {mass:g} kg is not physical")
+    if not (np.all(np.isfinite(moments)) and moments.min() > 0.0
+            and 2.0 * moments.max() <= moments.sum() * (1.0 + 1e-9)):
+        raise UrdfError(f"{label}: link {link.name!r}: inertia (principal moments "
+                        f"{', '.join(f'{m:g}' for m in moments)} kg m^2) is not physical: each must be "
+                        "positive and none more than the other two together")
+    return mass, frame[:3, 3].copy(), tensor
+
+
+def combine_inertials(inertials):
+    """(mass, centre, inertia about it) of several (mass, centre, inertia) in one frame."""
+    mass = sum(m for m, _, _ in inertials)
+    centre = sum(m * c for m, c, _ in inertials) / mass
+    tensor = np.zeros((3, 3))
+    for m, c, inertia in inertials:
+        d = c - centre
+        tensor += inertia + m * (np.dot(d, d) * np.eye(3) - np.outer(d, d))
+    return mass, centre, tensor
+
+
+def robot_model(source, name, position=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), fixed_base=None,
+                label=None):
+    """The RobotModel of a URDF file or text, its root link placed at `position`/`rpy`.
+    `fixed_base`: the root is fixed to the world (None: when the root's body, with the links
+    lumped into it, has no mass)."""
+    label = label or (str(source) if not str(source).lstrip().startswith("<") else "URDF text")
+    text, folder = read_description(source, label)
+    robot = parse(text, label)
+    links = {link.name: link for link in robot.links}
+    if len(links) > MAX_LINKS:
+        raise UrdfError(f"{label}: {len(links)} links, more than {MAX_LINKS}")
+    children = {}
+    parent_joint = {}
+    for joint in robot.joints:
+        for end in (joint.parent, joint.child):
+            if end not in links:
+                raise UrdfError(f"{label}: joint {joint.name!r}: no link named {end!r}")
+        if joint.child in parent_joint:
+            raise UrdfError(f"{label}: joint {joint.name!r}: link {joint.child!r} already has the parent "
+                            f"joint {parent_joint[joint.child].name!r} (a URDF is a tree: no loops)")
+        if joint.type not in JOINT_TYPES and joint.type != "fixed":
+            raise UrdfError(f"{label}: joint {joint.name!r}: type {joint.type!r} is not supported "
+                            "(revolute, continuous, prismatic, fixed)")
+        parent_joint[joint.child] = joint
+        children.setdefault(joint.parent, []).append(joint)
+    roots = [link for link in links if link not in parent_joint]
+    if len(roots) != 1:
+        raise UrdfError(f"{label}: {'no root link (a loop)' if not roots else f'{len(roots)} root links {roots}'}: "
+                        "a robot is one tree of links")
+    root = roots[0]
+    # Link poses in the world with every joint at 0, and the body each link is lumped into.
+    base = pose_matrix(position, quaternions_to_matrices(rpy_to_quat(rpy)[None])[0])
+    world_pose, body_of, order = {root: base}, {root: root}, [root]
+    for link in order:  # breadth first: parents before children
+        for joint in children.get(link, []):
+            world_pose[joint.child] = world_pose[link] @ origin(joint)
+            body_of[joint.child] = body_of[link] if joint.type == "fixed" else joint.child
+            order.append(joint.child)
+    if len(order) != len(links):  # cannot happen for a tree with one root; kept as a check
+        raise UrdfError(f"{label}: links not reached from the root {root!r}")
+    bodies, link_frames = {}, {}
+    for link in order:
+        owner = body_of[link]
+        pose = np.linalg.inv(world_pose[owner]) @ world_pose[link]  # the link in its body's frame
+        link_frames[link] = (body_name(name, owner, label), pose)
+        entry = bodies.setdefault(owner, {"parts": [], "inertials": []})
+        entry["parts"] += [collision_part(c, pose, folder, label, link) for c in links[link].collisions]
+        inertial = link_inertial(links[link], label)
+        if inertial is not None:
+            mass, centre, tensor = inertial
+            entry["inertials"].append((mass, pose[:3, :3] @ centre + pose[:3, 3],
+                                       pose[:3, :3] @ tensor @ pose[:3, :3].T))
+    # A root body without mass (PyBullet's and Gazebo's way of fixing a robot) is fixed.
+    fixed = not bodies[root]["inertials"] if fixed_base is None else fixed_base
+    body_specs = []
+    for owner, entry in bodies.items():
+        if not entry["parts"]:
+            raise UrdfError(f"{label}: link {owner!r}: no collision geometry (a body needs a shape; "
+                            "links without one are only lumped through fixed joints)")
+        spec = {"name": body_name(name, owner, label), "shape": "compound", "parts": entry["parts"],
+                "position": world_pose[owner][:3, 3].tolist(),
+                "quaternion": matrix_to_quaternion(world_pose[owner][:3, :3]).tolist()}
+        if entry["inertials"]:
+            mass, centre, tensor = combine_inertials(entry["inertials"])
+            spec["inertial"] = {"mass": mass, "centre": centre.tolist(), "inertia": tensor.tolist()}
+        elif not (owner == root and fixed):
+            raise UrdfError(f"{label}: link {owner!r}: no inertial (mass and inertia are needed for "
+                            "every moving link)")
+        if owner == root and fixed:
+            spec["immovable"] = True
+        body_specs.append(spec)
+    joint_specs = []
+    for link in order[1:]:
+        joint = parent_joint[link]
+        if joint.type == "fixed":
+            continue
+        frame = world_pose[joint.parent] @ origin(joint)
+        axis = np.asarray(joint.axis if joint.axis is not None else (1.0, 0.0, 0.0), dtype=np.float64)
+        if not np.linalg.norm(axis) > 0.0:
+            raise UrdfError(f"{label}: joint {joint.name!r}: its axis has no length")
+        spec = {"name": f"{name}.{joint.name}", "type": JOINT_TYPES[joint.type],
+                "parent": body_name(name, body_of[joint.parent], label),
+                "child": body_name(name, link, label), "anchor": frame[:3, 3].tolist(),
+                "axis": (frame[:3, :3] @ axis / np.linalg.norm(axis)).tolist()}
+        limit = joint.limit
+        if limit is not None and joint.type != "continuous":
+            for key in ("lower", "upper"):
+                if getattr(limit, key) is not None:
+                    spec[key] = float(getattr(limit, key))
+        motor = {}
+        if limit is not None and limit.effort:
+            motor["max_effort"] = float(limit.effort)
+        if limit is not None and limit.velocity:
+            motor["max_speed"] = float(limit.velocity)
+        if motor:
+            spec["motor"] = motor
+        try:
+            joint_specs.append(specs.validate_joint(spec, f"joint {joint.name!r}"))
+        except specs.SpecError as error:
+            raise UrdfError(f"{label}: {error}") from None
+    return RobotModel(body_specs, joint_specs, link_frames, text)
+
+
+def body_name(robot, link, label):
+    name = f"{robot}.{re.sub(r'[^A-Za-z0-9_.-]', '_', link)}"
+    if not specs.NAME_PATTERN.fullmatch(name):
+        raise UrdfError(f"{label}: link {link!r}: the body name {name!r} is longer than 64 characters "
+                        "(give the robot a shorter name)")
+    return name
+
+
+def add_robot(world, model):
+    """Adds a RobotModel's bodies and joints to `world`, all or none: every body is checked and
+    every name looked up first, and a refusal the World makes on the way (a body outside the
+    world) removes what was added."""
+    from .physics.world import prepare_body
+    taken = set(world.body_names())
+    for spec in model.bodies:
+        if spec["name"] in taken:
+            raise UrdfError(f"a body named {spec['name']!r} already exists")
+        prepare_body(spec, spec["name"])
+    joints = set(world.joint_names())
+    for spec in model.joints:
+        if spec["name"] in joints:
+            raise UrdfError(f"a joint named {spec['name']!r} already exists")
+    added = []
+    try:
+        for spec in model.bodies:
+            added.append(world.add_body(spec, spec["name"]))
+        for spec in model.joints:
+            world.add_joint(spec, spec["name"])
+    except ValueError:
+        world.remove_bodies(added)  # and with them their joints
+        raise
+    return added
