@@ -52,9 +52,16 @@ EQUALITY_ROWS, JOINT_ROWS = 6, 9
 # would fight the other rows' sweeps and ring; a fifth settles in ~25 steps (0.2 s at 128/s).
 POSITION_MOTOR_RATE = 0.2
 
-# Islands of up to this many joints have their equality rows solved as one (a K of up to 96 x 96,
-# ~0.3 ms to invert); larger ones joint by joint.
+# Islands of up to this many joints have their equality rows solved as one (a K of up to 96 x 96);
+# larger ones joint by joint.
 MAX_DIRECT_JOINTS = 16
+# An island of m joints keeps (6m)^2 floats of K's factor and 3m x 6m of its bounded rows'
+# responses: at most this many a joint.
+ISLAND_FLOATS_PER_JOINT = (36 + 18) * MAX_DIRECT_JOINTS
+
+# A limit row is solved only while its joint is this close to it (rad or m), or closer than two
+# steps at its speed: far from its limit it cannot act, and each solved row costs the island.
+LIMIT_MARGIN = 0.05
 
 # Position errors are corrected at most this fast (m/s, rad/s): a joint made between bodies far
 # apart, or a body teleported by an edit, pulls them together over a few steps, not in one.
@@ -99,7 +106,8 @@ JointArrays = namedtuple("JointArrays", [
     "block_inverse",  # (J, EQUALITY_ROWS, EQUALITY_ROWS) inverse effective mass of rows 0-5
     "islands",     # (3, J + 1) the joints island by island (each in the order they were made),
                    # each island's first place there, where its K^-1 starts (-1: joint by joint)
-    "island_inverse",   # (J * EQUALITY_ROWS * EQUALITY_ROWS * MAX_DIRECT_JOINTS,) K^-1s, row-major
+    "island_solver",    # (J * ISLAND_FLOATS_PER_JOINT,) each island's Cholesky factor of K (n x n,
+                        # row-major), then its bounded rows' equality responses (3 x joints x n)
     "island_residual",  # (J * EQUALITY_ROWS,) scratch of the sweeps
     "excluded_pairs",   # (E,) sorted pair_key of the jointed pairs that do not collide
 ])
@@ -114,7 +122,7 @@ def allocate_joints(capacity):
         row_values=np.zeros((capacity, JOINT_ROWS, 7)),
         block_inverse=np.zeros((capacity, EQUALITY_ROWS, EQUALITY_ROWS)),
         islands=np.zeros((3, capacity + 1), np.int64),
-        island_inverse=np.zeros(capacity * EQUALITY_ROWS * EQUALITY_ROWS * MAX_DIRECT_JOINTS),
+        island_solver=np.zeros(capacity * ISLAND_FLOATS_PER_JOINT),
         island_residual=np.zeros(capacity * EQUALITY_ROWS), excluded_pairs=np.zeros(0, np.int64))
 
 
@@ -304,11 +312,12 @@ def prepare_joints(joints, bodies, dt):
             flipped = ((-direction[0], -direction[1], -direction[2]),
                        (-lever_a[0], -lever_a[1], -lever_a[2]), (-lever_b[0], -lever_b[1], -lever_b[2]))
             position = joints.values[j, POSITION]
-            if kind != CONTINUOUS and joints.values[j, LOWER] > -np.inf:
+            near = LIMIT_MARGIN + 2.0 * abs(joints.values[j, SPEED]) * dt
+            if kind != CONTINUOUS and position - joints.values[j, LOWER] < near:
                 set_row(joints, j, LOWER_ROW, direction, lever_a, lever_b, m_a, m_b, inertia,
                         inertia, ia, ib)
                 limit_row(joints, j, LOWER_ROW, position - joints.values[j, LOWER], inv_dt)
-            if kind != CONTINUOUS and joints.values[j, UPPER] < np.inf:
+            if kind != CONTINUOUS and joints.values[j, UPPER] - position < near:
                 set_row(joints, j, UPPER_ROW, flipped[0], flipped[1], flipped[2], m_a, m_b,
                         inertia, inertia, ia, ib)
                 limit_row(joints, j, UPPER_ROW, joints.values[j, UPPER] - position, inv_dt)
@@ -336,8 +345,8 @@ def prepare_joints(joints, bodies, dt):
     group_islands(joints, static_row)
     for island in range(joints.count[1]):
         if joints.islands[ISLAND_OFFSET, island] >= 0:
-            invert_island(joints, island)
-            constrain_bounded_rows(joints, island)
+            factor_island(joints, island)
+            bounded_responses(joints, island)
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
@@ -396,7 +405,7 @@ def group_islands(joints, bodies):
         start[island + 1] = start[island] + sizes[island]
         if sizes[island] <= MAX_DIRECT_JOINTS:
             joints.islands[ISLAND_OFFSET, island] = offset
-            offset += (EQUALITY_ROWS * sizes[island]) ** 2
+            offset += (36 + 18) * sizes[island] ** 2
         else:
             joints.islands[ISLAND_OFFSET, island] = -1
     filled = sizes  # reused: joints placed so far per island
@@ -443,28 +452,49 @@ def shared_response(joints, j, row, k, col):
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
-def invert_island(joints, island):
-    """The island's K^-1 into island_inverse (Gauss-Jordan with partial pivoting). A row a
-    joint does not use gets a unit diagonal, so its impulse stays 0."""
+def factor_island(joints, island):
+    """The island's K (a row a joint does not use gets a unit diagonal, so its impulse stays 0)
+    factored as L L^T (Cholesky: K is symmetric positive definite) into island_solver."""
     first, last = joints.islands[ISLAND_START, island], joints.islands[ISLAND_START, island + 1]
     n = EQUALITY_ROWS * (last - first)
-    work = np.empty((n, 2 * n))
+    factor = joints.island_solver[joints.islands[ISLAND_OFFSET, island]:]
     for p in range(last - first):
         j = joints.islands[ISLAND_JOINTS, first + p]
         for r in range(EQUALITY_ROWS):
-            for q in range(last - first):
+            for q in range(p + 1):
                 k = joints.islands[ISLAND_JOINTS, first + q]
                 for c in range(EQUALITY_ROWS):
                     if joints.row_values[j, r, ROW_MASS] == 0.0 or joints.row_values[k, c, ROW_MASS] == 0.0:
                         value = 1.0 if (p == q and r == c) else 0.0
                     else:
                         value = shared_response(joints, j, r, k, c)
-                    work[EQUALITY_ROWS * p + r, EQUALITY_ROWS * q + c] = value
-    invert_in_place(work, n)
-    offset = joints.islands[ISLAND_OFFSET, island]
-    for r in range(n):
-        for c in range(n):
-            joints.island_inverse[offset + r * n + c] = work[r, n + c]
+                    factor[(EQUALITY_ROWS * p + r) * n + EQUALITY_ROWS * q + c] = value
+    for col in range(n):
+        diagonal = factor[col * n + col]
+        for k in range(col):
+            diagonal -= factor[col * n + k] * factor[col * n + k]
+        diagonal = np.sqrt(max(diagonal, 1.0e-300))
+        factor[col * n + col] = diagonal
+        for row in range(col + 1, n):
+            value = factor[row * n + col]
+            for k in range(col):
+                value -= factor[row * n + k] * factor[col * n + k]
+            factor[row * n + col] = value / diagonal
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
+def cholesky_solve(factor, n, x):
+    """x = K^-1 x in place, K = L L^T with L in factor's lower triangle (n x n, row-major)."""
+    for row in range(n):
+        value = x[row]
+        for k in range(row):
+            value -= factor[row * n + k] * x[k]
+        x[row] = value / factor[row * n + row]
+    for row in range(n - 1, -1, -1):
+        value = x[row]
+        for k in range(row + 1, n):
+            value -= factor[k * n + row] * x[k]
+        x[row] = value / factor[row * n + row]
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
@@ -496,29 +526,33 @@ def invert_in_place(work, n):
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
-def constrain_bounded_rows(joints, island):
-    """The effective mass of each motor and limit row of the island through its equalities:
-    1 / (j M^-1 j^T - u^T K^-1 u), u = J_eq M^-1 j^T."""
+def bounded_responses(joints, island):
+    """For each motor and limit row j of the island: the equality impulses w = -K^-1 u, u =
+    J_eq M^-1 j^T, that keep the equalities when j's impulse changes by 1 (stored after the
+    factor), and its effective mass through them, 1 / (j M^-1 j^T + u . w)."""
     first, last = joints.islands[ISLAND_START, island], joints.islands[ISLAND_START, island + 1]
-    n = EQUALITY_ROWS * (last - first)
+    size = last - first
+    n = EQUALITY_ROWS * size
     offset = joints.islands[ISLAND_OFFSET, island]
-    u = np.empty(n)
-    for p in range(last - first):
+    factor = joints.island_solver[offset:]
+    for p in range(size):
         j = joints.islands[ISLAND_JOINTS, first + p]
-        for row in (LOWER_ROW, UPPER_ROW, MOTOR_ROW):
+        for which in range(3):
+            row = LOWER_ROW + which
             if joints.row_values[j, row, ROW_MASS] == 0.0:
                 continue
-            for q in range(last - first):
+            w = joints.island_solver[offset + n * n + (3 * p + which) * n:]
+            for q in range(size):
                 k = joints.islands[ISLAND_JOINTS, first + q]
                 for c in range(EQUALITY_ROWS):
-                    u[EQUALITY_ROWS * q + c] = (shared_response(joints, k, c, j, row)
+                    w[EQUALITY_ROWS * q + c] = (shared_response(joints, k, c, j, row)
                                                 if joints.row_values[k, c, ROW_MASS] != 0.0 else 0.0)
             response = 1.0 / joints.row_values[j, row, ROW_MASS]
+            u = w[:n].copy()
+            cholesky_solve(factor, n, w)
             for r in range(n):
-                if u[r] == 0.0:
-                    continue
-                for c in range(n):
-                    response -= u[r] * joints.island_inverse[offset + r * n + c] * u[c]
+                w[r] = -w[r]
+                response += u[r] * w[r]
             joints.row_values[j, row, ROW_MASS] = 1.0 / response if response > 1.0e-12 else 0.0
 
 
@@ -594,51 +628,61 @@ def solve_joint_block(velocity, joints, target, impulse, j):
         apply_row_impulse(velocity, rows, j, row, a, b, m_a, m_b, d)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
-def solve_island_equalities(velocity, joints, target, impulse, island):
-    """Every equality row of the island at once: K^-1 times what they lack (exact)."""
-    first, last = joints.islands[ISLAND_START, island], joints.islands[ISLAND_START, island + 1]
-    n = EQUALITY_ROWS * (last - first)
-    offset, residual, rows = joints.islands[ISLAND_OFFSET, island], joints.island_residual, joints.rows
-    for p in range(last - first):
-        j = joints.islands[ISLAND_JOINTS, first + p]
-        a, b = joints.links[j, VELOCITY_A], joints.links[j, VELOCITY_B]
-        for row in range(EQUALITY_ROWS):
-            residual[EQUALITY_ROWS * p + row] = target[j, row] - row_speed(velocity, rows, j, row, a, b)
-    for p in range(last - first):
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
+def apply_island_impulses(velocity, joints, impulse, first, size, change, scale):
+    """Adds scale x change[6p + r] to equality row r of the island's p-th joint."""
+    for p in range(size):
         j = joints.islands[ISLAND_JOINTS, first + p]
         a, b = joints.links[j, VELOCITY_A], joints.links[j, VELOCITY_B]
         m_a, m_b = joints.values[j, INV_MASS_A], joints.values[j, INV_MASS_B]
         for row in range(EQUALITY_ROWS):
-            at = offset + (EQUALITY_ROWS * p + row) * n
-            d = 0.0
-            for c in range(n):
-                d += joints.island_inverse[at + c] * residual[c]
-            impulse[j, row] += d
-            apply_row_impulse(velocity, rows, j, row, a, b, m_a, m_b, d)
+            d = scale * change[EQUALITY_ROWS * p + row]
+            if d != 0.0:
+                impulse[j, row] += d
+                apply_row_impulse(velocity, joints.rows, j, row, a, b, m_a, m_b, d)
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
+def solve_island(velocity, joints, target, impulse, island, with_motors):
+    """One sweep over an island solved whole: each motor and limit row, its change carried
+    through the equalities by its precomputed response (so the equalities hold as before it);
+    then the equalities, K^-1 times what they lack (what the contacts changed since)."""
+    first, last = joints.islands[ISLAND_START, island], joints.islands[ISLAND_START, island + 1]
+    size = last - first
+    n = EQUALITY_ROWS * size
+    offset = joints.islands[ISLAND_OFFSET, island]
+    for p in range(size):
+        j = joints.islands[ISLAND_JOINTS, first + p]
+        for which in range(3):
+            row = LOWER_ROW + which
+            if row == MOTOR_ROW and not with_motors:
+                continue
+            change = solve_bounded_row(velocity, joints, target, impulse, j, row)
+            if change != 0.0:
+                response = joints.island_solver[offset + n * n + (3 * p + which) * n:]
+                apply_island_impulses(velocity, joints, impulse, first, size, response, change)
+    residual, rows = joints.island_residual, joints.rows
+    for p in range(size):
+        j = joints.islands[ISLAND_JOINTS, first + p]
+        a, b = joints.links[j, VELOCITY_A], joints.links[j, VELOCITY_B]
+        for row in range(EQUALITY_ROWS):
+            residual[EQUALITY_ROWS * p + row] = target[j, row] - row_speed(velocity, rows, j, row, a, b)
+    cholesky_solve(joints.island_solver[offset:], n, residual)
+    apply_island_impulses(velocity, joints, impulse, first, size, residual, 1.0)
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
 def solve_joint_sweep(velocity, joints, target, impulse, backwards, with_motors):
     """One sweep over the joints' rows, island by island (backwards: the last first); the motors
     only `with_motors` (the contact pass: in the collision pass too, a motor would apply its
-    effort twice a step). An island
-    solved whole: each motor and limit row that changes, then its equalities again; then its
-    equalities (what the contacts since the last sweep changed). A larger one: joint by joint,
+    effort twice a step). An island solved whole: solve_island. A larger one: joint by joint,
     the motor and limits, then the joint's equality block (what matters most last)."""
     islands = joints.count[1]
     for step in range(islands):
         island = islands - 1 - step if backwards else step
         first, last = joints.islands[ISLAND_START, island], joints.islands[ISLAND_START, island + 1]
         if joints.islands[ISLAND_OFFSET, island] >= 0:
-            for p in range(first, last):
-                j = joints.islands[ISLAND_JOINTS, p]
-                for row in (MOTOR_ROW, LOWER_ROW, UPPER_ROW):
-                    if row == MOTOR_ROW and not with_motors:
-                        continue
-                    if solve_bounded_row(velocity, joints, target, impulse, j, row) != 0.0:
-                        solve_island_equalities(velocity, joints, target, impulse, island)
-            solve_island_equalities(velocity, joints, target, impulse, island)
+            solve_island(velocity, joints, target, impulse, island, with_motors)
         else:
             for p in range(first, last):
                 j = joints.islands[ISLAND_JOINTS, last - 1 - (p - first) if backwards else p]
