@@ -16,16 +16,16 @@ contacts' row layout (contact.DIRECTION ... TURN_B):
   its impulse bounded by max_effort x dt.
 
 Rows 0-5 are equalities. The joints an island of bodies shares (a robot) have theirs solved
-together, exactly: their effective mass matrix K = J M^-1 J^T (6 rows a joint) is inverted
-once a step, and each sweep applies K^-1 times what the rows lack. Row by row, a thin arm's
+together, exactly: their effective mass matrix K = J M^-1 J^T (6 rows a joint) is factored
+(Cholesky) once a step, and each sweep applies K^-1 times what the rows lack. Row by row, a thin arm's
 hinge drifted into a growing wobble within 2 s, a 10-link chain came apart at 10 sweeps, and a
 10 kg weight on a 1 kg arm wandered off its plane: sequential impulses converge slowly across
 mass ratios, and correcting the drift in full each step feeds what they leave back. Islands of
 more than MAX_DIRECT_JOINTS solve each joint's block alone (6x6), one after the other.
 Rows 6-8 are bounded, solved one by one before the block, each with its effective mass
 through the island's equalities (what moving the axis moves: a motor turning a light link that
-carries a heavy one feels the heavy one), then the island's equalities are solved again, so
-one such row is exact in one sweep. A row with no effective mass
+carries a heavy one feels the heavy one) and its change carried through them by a response
+computed once a step, so one such row is exact in one sweep. A row with no effective mass
 (both sides static, or a limit or motor the joint does not have) is skipped. Position errors are corrected through the real velocities in full each step
 (target -C/dt, a velocity-level SHAKE): the split-impulse correction the contacts use forgets
 the centripetal share of a swing, and a pendulum corrected so lost ~1 % of its energy a
@@ -372,8 +372,8 @@ def invert_block(joints, j, work):
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def group_islands(joints, bodies):
     """Groups the joints by the moving bodies they share (a static side, the world or a frozen
-    or immovable body, joins nothing), and gives each island of up to MAX_DIRECT_JOINTS a
-    place for its K^-1."""
+    or immovable body, joins nothing; a joint holding nothing that moves is in no island), and
+    gives each island of up to MAX_DIRECT_JOINTS a place for its factor and responses."""
     count = joints.count[0]
     # Union-find over joint indices, through the moving bodies they hold.
     parent = np.arange(count)
@@ -393,6 +393,8 @@ def group_islands(joints, bodies):
     sizes = np.zeros(count, np.int64)
     islands = 0
     for j in range(count):
+        if joints.values[j, INV_MASS_A] == 0.0 and joints.values[j, INV_MASS_B] == 0.0:
+            continue  # nothing it holds moves (frozen, immovable): no island
         root = find_root(parent, j)
         if island_of_root[root] < 0:
             island_of_root[root] = islands
@@ -412,6 +414,8 @@ def group_islands(joints, bodies):
     filled[:islands] = 0
     for j in range(count):
         island = island_of_root[find_root(parent, j)]
+        if island < 0:
+            continue
         joints.islands[ISLAND_JOINTS, start[island] + filled[island]] = j
         filled[island] += 1
     joints.count[1] = islands
@@ -482,7 +486,7 @@ def factor_island(joints, island):
             factor[row * n + col] = value / diagonal
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
 def cholesky_solve(factor, n, x):
     """x = K^-1 x in place, K = L L^T with L in factor's lower triangle (n x n, row-major)."""
     for row in range(n):
@@ -642,7 +646,7 @@ def apply_island_impulses(velocity, joints, impulse, first, size, change, scale)
                 apply_row_impulse(velocity, joints.rows, j, row, a, b, m_a, m_b, d)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
 def solve_island(velocity, joints, target, impulse, island, with_motors):
     """One sweep over an island solved whole: each motor and limit row, its change carried
     through the equalities by its precomputed response (so the equalities hold as before it);
@@ -671,15 +675,36 @@ def solve_island(velocity, joints, target, impulse, island, with_motors):
     apply_island_impulses(velocity, joints, impulse, first, size, residual, 1.0)
 
 
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
+def islands_touched(joints, velocity_a, velocity_b, points, count, rows):
+    """Which islands a contact point of points[:count] touches (a moving body of one of its
+    joints is a side of the point); `rows` is the velocity arrays' length."""
+    touched_row = np.zeros(rows, np.bool_)
+    for k in range(count):
+        touched_row[velocity_a[points[k]]] = True
+        touched_row[velocity_b[points[k]]] = True
+    touched = np.zeros(joints.count[1], np.bool_)
+    for island in range(joints.count[1]):
+        for place in range(joints.islands[ISLAND_START, island], joints.islands[ISLAND_START, island + 1]):
+            j = joints.islands[ISLAND_JOINTS, place]
+            if ((joints.values[j, INV_MASS_A] != 0.0 and touched_row[joints.links[j, VELOCITY_A]])
+                    or (joints.values[j, INV_MASS_B] != 0.0 and touched_row[joints.links[j, VELOCITY_B]])):
+                touched[island] = True
+    return touched
+
+
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
-def solve_joint_sweep(velocity, joints, target, impulse, backwards, with_motors):
-    """One sweep over the joints' rows, island by island (backwards: the last first); the motors
-    only `with_motors` (the contact pass: in the collision pass too, a motor would apply its
-    effort twice a step). An island solved whole: solve_island. A larger one: joint by joint,
-    the motor and limits, then the joint's equality block (what matters most last)."""
+def solve_joint_sweep(velocity, joints, target, impulse, backwards, with_motors, touched, which):
+    """One sweep over the joints' rows of the islands whose `touched` flag is `which`, island by
+    island (backwards: the last first); the motors only `with_motors` (the contact pass: in the
+    collision pass too, a motor would apply its effort twice a step). An island solved whole:
+    solve_island. A larger one: joint by joint, the motor and limits, then the joint's equality
+    block (what matters most last)."""
     islands = joints.count[1]
     for step in range(islands):
         island = islands - 1 - step if backwards else step
+        if touched[island] != which:
+            continue
         first, last = joints.islands[ISLAND_START, island], joints.islands[ISLAND_START, island + 1]
         if joints.islands[ISLAND_OFFSET, island] >= 0:
             solve_island(velocity, joints, target, impulse, island, with_motors)
