@@ -38,7 +38,7 @@ from .constants import (LINEAR_SLOP, MAX_CORRECTION_SPEED, POSITION_CORRECTION,
                         STICKING_SPEED)
 from .contact import ARM_A, ARM_B, DIRECTION, TURN_A, TURN_B
 from .joints import (COLLISION_IMPULSE, COLLISION_TARGET, CONTACT_TARGET, IMPULSE, islands_touched,
-                     solve_joint_sweep)
+                     settle_island_impulses, solve_joint_sweep)
 from .math3d import cross
 from .solve_schedule import shock_levels, split_chains, support_groups
 
@@ -551,6 +551,7 @@ def solve_with_joints(velocity, contacts, joints, sweeps, target, normal_impulse
         for sweep in range(sweeps):
             solve_joint_sweep(velocity, joints, joint_target, joint_impulse, sweep % 2 == 1, True,
                               touched, False)
+    settle_island_impulses(joints, joint_impulse)
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)

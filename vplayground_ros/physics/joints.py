@@ -55,9 +55,10 @@ POSITION_MOTOR_RATE = 0.2
 # Islands of up to this many joints have their equality rows solved as one (a K of up to 96 x 96);
 # larger ones joint by joint.
 MAX_DIRECT_JOINTS = 16
-# An island of m joints keeps (6m)^2 floats of K's factor and 3m x 6m of its bounded rows'
-# responses: at most this many a joint.
-ISLAND_FLOATS_PER_JOINT = (36 + 18) * MAX_DIRECT_JOINTS
+# An island of m joints keeps (6m)^2 floats of K's factor, 3m x 6m of its bounded rows'
+# responses and 3m x 2m x 6 of their velocity changes: at most this many a joint.
+ISLAND_FLOATS = 36 + 18 + 36
+ISLAND_FLOATS_PER_JOINT = ISLAND_FLOATS * MAX_DIRECT_JOINTS
 
 # A limit row is solved only while its joint is this close to it (rad or m), or closer than two
 # steps at its speed: far from its limit it cannot act, and each solved row costs the island.
@@ -77,11 +78,11 @@ KIND, BODY_A, BODY_B, MOTOR_MODE, COLLIDE_CONNECTED, VELOCITY_A, VELOCITY_B = ra
  INV_MASS_A, INV_MASS_B) = range(11)
 # Columns of JointArrays.row_values: per row of a joint.
 (ROW_MASS, COLLISION_TARGET, CONTACT_TARGET, IMPULSE_LOW, IMPULSE_HIGH, COLLISION_IMPULSE,
- IMPULSE) = range(7)
+ IMPULSE, PASS_CHANGE) = range(8)
 # JointArrays.frames[j, side]: the anchor (x, y, z) then the joint frame's quaternion.
 ANCHOR, FRAME = 0, 3
 # Rows of JointArrays.islands.
-ISLAND_JOINTS, ISLAND_START, ISLAND_OFFSET = 0, 1, 2
+ISLAND_JOINTS, ISLAND_START, ISLAND_OFFSET, ISLAND_BODY_START, ISLAND_BODIES = range(5)
 
 # A few arrays with named columns rather than one array a field: handing a tuple of arrays to
 # compiled code costs ~0.25 us an array, on every World.step call, and 40 arrays of joints made
@@ -100,14 +101,18 @@ JointArrays = namedtuple("JointArrays", [
                    # applied last step, each side's inverse mass in the solver
     # The solver's view, rebuilt each step (prepare_joints):
     "rows",        # (J, JOINT_ROWS, ROW_SIZE)
-    "row_values",  # (J, JOINT_ROWS, 7) ROW_MASS (0: not solved) ... IMPULSE: relative velocity
-                   # goals of the two passes, the accumulated impulse's bounds, the impulses
-                   # of the collision pass and of the contact pass (warm-started)
+    "row_values",  # (J, JOINT_ROWS, 8) ROW_MASS (0: not solved) ... PASS_CHANGE: relative
+                   # velocity goals of the two passes, the accumulated impulse's bounds, the
+                   # impulses of the collision pass and of the contact pass (warm-started), and
+                   # what a bounded row of an island solved whole added in this pass
     "block_inverse",  # (J, EQUALITY_ROWS, EQUALITY_ROWS) inverse effective mass of rows 0-5
-    "islands",     # (3, J + 1) the joints island by island (each in the order they were made),
-                   # each island's first place there, where its K^-1 starts (-1: joint by joint)
+    "islands",     # (5, 2 J + 1) the joints island by island (each in the order they were made),
+                   # each island's first place there, where its factor starts (-1: joint by
+                   # joint), its moving bodies' first place in the next row, those bodies'
+                   # velocity rows
     "island_solver",    # (J * ISLAND_FLOATS_PER_JOINT,) each island's Cholesky factor of K (n x n,
-                        # row-major), then its bounded rows' equality responses (3 x joints x n)
+                        # row-major), its bounded rows' equality responses (3 x joints x n),
+                        # and their velocity changes (3 x joints x 2 joints x 6)
     "island_residual",  # (J * EQUALITY_ROWS,) scratch of the sweeps
     "excluded_pairs",   # (E,) sorted pair_key of the jointed pairs that do not collide
 ])
@@ -119,9 +124,9 @@ def allocate_joints(capacity):
     return JointArrays(
         count=np.zeros(2, np.int64), links=np.zeros((capacity, 7), np.int64), frames=frames,
         values=np.zeros((capacity, 11)), rows=np.zeros((capacity, JOINT_ROWS, ROW_SIZE)),
-        row_values=np.zeros((capacity, JOINT_ROWS, 7)),
+        row_values=np.zeros((capacity, JOINT_ROWS, 8)),
         block_inverse=np.zeros((capacity, EQUALITY_ROWS, EQUALITY_ROWS)),
-        islands=np.zeros((3, capacity + 1), np.int64),
+        islands=np.zeros((5, 2 * capacity + 1), np.int64),
         island_solver=np.zeros(capacity * ISLAND_FLOATS_PER_JOINT),
         island_residual=np.zeros(capacity * EQUALITY_ROWS), excluded_pairs=np.zeros(0, np.int64))
 
@@ -346,7 +351,7 @@ def prepare_joints(joints, bodies, dt):
     for island in range(joints.count[1]):
         if joints.islands[ISLAND_OFFSET, island] >= 0:
             factor_island(joints, island)
-            bounded_responses(joints, island)
+            bounded_responses(joints, island, static_row + 1)
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
@@ -407,7 +412,7 @@ def group_islands(joints, bodies):
         start[island + 1] = start[island] + sizes[island]
         if sizes[island] <= MAX_DIRECT_JOINTS:
             joints.islands[ISLAND_OFFSET, island] = offset
-            offset += (36 + 18) * sizes[island] ** 2
+            offset += ISLAND_FLOATS * sizes[island] ** 2
         else:
             joints.islands[ISLAND_OFFSET, island] = -1
     filled = sizes  # reused: joints placed so far per island
@@ -418,6 +423,21 @@ def group_islands(joints, bodies):
             continue
         joints.islands[ISLAND_JOINTS, start[island] + filled[island]] = j
         filled[island] += 1
+    # Each island's moving bodies (its joints' sides that move), once each.
+    body_start, island_bodies = joints.islands[ISLAND_BODY_START], joints.islands[ISLAND_BODIES]
+    listed = np.full(bodies + 1, -1, np.int64)  # the island that listed each velocity row
+    count_bodies = 0
+    for island in range(islands):
+        body_start[island] = count_bodies
+        for place in range(start[island], start[island + 1]):
+            j = joints.islands[ISLAND_JOINTS, place]
+            for side in range(2):
+                row = joints.links[j, VELOCITY_A + side]
+                if joints.values[j, INV_MASS_A + side] != 0.0 and listed[row] != island:
+                    listed[row] = island
+                    island_bodies[count_bodies] = row
+                    count_bodies += 1
+    body_start[islands] = count_bodies
     joints.count[1] = islands
 
 
@@ -529,16 +549,51 @@ def invert_in_place(work, n):
                     work[r, c] -= factor * work[col, c]
 
 
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
+def body_changes(joints, island, p, which):
+    """The velocity changes (2 m x 6, m the island's joints) of the island's moving bodies per
+    unit impulse of bounded row `which` (0 lower, 1 upper, 2 motor) of its p-th joint."""
+    first, last = joints.islands[ISLAND_START, island], joints.islands[ISLAND_START, island + 1]
+    size = last - first
+    n = EQUALITY_ROWS * size
+    at = joints.islands[ISLAND_OFFSET, island] + n * n + 3 * size * n + (3 * p + which) * 2 * size * 6
+    return joints.island_solver[at:at + 2 * size * 6].reshape((2 * size, 6))
+
+
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
-def bounded_responses(joints, island):
+def add_row_change(joints, j, row, scale, change, slot_of):
+    """Adds to `change` (per island body: linear, angular) what an impulse `scale` along row
+    `row` of joint j does to its moving sides."""
+    rows = joints.rows
+    for side in range(2):
+        mass = joints.values[j, INV_MASS_A + side]
+        if mass == 0.0:
+            continue
+        body = slot_of[joints.links[j, VELOCITY_A + side]]
+        sign = -scale if side == 0 else scale
+        turn = TURN_A if side == 0 else TURN_B
+        for e in range(3):
+            change[body, e] += sign * mass * rows[j, row, DIRECTION + e]
+            change[body, 3 + e] += sign * rows[j, row, turn + e]
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
+def bounded_responses(joints, island, rows):
     """For each motor and limit row j of the island: the equality impulses w = -K^-1 u, u =
     J_eq M^-1 j^T, that keep the equalities when j's impulse changes by 1 (stored after the
-    factor), and its effective mass through them, 1 / (j M^-1 j^T + u . w)."""
+    factor), the velocity change of each of the island's moving bodies that this makes with
+    j's own (body_changes), and j's effective mass through them, 1 / (j M^-1 j^T + u . w).
+    `rows`: the velocity arrays' length."""
     first, last = joints.islands[ISLAND_START, island], joints.islands[ISLAND_START, island + 1]
     size = last - first
     n = EQUALITY_ROWS * size
     offset = joints.islands[ISLAND_OFFSET, island]
     factor = joints.island_solver[offset:]
+    # Each moving body's place among the island's (for body_changes).
+    slot_of = np.full(rows, -1, np.int64)
+    bodies_first = joints.islands[ISLAND_BODY_START, island]
+    for place in range(bodies_first, joints.islands[ISLAND_BODY_START, island + 1]):
+        slot_of[joints.islands[ISLAND_BODIES, place]] = place - bodies_first
     for p in range(size):
         j = joints.islands[ISLAND_JOINTS, first + p]
         for which in range(3):
@@ -558,6 +613,16 @@ def bounded_responses(joints, island):
                 w[r] = -w[r]
                 response += u[r] * w[r]
             joints.row_values[j, row, ROW_MASS] = 1.0 / response if response > 1.0e-12 else 0.0
+            # What a unit impulse of the row, with its equality responses, does to each moving
+            # body of the island (its row's own sides and every equality row's).
+            change = body_changes(joints, island, p, which)
+            change[:] = 0.0
+            add_row_change(joints, j, row, 1.0, change, slot_of)
+            for q in range(size):
+                k = joints.islands[ISLAND_JOINTS, first + q]
+                for c in range(EQUALITY_ROWS):
+                    if w[EQUALITY_ROWS * q + c] != 0.0:
+                        add_row_change(joints, k, c, w[EQUALITY_ROWS * q + c], change, slot_of)
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
@@ -594,9 +659,9 @@ def row_speed(velocity, rows, j, row, a, b):
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
-def solve_bounded_row(velocity, joints, target, impulse, j, row):
+def bounded_row_change(velocity, joints, target, impulse, j, row):
     """One motor or limit row: its accumulated impulse driven to the target within bounds.
-    Returns the impulse it added."""
+    Returns the impulse it added (not yet applied to the bodies)."""
     mass = joints.row_values[j, row, ROW_MASS]
     if mass == 0.0:
         return 0.0
@@ -605,9 +670,17 @@ def solve_bounded_row(velocity, joints, target, impulse, j, row):
     new = old + mass * (target[j, row] - row_speed(velocity, joints.rows, j, row, a, b))
     new = min(max(new, joints.row_values[j, row, IMPULSE_LOW]), joints.row_values[j, row, IMPULSE_HIGH])
     impulse[j, row] = new
-    apply_row_impulse(velocity, joints.rows, j, row, a, b, joints.values[j, INV_MASS_A],
-                      joints.values[j, INV_MASS_B], new - old)
     return new - old
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
+def solve_bounded_row(velocity, joints, target, impulse, j, row):
+    """bounded_row_change, applied to the joint's two bodies (a joint solved alone)."""
+    change = bounded_row_change(velocity, joints, target, impulse, j, row)
+    if change != 0.0:
+        apply_row_impulse(velocity, joints.rows, j, row, joints.links[j, VELOCITY_A],
+                          joints.links[j, VELOCITY_B], joints.values[j, INV_MASS_A],
+                          joints.values[j, INV_MASS_B], change)
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
@@ -649,7 +722,8 @@ def apply_island_impulses(velocity, joints, impulse, first, size, change, scale)
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
 def solve_island(velocity, joints, target, impulse, island, with_motors):
     """One sweep over an island solved whole: each motor and limit row, its change carried
-    through the equalities by its precomputed response (so the equalities hold as before it);
+    through the equalities by its precomputed velocity changes (so the equalities hold as before
+    it; the equality impulses that takes are booked at the pass's end, settle_island_impulses);
     then the equalities, K^-1 times what they lack (what the contacts changed since)."""
     first, last = joints.islands[ISLAND_START, island], joints.islands[ISLAND_START, island + 1]
     size = last - first
@@ -661,10 +735,15 @@ def solve_island(velocity, joints, target, impulse, island, with_motors):
             row = LOWER_ROW + which
             if row == MOTOR_ROW and not with_motors:
                 continue
-            change = solve_bounded_row(velocity, joints, target, impulse, j, row)
+            change = bounded_row_change(velocity, joints, target, impulse, j, row)
             if change != 0.0:
-                response = joints.island_solver[offset + n * n + (3 * p + which) * n:]
-                apply_island_impulses(velocity, joints, impulse, first, size, response, change)
+                joints.row_values[j, row, PASS_CHANGE] += change
+                moved = body_changes(joints, island, p, which)
+                bodies_first = joints.islands[ISLAND_BODY_START, island]
+                for place in range(bodies_first, joints.islands[ISLAND_BODY_START, island + 1]):
+                    body = joints.islands[ISLAND_BODIES, place]
+                    for e in range(6):
+                        velocity[body, e] += change * moved[place - bodies_first, e]
     residual, rows = joints.island_residual, joints.rows
     for p in range(size):
         j = joints.islands[ISLAND_JOINTS, first + p]
@@ -673,6 +752,31 @@ def solve_island(velocity, joints, target, impulse, island, with_motors):
             residual[EQUALITY_ROWS * p + row] = target[j, row] - row_speed(velocity, rows, j, row, a, b)
     cholesky_solve(joints.island_solver[offset:], n, residual)
     apply_island_impulses(velocity, joints, impulse, first, size, residual, 1.0)
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
+def settle_island_impulses(joints, impulse):
+    """Books the equality impulses the bounded rows of islands solved whole took this pass
+    (their changes times their responses), for the warm start and the efforts."""
+    for island in range(joints.count[1]):
+        offset = joints.islands[ISLAND_OFFSET, island]
+        if offset < 0:
+            continue
+        first, last = joints.islands[ISLAND_START, island], joints.islands[ISLAND_START, island + 1]
+        size = last - first
+        n = EQUALITY_ROWS * size
+        for p in range(size):
+            j = joints.islands[ISLAND_JOINTS, first + p]
+            for which in range(3):
+                change = joints.row_values[j, LOWER_ROW + which, PASS_CHANGE]
+                if change == 0.0:
+                    continue
+                joints.row_values[j, LOWER_ROW + which, PASS_CHANGE] = 0.0
+                response = joints.island_solver[offset + n * n + (3 * p + which) * n:]
+                for q in range(size):
+                    k = joints.islands[ISLAND_JOINTS, first + q]
+                    for c in range(EQUALITY_ROWS):
+                        impulse[k, c] += change * response[EQUALITY_ROWS * q + c]
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
