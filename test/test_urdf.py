@@ -162,3 +162,24 @@ def test_a_robot_is_added_whole_or_not_at_all():
     with pytest.raises(ValueError, match="outside the world"):
         add_robot(world, model)
     assert world.body_names() == ["arm.upper"] and world.joint_names() == []
+
+
+def test_links_do_not_collide_with_each_other_unless_asked():
+    world, model = loaded(KUKA, "kuka")
+    assert len(world._joints.arrays.excluded_pairs) == 8 * 7 // 2  # every pair of its 8 links
+    world = World()
+    add_robot(world, robot_model(KUKA, "kuka", self_collide=True))
+    assert len(world._joints.arrays.excluded_pairs) == 7  # the jointed pairs alone
+
+
+def test_bodies_kept_apart_pass_through_each_other_and_nothing_else():
+    world = World({"gravity": [0, 0, 0]}, ground=None)
+    world.add_body({"name": "a", "position": [0, 0, 0]})
+    world.add_body({"name": "b", "position": [0.5, 0, 0]})
+    world.add_body({"name": "c", "position": [-0.6, 0, 0], "linear_velocity": [1.0, 0, 0]})
+    world.disable_collisions(["a", "b"])
+    world.step(RATE // 4)
+    assert world.body("b")["position"][0] == pytest.approx(0.5, abs=1e-12)  # a and b overlap on
+    assert world.body("a")["linear_velocity"][0] > 0.1  # c still hit a
+    world.remove_body("b")
+    assert len(world._joints.arrays.excluded_pairs) == 0

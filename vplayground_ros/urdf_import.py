@@ -27,7 +27,8 @@ from .scene import read_mesh
 
 # What a robot description becomes: body specs (the root's first), joint specs, each link's body
 # and pose in that body's frame (4x4), and the description's text (for robot_description).
-RobotModel = namedtuple("RobotModel", "bodies joints link_frames description")
+# `self_collide`: whether its links collide with each other.
+RobotModel = namedtuple("RobotModel", "bodies joints link_frames description self_collide")
 
 JOINT_TYPES = {"revolute": "revolute", "continuous": "continuous", "prismatic": "prismatic"}
 MAX_LINKS = 256
@@ -183,10 +184,11 @@ def combine_inertials(inertials):
 
 
 def robot_model(source, name, position=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), fixed_base=None,
-                label=None):
+                self_collide=False, label=None):
     """The RobotModel of a URDF file or text, its root link placed at `position`/`rpy`.
     `fixed_base`: the root is fixed to the world (None: when the root's body, with the links
-    lumped into it, has no mass)."""
+    lumped into it, has no mass). `self_collide`: its links collide with each other (off, as
+    PyBullet and Gazebo load URDF robots)."""
     label = label or (str(source) if not str(source).lstrip().startswith("<") else "URDF text")
     text, folder = read_description(source, label)
     robot = parse(text, label)
@@ -282,7 +284,7 @@ def robot_model(source, name, position=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), fix
             joint_specs.append(specs.validate_joint(spec, f"joint {joint.name!r}"))
         except specs.SpecError as error:
             raise UrdfError(f"{label}: {error}") from None
-    return RobotModel(body_specs, joint_specs, link_frames, text)
+    return RobotModel(body_specs, joint_specs, link_frames, text, bool(self_collide))
 
 
 def body_name(robot, link, label):
@@ -313,6 +315,8 @@ def add_robot(world, model):
             added.append(world.add_body(spec, spec["name"]))
         for spec in model.joints:
             world.add_joint(spec, spec["name"])
+        if not model.self_collide:
+            world.disable_collisions(added)
     except ValueError:
         world.remove_bodies(added)  # and with them their joints
         raise

@@ -14,6 +14,7 @@ class JointRegistry:
         self.arrays = allocate_joints(4)  # what the kernels take
         self._names = []  # row order
         self._specs = {}  # name -> validated spec (parent and child by name)
+        self._apart = []  # sets of body slots that do not collide with each other
 
     def __contains__(self, name):
         return name in self._specs
@@ -94,12 +95,22 @@ class JointRegistry:
         row = self.row(name)
         return int(self.arrays.links[row, BODY_A]), int(self.arrays.links[row, BODY_B])
 
+    def keep_apart(self, slots):
+        """Bodies that do not collide with each other (a robot's links), jointed or not."""
+        self._apart.append(set(int(slot) for slot in slots))
+
+    def forget(self, slots):
+        """Drops removed bodies from the sets kept apart."""
+        gone = set(int(slot) for slot in slots)
+        self._apart = [kept for kept in (group - gone for group in self._apart) if len(kept) > 1]
+
     def update_bodies(self, jointed):
         """Marks the jointed bodies in `jointed` (the bodies' flag array) and lists the pairs
-        that must not collide, sorted, for the broad phase."""
+        that must not collide (jointed without collide_connected, or kept apart), sorted, for
+        the broad phase."""
         a, count = self.arrays, len(self._names)
         jointed[:] = False
-        excluded = []
+        excluded = [pair_key(x, y) for group in self._apart for x in group for y in group if x < y]
         for row in range(count):
             pair = [int(a.links[row, BODY_A]), int(a.links[row, BODY_B])]
             for slot in pair:

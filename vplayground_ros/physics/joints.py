@@ -346,12 +346,14 @@ def prepare_joints(joints, bodies, dt):
                 joints.row_values[j, row, IMPULSE] = 0.0
                 joints.rows[j, row, :] = 0.0
                 joints.row_values[j, row, COLLISION_TARGET] = joints.row_values[j, row, CONTACT_TARGET] = 0.0
-        invert_block(joints, j, work)
     group_islands(joints, static_row)
     for island in range(joints.count[1]):
         if joints.islands[ISLAND_OFFSET, island] >= 0:
             factor_island(joints, island)
             bounded_responses(joints, island, static_row + 1)
+        else:
+            for place in range(joints.islands[ISLAND_START, island], joints.islands[ISLAND_START, island + 1]):
+                invert_block(joints, joints.islands[ISLAND_JOINTS, place], work)
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
@@ -450,6 +452,19 @@ def find_root(parent, x):
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
+def share_a_body(joints, j, k):
+    """Whether joints j and k hold a moving body in common."""
+    for side_j in range(2):
+        if joints.values[j, INV_MASS_A + side_j] == 0.0:
+            continue
+        body = joints.links[j, VELOCITY_A + side_j]
+        for side_k in range(2):
+            if joints.values[k, INV_MASS_A + side_k] != 0.0 and joints.links[k, VELOCITY_A + side_k] == body:
+                return True
+    return False
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def shared_response(joints, j, row, k, col):
     """J_row M^-1 J_col^T between row `row` of joint j and row `col` of joint k: the velocity
     change along the one per unit impulse along the other, through the moving bodies they
@@ -484,11 +499,12 @@ def factor_island(joints, island):
     factor = joints.island_solver[joints.islands[ISLAND_OFFSET, island]:]
     for p in range(last - first):
         j = joints.islands[ISLAND_JOINTS, first + p]
-        for r in range(EQUALITY_ROWS):
-            for q in range(p + 1):
-                k = joints.islands[ISLAND_JOINTS, first + q]
+        for q in range(p + 1):
+            k = joints.islands[ISLAND_JOINTS, first + q]
+            linked = p == q or share_a_body(joints, j, k)  # else their block of K is zero
+            for r in range(EQUALITY_ROWS):
                 for c in range(EQUALITY_ROWS):
-                    if joints.row_values[j, r, ROW_MASS] == 0.0 or joints.row_values[k, c, ROW_MASS] == 0.0:
+                    if not linked or joints.row_values[j, r, ROW_MASS] == 0.0 or joints.row_values[k, c, ROW_MASS] == 0.0:
                         value = 1.0 if (p == q and r == c) else 0.0
                     else:
                         value = shared_response(joints, j, r, k, c)
@@ -603,9 +619,10 @@ def bounded_responses(joints, island, rows):
             w = joints.island_solver[offset + n * n + (3 * p + which) * n:]
             for q in range(size):
                 k = joints.islands[ISLAND_JOINTS, first + q]
+                linked = k == j or share_a_body(joints, j, k)
                 for c in range(EQUALITY_ROWS):
                     w[EQUALITY_ROWS * q + c] = (shared_response(joints, k, c, j, row)
-                                                if joints.row_values[k, c, ROW_MASS] != 0.0 else 0.0)
+                                                if linked and joints.row_values[k, c, ROW_MASS] != 0.0 else 0.0)
             response = 1.0 / joints.row_values[j, row, ROW_MASS]
             u = w[:n].copy()
             cholesky_solve(factor, n, w)

@@ -313,6 +313,8 @@ class World(WorldQueries):
         if len(slots) == 0:
             return
         self._remove_joints(self._joints.holding(slots))
+        self._joints.forget(slots)
+        self._joints.update_bodies(self._bodies.jointed)
         self._wake_touching(slots)
         self._forget_contacts(slots)
         for name, slot in zip(names, slots):
@@ -381,6 +383,14 @@ class World(WorldQueries):
             if slot != WORLD_SIDE:
                 self._wake(slot)
         return name
+
+    def disable_collisions(self, names):
+        """The named bodies stop colliding with each other (a robot's links, which simulators of
+        URDF robots leave apart unless asked); with everything else they collide as before."""
+        slots = [self._slot(name) for name in names]
+        self._joints.keep_apart(slots)
+        self._joints.update_bodies(self._bodies.jointed)
+        self._forget_contacts(slots)
 
     def joint_names(self):
         """Every joint, in the order they were made (the order the solver sweeps them)."""
