@@ -183,3 +183,27 @@ def test_bodies_kept_apart_pass_through_each_other_and_nothing_else():
     assert world.body("a")["linear_velocity"][0] > 0.1  # c still hit a
     world.remove_body("b")
     assert len(world._joints.arrays.excluded_pairs) == 0
+
+
+def test_kuka_follows_a_joint_trajectory_within_a_degree():
+    """Every joint swings 0.4 rad at 0.5 Hz about a pose (1.26 rad/s at most), its position
+    motor given the trajectory's position and velocity each step, as a trajectory controller
+    interpolating a JointTrajectory would."""
+    world, model = loaded(KUKA, "kuka")
+    joints = world.joint_names()
+    pose = np.array([0.3, 0.5, -0.2, -1.0, 0.4, 0.6, 0.1])
+    amplitude, omega, phase = 0.4, math.pi, np.arange(7) * 0.7
+    for joint, angle in zip(joints, pose + amplitude * np.sin(phase)):
+        world.edit_joint(joint, motor={"mode": "position", "target": angle})
+    world.step(RATE)  # at the trajectory's start
+    worst = 0.0
+    for k in range(1, 4 * RATE + 1):
+        t = k / RATE
+        for joint, angle, speed in zip(joints, pose + amplitude * np.sin(omega * t + phase),
+                                       amplitude * omega * np.cos(omega * t + phase)):
+            world.edit_joint(joint, motor={"target": angle, "velocity": speed})
+        world.step(1)
+        if k > RATE // 2:  # after the start's jump in velocity
+            reached = np.array([world.joint(joint)["position"] for joint in joints])
+            worst = max(worst, np.abs(reached - (pose + amplitude * np.sin(omega * t + phase))).max())
+    assert math.degrees(worst) < 1.0

@@ -4,9 +4,10 @@ The bodies they hold are the World's; this registry knows them by slot, and the 
 body's joints with it, so no joint ever holds a slot another body has since taken."""
 import numpy as np
 
-from .joints import (ANCHOR, BODY_A, BODY_B, COLLIDE_CONNECTED, EFFORT, FRAME, IMPULSE, KIND, KINDS,
-                     LOWER, MAX_EFFORT, MAX_SPEED, MOTOR_MODE, MOTOR_TARGET, MOTORS, PER_JOINT,
-                     POSITION, SPEED, UPPER, WORLD_SIDE, WRAPPED_ANGLE, allocate_joints, pair_key)
+from .joints import (ANCHOR, BODY_A, BODY_B, COLLIDE_CONNECTED, EFFORT, FEED_FORWARD, FRAME,
+                     IMPULSE, KIND, KINDS, LOWER, MAX_EFFORT, MAX_SPEED, MOTORS, MOTOR_MODE,
+                     MOTOR_TARGET, PER_JOINT, POSITION, SPEED, UPPER, WORLD_SIDE, WRAPPED_ANGLE,
+                     allocate_joints, pair_key)
 
 
 class JointRegistry:
@@ -66,7 +67,7 @@ class JointRegistry:
         a.values[row, LOWER], a.values[row, UPPER] = spec["lower"], spec["upper"]
         motor = spec["motor"]
         a.links[row, MOTOR_MODE] = MOTORS[motor["mode"]]
-        a.values[row, MOTOR_TARGET] = motor["target"]
+        a.values[row, MOTOR_TARGET], a.values[row, FEED_FORWARD] = motor["target"], motor["velocity"]
         a.values[row, MAX_EFFORT], a.values[row, MAX_SPEED] = motor["max_effort"], motor["max_speed"]
         a.links[row, COLLIDE_CONNECTED] = spec["collide_connected"]
 

@@ -74,8 +74,8 @@ WORLD_SIDE = -1
 # Columns of JointArrays.links (int64): what a joint is and holds.
 KIND, BODY_A, BODY_B, MOTOR_MODE, COLLIDE_CONNECTED, VELOCITY_A, VELOCITY_B = range(7)
 # Columns of JointArrays.values (float): its settings, its state, and the solver's masses.
-(LOWER, UPPER, MOTOR_TARGET, MAX_EFFORT, MAX_SPEED, POSITION, WRAPPED_ANGLE, SPEED, EFFORT,
- INV_MASS_A, INV_MASS_B) = range(11)
+(LOWER, UPPER, MOTOR_TARGET, FEED_FORWARD, MAX_EFFORT, MAX_SPEED, POSITION, WRAPPED_ANGLE,
+ SPEED, EFFORT, INV_MASS_A, INV_MASS_B) = range(12)
 # Columns of JointArrays.row_values: per row of a joint.
 (ROW_MASS, COLLISION_TARGET, CONTACT_TARGET, IMPULSE_LOW, IMPULSE_HIGH, COLLISION_IMPULSE,
  IMPULSE, PASS_CHANGE) = range(8)
@@ -94,8 +94,9 @@ JointArrays = namedtuple("JointArrays", [
                    # collide, and (prepare_joints) their rows of the velocity arrays
     "frames",      # (J, 2, 7) per side (parent, child): the anchor in the body's frame from its
                    # centre of mass, then the joint's frame in the body's frame (x: the axis)
-    "values",      # (J, 11) LOWER ... INV_MASS_B: limits (rad or m; -inf / inf for none), the
-                   # motor's target (rad/s, m/s; rad, m), max_effort (N m, N; inf: unbounded),
+    "values",      # (J, 12) LOWER ... INV_MASS_B: limits (rad or m; -inf / inf for none), the
+                   # motor's target (rad/s, m/s; rad, m), a position motor's feed-forward
+                   # velocity (rad/s, m/s), max_effort (N m, N; inf: unbounded),
                    # max_speed, the coordinate (angle with turns counted, or slide), the last
                    # measured angle in (-pi, pi], its rate, the effort the motor and limits
                    # applied last step, each side's inverse mass in the solver
@@ -123,7 +124,7 @@ def allocate_joints(capacity):
     frames[:, :, FRAME + 3] = 1.0
     return JointArrays(
         count=np.zeros(2, np.int64), links=np.zeros((capacity, 7), np.int64), frames=frames,
-        values=np.zeros((capacity, 11)), rows=np.zeros((capacity, JOINT_ROWS, ROW_SIZE)),
+        values=np.zeros((capacity, 12)), rows=np.zeros((capacity, JOINT_ROWS, ROW_SIZE)),
         row_values=np.zeros((capacity, JOINT_ROWS, 8)),
         block_inverse=np.zeros((capacity, EQUALITY_ROWS, EQUALITY_ROWS)),
         islands=np.zeros((5, 2 * capacity + 1), np.int64),
@@ -333,7 +334,9 @@ def prepare_joints(joints, bodies, dt):
                 if mode == MOTOR_VELOCITY:
                     goal = joints.values[j, MOTOR_TARGET]
                 else:
-                    goal = POSITION_MOTOR_RATE * (joints.values[j, MOTOR_TARGET] - position) * inv_dt
+                    # The velocity the target moves at, and a share of the way to it.
+                    goal = (joints.values[j, FEED_FORWARD]
+                            + POSITION_MOTOR_RATE * (joints.values[j, MOTOR_TARGET] - position) * inv_dt)
                 goal = min(max(goal, -joints.values[j, MAX_SPEED]), joints.values[j, MAX_SPEED])
                 joints.row_values[j, MOTOR_ROW, COLLISION_TARGET] = goal
                 joints.row_values[j, MOTOR_ROW, CONTACT_TARGET] = goal

@@ -500,9 +500,9 @@ JOINT_TYPES = ("fixed", "revolute", "continuous", "prismatic")
 JOINT_KEYS = {"name", "type", "parent", "child", "anchor", "axis", "position", "lower", "upper",
               "motor", "collide_connected"}
 JOINT_EDIT_KEYS = {"lower", "upper", "motor", "collide_connected"}
-MOTOR_KEYS = {"mode", "target", "max_effort", "max_speed"}
+MOTOR_KEYS = {"mode", "target", "velocity", "max_effort", "max_speed"}
 MOTOR_MODES = ("none", "velocity", "position")
-MOTOR_DEFAULTS = {"mode": "none", "target": 0.0, "max_effort": math.inf, "max_speed": math.inf}
+MOTOR_DEFAULTS = {"mode": "none", "target": 0.0, "velocity": 0.0, "max_effort": math.inf, "max_speed": math.inf}
 MAX_EFFORT = 1.0e12  # N or N m
 
 
@@ -570,6 +570,8 @@ def validate_joint_edit(raw, path, joint_type, current):
             merged["mode"] = motor["mode"]
         if "target" in motor:
             merged["target"] = number(motor["target"], child(motor_path, "target"), -MAX_COORDINATE, MAX_COORDINATE)
+        if "velocity" in motor:  # a position motor's feed-forward: how fast its target moves
+            merged["velocity"] = number(motor["velocity"], child(motor_path, "velocity"), -MAX_SPEED, MAX_SPEED)
         for key in ("max_effort", "max_speed"):
             if key in motor:
                 value = motor[key]
