@@ -24,8 +24,10 @@ from .robots import validate_robot, world_robots
 from .sensors import validate_sensors
 
 SCENE_VERSION = 1
-TOP_LEVEL_KEYS = {"version", "settings", "ground", "playground", "bodies", "vehicles", "joints",
-                  "sensors"}
+TOP_LEVEL_KEYS = {"version", "settings", "ground", "playground", "bodies", "vehicles", "robots",
+                  "joints", "sensors"}
+ROBOT_ENTRY_KEYS = {"name", "urdf", "position", "rpy", "quaternion", "fixed_base", "self_collide",
+                    "joint_positions"}
 PLAYGROUND_KEYS = {"mesh", "position", "rpy", "scale"}
 MAX_PLAYGROUND_TRIANGLES = 500_000  # beyond this the octree and the viewer stop being real-time
 # Files are measured before they are read, so a hostile or mistaken path (a multi-gigabyte file)
@@ -305,6 +307,7 @@ def validate_scene(scene, base, max_bodies=None, directories=None, frames=DEFAUL
     # Named before the sensors are checked: a sensor's name is a frame and must not be a body's,
     # generated or not.
     owners = name_unnamed(bodies, vehicles, names)
+    robots = validate_robots(scene, base, directories, owners)
     sensors = validate_sensors(scene.get("sensors"), owners)
     # The names against the node's frames and the optical frames of the cameras named by them;
     # a frame_id is checked against everything below, naming the sensor's key.
@@ -322,7 +325,50 @@ def validate_scene(scene, base, max_bodies=None, directories=None, frames=DEFAUL
                 raise specs.SpecError(f"sensors[{k}].frame_id", f"the frame {specs.quote(frame)} is {taken[frame]}")
             taken[frame] = f"a frame of the sensor {sensor['name']}"
     joints = validate_joints(scene, owners)
-    return settings, ground, playground, bodies, vehicles, joints, sensors
+    return settings, ground, playground, bodies, vehicles, robots, joints, sensors
+
+
+def validate_robots(scene, base, directories, owners):
+    """The scene's `robots` (URDF robots): each entry checked and its description read into a
+    urdf_import.RobotModel, the file found as a mesh is; `owners` (body and vehicle names)
+    gains their bodies. Returns [(entry, model)]."""
+    from .urdf_import import UrdfError, robot_model  # (urdf_import reads meshes through this module)
+    robots = []
+    for k, raw in enumerate(validate_list(scene, "robots")):
+        path = f"robots[{k}]"
+        specs.mapping(raw, path, ROBOT_ENTRY_KEYS)
+        for key in ("name", "urdf"):
+            if key not in raw:
+                raise specs.SpecError(f"{path}.{key}", "missing (a robot is a name and a URDF file)")
+        fields = specs.validate_body_fields({key: raw[key] for key in ("name", "position", "rpy", "quaternion")
+                                             if key in raw}, path)
+        entry = {"name": fields["name"], "urdf": raw["urdf"]}
+        for key in ("fixed_base", "self_collide"):
+            if raw.get(key) is not None:
+                entry[key] = specs.boolean(raw[key], f"{path}.{key}")
+        positions = raw.get("joint_positions") or {}
+        if not isinstance(positions, dict):
+            raise specs.SpecError(f"{path}.joint_positions", "expected a mapping {joint: rad or m}")
+        entry["joint_positions"] = {str(joint): specs.number(value, f"{path}.joint_positions.{joint}",
+                                                             -specs.MAX_COORDINATE, specs.MAX_COORDINATE)
+                                    for joint, value in positions.items()}
+        if not isinstance(raw["urdf"], str) or not raw["urdf"]:
+            raise specs.SpecError(f"{path}.urdf", "expected a file name")
+        file = resolve_mesh(raw["urdf"], base, directories, f"{path}.urdf")
+        try:
+            model = robot_model(file, entry["name"], fields.get("position", [0.0, 0.0, 0.0]),
+                                fields.get("rpy", [0.0, 0.0, 0.0]), entry.get("fixed_base"),
+                                entry.get("self_collide", False), entry["joint_positions"],
+                                label=f"{path}.urdf: {file}", quaternion=fields.get("quaternion"))
+        except UrdfError as error:
+            raise specs.SpecError("", str(error)) from None
+        for body in model.bodies:
+            if body["name"] in owners:
+                raise specs.SpecError(f"{path}.name", f"its link body {body['name']!r} is {owners[body['name']]}")
+            owners[body["name"]] = f"a link of the robot {entry['name']}"
+        entry.update({key: fields[key] for key in ("position", "rpy", "quaternion") if key in fields})
+        robots.append((entry, model))
+    return robots
 
 
 def validate_joints(scene, owners):
@@ -350,7 +396,7 @@ def load_world(path_or_dict, max_bodies=None, directories=None, frames=DEFAULT_F
     frame names (parameters.Frames), which no body or sensor may take."""
     scene, label, base = read_scene(path_or_dict)
     try:
-        settings, ground, playground, bodies, vehicles, joints, sensor_specs = validate_scene(
+        settings, ground, playground, bodies, vehicles, robots, joints, sensor_specs = validate_scene(
             scene, base, max_bodies, directories, frames)
     except specs.SpecError as error:
         raise SceneError(f"{label}: {error}", error) from None
@@ -367,6 +413,14 @@ def load_world(path_or_dict, max_bodies=None, directories=None, frames=DEFAULT_F
         if dropped:
             log.warning("%s: playground mesh %s: dropped %d degenerate triangles", label,
                         spec["mesh"], dropped)
+    from .urdf_import import add_robot  # (urdf_import reads meshes through this module)
+    for k, (entry, model) in enumerate(robots):
+        try:
+            add_robot(world, model)
+        except ValueError as error:
+            raise SceneError(f"{label}: robots[{k}]: {error}") from None
+        world.robot_specs.append({**entry, "bodies": [b["name"] for b in model.bodies],
+                                  "joints": [j["name"] for j in model.joints]})
     for key, entries, add in (("bodies", bodies, world.add_body), ("vehicles", vehicles, world.add_vehicle),
                               ("joints", joints, world.add_joint)):
         for k, entry in enumerate(entries):
@@ -391,6 +445,25 @@ def packaged_mesh_name(path):
     return PACKAGE_MESHES + name if shared is not None and shared.resolve() == Path(path).resolve() else str(path)
 
 
+def saved_robots(world):
+    """The world's URDF robots as scene entries (the root where it stands now, each joint's
+    position; link velocities are not kept), and the names of the bodies and joints they hold.
+    A robot one of whose bodies is gone is saved as its remaining bodies and joints."""
+    present, joints = set(world.body_names()), set(world.joint_names())
+    entries, parts = [], set()
+    for spec in world.robot_specs:
+        if not (set(spec["bodies"]) <= present and set(spec["joints"]) <= joints):
+            continue
+        root = world.body(spec["bodies"][0])
+        prefix = spec["name"] + "."
+        entry = {key: spec[key] for key in ("name", "urdf", "fixed_base", "self_collide") if key in spec}
+        entry.update(position=root["position"], quaternion=root["quaternion"],
+                     joint_positions={name[len(prefix):]: world.joint(name)["position"] for name in spec["joints"]})
+        entries.append(entry)
+        parts |= set(spec["bodies"]) | set(spec["joints"])
+    return entries, parts
+
+
 def save_world(world, path):
     """Writes the world as a scene file that load_world turns back into the same world."""
     Path(path).write_text(yaml.safe_dump(world_to_scene(world), sort_keys=False), encoding="utf-8")
@@ -407,10 +480,14 @@ def world_to_scene(world):
     if world.playground_spec is not None:
         scene["playground"] = {**world.playground_spec,
                                "mesh": packaged_mesh_name(world.playground_spec["mesh"])}
-    scene["bodies"] = [world.body(name) for name in world.body_names() if name not in vehicles]
+    robots, robot_parts = saved_robots(world)
+    scene["bodies"] = [world.body(name) for name in world.body_names()
+                       if name not in vehicles and name not in robot_parts]
     scene["vehicles"] = [world.vehicle(name) for name in vehicles]
+    if robots:
+        scene["robots"] = robots
     joints = [{key: value for key, value in world.joint(name).items() if key not in ("velocity", "effort")}
-              for name in world.joint_names()]
+              for name in world.joint_names() if name not in robot_parts]
     if joints:
         scene["joints"] = joints
     present = set(world.body_names())

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from .physics import specs
-from .physics.math3d import matrix_to_quaternion, quaternions_to_matrices, rpy_to_quat
+from .physics.math3d import axis_rotation, matrix_to_quaternion, quaternions_to_matrices, rpy_to_quat
 from .physics.shapes.convex import MAX_HULL_POINTS
 from .scene import read_mesh
 
@@ -184,11 +184,13 @@ def combine_inertials(inertials):
 
 
 def robot_model(source, name, position=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), fixed_base=None,
-                self_collide=False, label=None):
-    """The RobotModel of a URDF file or text, its root link placed at `position`/`rpy`.
+                self_collide=False, joint_positions=None, label=None, quaternion=None):
+    """The RobotModel of a URDF file or text, its root link placed at `position` and `rpy` (or
+    `quaternion`, x y z w, when given).
     `fixed_base`: the root is fixed to the world (None: when the root's body, with the links
     lumped into it, has no mass). `self_collide`: its links collide with each other (off, as
-    PyBullet and Gazebo load URDF robots)."""
+    PyBullet and Gazebo load URDF robots). `joint_positions`: {joint: rad or m} for joints not
+    at 0 (the links placed accordingly, each joint's coordinate that value)."""
     label = label or (str(source) if not str(source).lstrip().startswith("<") else "URDF text")
     text, folder = read_description(source, label)
     robot = parse(text, label)
@@ -214,12 +216,19 @@ def robot_model(source, name, position=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), fix
         raise UrdfError(f"{label}: {'no root link (a loop)' if not roots else f'{len(roots)} root links {roots}'}: "
                         "a robot is one tree of links")
     root = roots[0]
-    # Link poses in the world with every joint at 0, and the body each link is lumped into.
-    base = pose_matrix(position, quaternions_to_matrices(rpy_to_quat(rpy)[None])[0])
+    joint_positions = dict(joint_positions or {})
+    movable = {joint.name for joint in robot.joints if joint.type != "fixed"}
+    for joint in sorted(set(joint_positions) - movable):
+        raise UrdfError(f"{label}: joint_positions: no revolute, continuous or prismatic joint named {joint!r}")
+    # Link poses in the world with the joints at their positions, and the body each link is
+    # lumped into.
+    turn = np.asarray(quaternion, dtype=np.float64) if quaternion is not None else rpy_to_quat(rpy)
+    base = pose_matrix(position, quaternions_to_matrices(turn[None])[0])
     world_pose, body_of, order = {root: base}, {root: root}, [root]
     for link in order:  # breadth first: parents before children
         for joint in children.get(link, []):
-            world_pose[joint.child] = world_pose[link] @ origin(joint)
+            world_pose[joint.child] = (world_pose[link] @ origin(joint)
+                                       @ joint_motion(joint, joint_positions.get(joint.name, 0.0), label))
             body_of[joint.child] = body_of[link] if joint.type == "fixed" else joint.child
             order.append(joint.child)
     if len(order) != len(links):  # cannot happen for a tree with one root; kept as a check
@@ -264,10 +273,14 @@ def robot_model(source, name, position=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), fix
         axis = np.asarray(joint.axis if joint.axis is not None else (1.0, 0.0, 0.0), dtype=np.float64)
         if not np.linalg.norm(axis) > 0.0:
             raise UrdfError(f"{label}: joint {joint.name!r}: its axis has no length")
+        axis = frame[:3, :3] @ axis / np.linalg.norm(axis)
+        moved = float(joint_positions.get(joint.name, 0.0))
+        # The child's anchor: where the joint's origin went (along the axis for a prismatic).
+        anchor = frame[:3, 3] + (moved * axis if joint.type == "prismatic" else 0.0)
         spec = {"name": f"{name}.{joint.name}", "type": JOINT_TYPES[joint.type],
                 "parent": body_name(name, body_of[joint.parent], label),
-                "child": body_name(name, link, label), "anchor": frame[:3, 3].tolist(),
-                "axis": (frame[:3, :3] @ axis / np.linalg.norm(axis)).tolist()}
+                "child": body_name(name, link, label), "anchor": anchor.tolist(),
+                "axis": axis.tolist(), "position": moved}
         limit = joint.limit
         if limit is not None and joint.type != "continuous":
             for key in ("lower", "upper"):
@@ -285,6 +298,24 @@ def robot_model(source, name, position=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), fix
         except specs.SpecError as error:
             raise UrdfError(f"{label}: {error}") from None
     return RobotModel(body_specs, joint_specs, link_frames, text, bool(self_collide))
+
+
+def joint_motion(joint, value, label):
+    """The transform a joint at `value` adds after its origin: a turn about its axis (revolute,
+    continuous) or a slide along it (prismatic)."""
+    if value == 0.0 or joint.type == "fixed":
+        return np.eye(4)
+    axis = np.asarray(joint.axis if joint.axis is not None else (1.0, 0.0, 0.0), dtype=np.float64)
+    length = np.linalg.norm(axis)
+    if not length > 0.0:
+        raise UrdfError(f"{label}: joint {joint.name!r}: its axis has no length")
+    axis = axis / length
+    motion = np.eye(4)
+    if joint.type == "prismatic":
+        motion[:3, 3] = value * axis
+    else:
+        motion[:3, :3] = axis_rotation(axis, value)
+    return motion
 
 
 def body_name(robot, link, label):

@@ -49,6 +49,12 @@ def quaternions_to_matrices(q):
     ], -2)
 
 
+def axis_rotation(axis, angle):
+    """The rotation matrix by `angle` about the unit `axis` (Rodrigues)."""
+    k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+    return np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * k @ k
+
+
 def rpy_to_quat(rpy):
     """Roll, pitch, yaw (fixed axes X, Y, Z; REP-103) to an (x, y, z, w) quaternion."""
     r, p, y = (0.5 * float(a) for a in rpy)

@@ -22,7 +22,8 @@ from .freezing import wake_body
 from .jit_cache import compile_once
 from .joint_registry import JointRegistry
 from .joints import ANCHOR, EFFORT, FRAME, POSITION, SPEED, WORLD_SIDE, measure_joints
-from .math3d import matrix_to_quaternion, quat_to_matrix, quaternions_to_matrices, rpy_to_quat
+from .math3d import (axis_rotation, matrix_to_quaternion, quat_to_matrix, quaternions_to_matrices,
+                     rpy_to_quat)
 from .pipeline import (DONE, GROW_CONTACTS, GROW_INDEX, GROW_PAIRS, STAGES, STAT_FROZEN,
                        STAT_PAIRS, STAT_POINTS, STAT_TRIANGLES, STAT_WOKEN, resting_steps,
                        step_world)
@@ -127,6 +128,9 @@ class World(WorldQueries):
         # The scene's validated `sensors` entries: not physics (vplayground_ros.sensors samples
         # them through cast_rays), but part of the scene, kept and saved with it.
         self.sensor_specs = []
+        # The scene's `robots` (URDF robots, vplayground_ros.urdf_import), likewise: each entry
+        # as validated, with the names of the bodies and joints it made.
+        self.robot_specs = []
         self._centre = np.zeros(3)  # world_centre(), kept with the playground
         self.stats = {"woken": 0, "frozen": 0, "pairs": 0, "points": 0, "triangles": 0}
         self.profiling = False  # time every stage of the step (bench/), at ~6 us a step
@@ -802,12 +806,6 @@ class World(WorldQueries):
             new[:len(old)] = old
         index_manifolds(kept)
         self._contacts = grown
-
-
-def axis_rotation(axis, angle):
-    """The rotation by `angle` about the unit `axis` (Rodrigues)."""
-    k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
-    return np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * k @ k
 
 
 def joint_frame(axis):
