@@ -371,3 +371,69 @@ def test_scene_joint_errors_name_the_key(joints, message):
     from vplayground_ros.scene import SceneError, load_world
     with pytest.raises(SceneError, match=re.escape(message)):
         load_world({**CHAIN_SCENE, "joints": joints})
+
+
+def test_a_door_on_two_hinges_swings():
+    """Two hinges on one axis: five of their ten rows repeat the others (a redundant K)."""
+    world = World(UNFROZEN, ground=None)
+    world.add_body({"name": "door", "size": [0.05, 0.9, 2.0], "mass": 20.0, "position": [0, 0.45, 2.0]})
+    for z in (1.2, 2.8):
+        world.add_joint({"type": "revolute", "child": "door", "anchor": [0, 0, z], "axis": [0, 0, 1]})
+    world.apply_impulse("door", [10.0, 0, 0])
+    world.step(2 * RATE)
+    door = world.body("door")
+    assert np.all(np.isfinite(door["position"]))
+    assert door["position"][2] == pytest.approx(2.0, abs=1e-3)  # held up by its hinges
+    assert math.hypot(door["position"][0], door["position"][1]) == pytest.approx(0.45, abs=1e-3)
+    assert abs(door["angular_velocity"][2]) > 0.1  # and swinging about them
+
+
+def test_two_fixed_joints_between_the_same_bodies_hold():
+    world = World(UNFROZEN, ground=None)
+    world.add_body({"name": "a", "position": [0, 0, 3], "immovable": True})
+    world.add_body({"name": "b", "position": [1, 0, 3]})
+    world.add_joint({"type": "fixed", "parent": "a", "child": "b"})
+    world.add_joint({"type": "fixed", "parent": "a", "child": "b", "anchor": [0.5, 0, 3]})
+    world.step(RATE)
+    assert world.body("b")["position"] == pytest.approx([1, 0, 3], abs=1e-6)
+
+
+def test_a_long_chain_solved_whole_hangs_still():
+    world = World(UNFROZEN, ground=None)
+    for k in range(24):
+        world.add_body({"name": f"l{k}", "size": [0.05, 0.05, 0.2], "mass": 1.0, "position": [0, 0, 10 - 0.1 - 0.2 * k]})
+        world.add_joint({"type": "revolute", "parent": f"l{k - 1}" if k else None, "child": f"l{k}",
+                         "anchor": [0, 0, 10 - 0.2 * k], "axis": [1, 0, 0]})
+    start = world.state()["positions"].copy()
+    world.step(2 * RATE)
+    assert np.abs(world.state()["positions"] - start).max() < 1e-3
+
+
+def test_editing_a_jointed_compound_keeps_its_joint_on_its_frame():
+    world = World(UNFROZEN, ground=None)
+    world.add_body({"name": "c", "shape": "compound", "position": [0, 0, 2], "parts": [{"size": [0.2, 0.2, 0.2]}]})
+    world.add_joint({"name": "pin", "type": "revolute", "child": "c", "anchor": [0, 0, 2], "axis": [0, 1, 0]})
+    world.edit_body("c", parts=[{"size": [0.2, 0.2, 0.2]}, {"size": [0.2, 0.2, 0.2], "position": [1, 0, 0]}])
+    assert world.joint("pin")["anchor"] == pytest.approx([0, 0, 2], abs=1e-12)
+    world.step(RATE // 2)
+    assert world.body("c")["position"] == pytest.approx([0, 0, 2], abs=1e-3)  # it turns about its pin
+
+
+def test_infinite_limits_only_where_they_mean_none():
+    world = World()
+    world.add_body({"name": "a", "position": [0, 0, 1]})
+    with pytest.raises(SpecError, match="joint.lower: must be finite"):
+        world.add_joint({"type": "revolute", "child": "a", "lower": math.inf})
+    with pytest.raises(SpecError, match="joint.upper: a fixed joint has no limits"):
+        world.add_joint({"type": "fixed", "child": "a", "upper": -math.inf})
+    world.add_joint({"type": "revolute", "child": "a", "lower": -math.inf, "upper": math.inf})
+
+
+def test_a_saved_fixed_joint_loads_again():
+    from vplayground_ros.scene import load_world, world_to_scene
+    world = load_world({"version": 1, "bodies": [{"name": "a", "position": [0, 0, 1]},
+                                                 {"name": "b", "position": [1, 0, 1]}],
+                        "joints": [{"name": "weld", "type": "fixed", "parent": "a", "child": "b"}]})
+    scene = world_to_scene(world)
+    assert "position" not in scene["joints"][0]
+    assert load_world(scene).joint_names() == ["weld"]

@@ -110,6 +110,15 @@ def test_bad_inertials_are_refused(inertial, message):
         World().add_body({"shape": "compound", "parts": [{}], "inertial": inertial})
 
 
+def test_editing_an_inertial_changes_the_mass():
+    world = World()
+    inertial = {"mass": 1.0, "centre": [0, 0, 0], "inertia": (0.1 * np.eye(3)).tolist()}
+    world.add_body({"name": "b", "shape": "compound", "parts": [{}], "inertial": inertial})
+    world.edit_body("b", inertial={**inertial, "mass": 5.0, "inertia": (0.5 * np.eye(3)).tolist()})
+    assert world.body("b")["mass"] == 5.0
+    np.testing.assert_allclose(world._bodies.inv_inertia[world._slots["b"]], 2.0 * np.eye(3), rtol=1e-12)
+
+
 def test_inertial_is_a_compounds_and_excludes_a_mass():
     with pytest.raises(SpecError, match="a box has no inertial"):
         World().add_body({"inertial": {"mass": 1, "centre": [0, 0, 0], "inertia": np.eye(3).tolist()}})

@@ -367,6 +367,7 @@ def validate_robots(scene, base, directories, owners):
                 raise specs.SpecError(f"{path}.name", f"its link body {body['name']!r} is {owners[body['name']]}")
             owners[body["name"]] = f"a link of the robot {entry['name']}"
         entry.update({key: fields[key] for key in ("position", "rpy", "quaternion") if key in fields})
+        entry["urdf"] = str(file)  # found once: a scene saved elsewhere must still find it
         robots.append((entry, model))
     return robots
 
@@ -445,6 +446,13 @@ def packaged_mesh_name(path):
     return PACKAGE_MESHES + name if shared is not None and shared.resolve() == Path(path).resolve() else str(path)
 
 
+def joint_spec(joint):
+    """A joint as a scene holds it: World.joint's keys but its state (a fixed joint has no
+    position)."""
+    dropped = ("velocity", "effort") + (("position",) if joint["type"] == "fixed" else ())
+    return {key: value for key, value in joint.items() if key not in dropped}
+
+
 def saved_robots(world):
     """The world's URDF robots as scene entries (the root where it stands now, each joint's
     position; link velocities are not kept), and the names of the bodies and joints they hold.
@@ -486,8 +494,7 @@ def world_to_scene(world):
     scene["vehicles"] = [world.vehicle(name) for name in vehicles]
     if robots:
         scene["robots"] = robots
-    joints = [{key: value for key, value in world.joint(name).items() if key not in ("velocity", "effort")}
-              for name in world.joint_names() if name not in robot_parts]
+    joints = [joint_spec(world.joint(name)) for name in world.joint_names() if name not in robot_parts]
     if joints:
         scene["joints"] = joints
     present = set(world.body_names())

@@ -247,6 +247,12 @@ def robot_model(source, name, position=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), fix
                                        pose[:3, :3] @ tensor @ pose[:3, :3].T))
     # A root body without mass (PyBullet's and Gazebo's way of fixing a robot) is fixed.
     fixed = not bodies[root]["inertials"] if fixed_base is None else fixed_base
+    named = {}
+    for owner in bodies:
+        other = named.setdefault(body_name(name, owner, label), owner)
+        if other != owner:
+            raise UrdfError(f"{label}: links {other!r} and {owner!r} both make the body "
+                            f"{body_name(name, owner, label)!r}")
     body_specs = []
     for owner, entry in bodies.items():
         if not entry["parts"]:
@@ -277,7 +283,7 @@ def robot_model(source, name, position=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), fix
         moved = float(joint_positions.get(joint.name, 0.0))
         # The child's anchor: where the joint's origin went (along the axis for a prismatic).
         anchor = frame[:3, 3] + (moved * axis if joint.type == "prismatic" else 0.0)
-        spec = {"name": f"{name}.{joint.name}", "type": JOINT_TYPES[joint.type],
+        spec = {"name": entity_name(name, joint.name, "joint", label), "type": JOINT_TYPES[joint.type],
                 "parent": body_name(name, body_of[joint.parent], label),
                 "child": body_name(name, link, label), "anchor": anchor.tolist(),
                 "axis": axis.tolist(), "position": moved}
@@ -319,9 +325,14 @@ def joint_motion(joint, value, label):
 
 
 def body_name(robot, link, label):
-    name = f"{robot}.{re.sub(r'[^A-Za-z0-9_.-]', '_', link)}"
+    return entity_name(robot, link, "link", label)
+
+
+def entity_name(robot, element, kind, label):
+    """`<robot>.<element>`, the element's characters a name may not have as '_'."""
+    name = f"{robot}.{re.sub(r'[^A-Za-z0-9_.-]', '_', element)}"
     if not specs.NAME_PATTERN.fullmatch(name):
-        raise UrdfError(f"{label}: link {link!r}: the body name {name!r} is longer than 64 characters "
+        raise UrdfError(f"{label}: {kind} {element!r}: the name {name!r} is longer than 64 characters "
                         "(give the robot a shorter name)")
     return name
 

@@ -85,6 +85,15 @@ class JointRegistry:
         for row in sorted(gone, reverse=True):
             del self._specs[self._names.pop(row)]
 
+    def shift_anchors(self, slot, offset):
+        """Moves the anchors on body `slot` by `offset` (its axes): they are kept from its centre
+        of mass, which an edit of a compound's parts moves on its frame."""
+        a = self.arrays
+        for row in range(len(self._names)):
+            for side, end in ((0, BODY_A), (1, BODY_B)):
+                if a.links[row, end] == slot:
+                    a.frames[row, side, ANCHOR:ANCHOR + 3] += offset
+
     def holding(self, slots):
         """The joints that hold any of the body slots."""
         slots = set(int(slot) for slot in slots)

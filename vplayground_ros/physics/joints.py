@@ -52,9 +52,13 @@ EQUALITY_ROWS, JOINT_ROWS = 6, 9
 # would fight the other rows' sweeps and ring; a fifth settles in ~25 steps (0.2 s at 128/s).
 POSITION_MOTOR_RATE = 0.2
 
-# Islands of up to this many joints have their equality rows solved as one (a K of up to 96 x 96);
-# larger ones joint by joint.
-MAX_DIRECT_JOINTS = 16
+# Islands of up to this many joints have their equality rows solved as one (a K of up to 192 x
+# 192, ~1 ms to factor); larger ones joint by joint, which holds chains of up to 16 joints only
+# (a 17-link chain hanging still came apart: sequential blocks and full drift correction).
+MAX_DIRECT_JOINTS = 32
+
+# A pivot of K's factor this small against its diagonal is a redundant row's.
+REDUNDANT_PIVOT = 1.0e-9
 # An island of m joints keeps (6m)^2 floats of K's factor, 3m x 6m of its bounded rows'
 # responses and 3m x 2m x 6 of their velocity changes: at most this many a joint.
 ISLAND_FLOATS = 36 + 18 + 36
@@ -513,10 +517,19 @@ def factor_island(joints, island):
                         value = shared_response(joints, j, r, k, c)
                     factor[(EQUALITY_ROWS * p + r) * n + EQUALITY_ROWS * q + c] = value
     for col in range(n):
-        diagonal = factor[col * n + col]
+        original = factor[col * n + col]
+        diagonal = original
         for k in range(col):
             diagonal -= factor[col * n + k] * factor[col * n + k]
-        diagonal = np.sqrt(max(diagonal, 1.0e-300))
+        if diagonal <= REDUNDANT_PIVOT * original:
+            # A redundant row (two hinges of one door on one axis, two fixed joints between the
+            # same bodies): the others already hold what it would. An infinite pivot makes the
+            # solve give it no impulse; the rest factor as without it.
+            factor[col * n + col] = np.inf
+            for row in range(col + 1, n):
+                factor[row * n + col] = 0.0
+            continue
+        diagonal = np.sqrt(diagonal)
         factor[col * n + col] = diagonal
         for row in range(col + 1, n):
             value = factor[row * n + col]
@@ -632,7 +645,10 @@ def bounded_responses(joints, island, rows):
             for r in range(n):
                 w[r] = -w[r]
                 response += u[r] * w[r]
-            joints.row_values[j, row, ROW_MASS] = 1.0 / response if response > 1.0e-12 else 0.0
+            if not response > 1.0e-12:  # the equalities leave it no motion: not solved
+                joints.row_values[j, row, ROW_MASS] = joints.row_values[j, row, IMPULSE] = 0.0
+                continue
+            joints.row_values[j, row, ROW_MASS] = 1.0 / response
             # What a unit impulse of the row, with its equality responses, does to each moving
             # body of the island (its row's own sides and every equality row's).
             change = body_changes(joints, island, p, which)

@@ -549,7 +549,7 @@ def validate_joint_edit(raw, path, joint_type, current):
     for key in ("lower", "upper"):
         if key in raw:
             value = raw[key]
-            if value in (math.inf, -math.inf):  # no limit (how a saved scene writes none)
+            if value == (-math.inf if key == "lower" else math.inf):  # none (as a scene saves it)
                 out[key] = float(value)
                 continue
             if joint_type not in ("revolute", "prismatic"):

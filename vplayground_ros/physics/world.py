@@ -277,7 +277,9 @@ class World(WorldQueries):
         solid = (shapes.solid(shape.name, {**shape.fields, **body}, name, body.get("density", specs.DEFAULT_DENSITY))
                  if resized else self._solids[slot][1])
         b = self._bodies
-        if "mass" in body or "density" in body:
+        if "inertial" in body:  # a compound's mass properties as given, its mass with them
+            mass = specs.mass_properties(solid, body["inertial"]["mass"], specs.child(name, "inertial"))
+        elif "mass" in body or "density" in body:
             mass = body["mass"] if "mass" in body else body["density"] * solid.volume
             if name in self._vehicles and mass <= self._wheels_mass(name):
                 raise ValueError(f"{name}.mass: a car weighs its chassis and its wheels "
@@ -294,7 +296,10 @@ class World(WorldQueries):
         if "quaternion" in body:
             b.orientation[slot] = body["quaternion"]
         if resized:
+            old = self._solids[slot][1].compound
             self._set_solid(slot, shape.name, solid)
+            if old is not None:  # the joints' anchors stay where they were on the body's frame
+                self._joints.shift_anchors(slot, np.asarray(old.centre) - np.asarray(solid.compound.centre))
         if "position" in body or solid.compound is not None:
             b.position[slot] = self._centre_of_mass(slot, frame)
         self._set_fields(slot, body, mass)
@@ -404,8 +409,9 @@ class World(WorldQueries):
         """The joint as it is now: its spec with `anchor` (the child's anchor) and `axis` (the
         parent's) in the world now, `position` (rad, turns counted, or m; what the spec gave
         where it was made), `velocity` (rad/s or m/s) and `effort` (N m or N its motor and
-        limits applied along the axis in the last step). add_joint(joint(name)) between the
-        same bodies as they are makes the same joint."""
+        limits applied along the axis in the last step). Its spec keys (without velocity and
+        effort, and position for a fixed joint) make the same joint again between the same
+        bodies as they are."""
         row = self._joints.row(name)
         arrays = self._joints.arrays
         measure_joints(self._bodies, arrays)
