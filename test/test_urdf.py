@@ -261,3 +261,21 @@ def test_scene_robot_errors_name_the_entry(robot, message):
         return
     with pytest.raises(SceneError, match=re.escape(message)):
         load_world(robot_scene(**robot))
+
+
+def test_a_sensor_rides_on_a_robot_link():
+    """An IMU on the KUKA's last link, the arm held by its motors at a pose: at rest it reads
+    gravity's reaction along the link's axes."""
+    from vplayground_ros.scene import load_world
+    from vplayground_ros.sensors import Sensors
+    scene = robot_scene()
+    scene["sensors"] = [{"name": "wrist_imu", "type": "imu", "parent": "kuka.lbr_iiwa_link_7", "rate": 50}]
+    world = load_world(scene)
+    for joint in world.joint_names():
+        world.edit_joint(joint, motor={"mode": "position", "target": 0.0})
+    sensors = Sensors()
+    world.step(RATE)
+    world.step(sensors.steps_until_due(world))
+    reading = {s.name: r for s, r in sensors.sample(world)}["wrist_imu"]
+    # Upright at every joint 0, the last link's z is up: +g along it.
+    assert reading["linear_acceleration"] == pytest.approx([0.0, 0.0, 9.81], abs=0.05)
