@@ -39,6 +39,21 @@ def integrate_orientation(q, omega, dt):
     q[0], q[1], q[2], q[3] = nx * inv, ny * inv, nz * inv, nw * inv
 
 
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
+def body_frame_ray(origin, direction, geometry, j):
+    """A world ray (origin, direction) in frame j of `geometry` (its position (N, 3) and
+    rotation (N, 3, 3) arrays: bodies, or a compound's parts), as tuples."""
+    p, r = geometry.position, geometry.rotation
+    v = (origin[0] - p[j, 0], origin[1] - p[j, 1], origin[2] - p[j, 2])
+    o = (v[0] * r[j, 0, 0] + v[1] * r[j, 1, 0] + v[2] * r[j, 2, 0],
+         v[0] * r[j, 0, 1] + v[1] * r[j, 1, 1] + v[2] * r[j, 2, 1],
+         v[0] * r[j, 0, 2] + v[1] * r[j, 1, 2] + v[2] * r[j, 2, 2])
+    d = (direction[0] * r[j, 0, 0] + direction[1] * r[j, 1, 0] + direction[2] * r[j, 2, 0],
+         direction[0] * r[j, 0, 1] + direction[1] * r[j, 1, 1] + direction[2] * r[j, 2, 1],
+         direction[0] * r[j, 0, 2] + direction[1] * r[j, 1, 2] + direction[2] * r[j, 2, 2])
+    return o, d
+
+
 def quaternions_to_matrices(q):
     """(N, 4) xyzw -> (N, 3, 3), vectorised (the compiled kernels use quat_to_matrix)."""
     x, y, z, w = q[:, 0], q[:, 1], q[:, 2], q[:, 3]

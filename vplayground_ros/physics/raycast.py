@@ -8,6 +8,7 @@ from numba import njit
 from . import shapes
 from .broad_phase import cell_box, object_level, query_index
 from .ids import GROUND, PLAYGROUND
+from .math3d import body_frame_ray
 
 NO_HIT = np.inf
 
@@ -35,19 +36,6 @@ def ray_body_without_hull(origin, direction, reach, geometry, j):
     o, d = body_frame_ray(origin, direction, geometry, j)
     dims = (geometry.dimensions[j, 0], geometry.dimensions[j, 1], geometry.dimensions[j, 2])
     return world_normal(shapes.ray_without_hull(geometry.shape[j], dims, o, d, reach), geometry.rotation, j)
-
-
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
-def body_frame_ray(origin, direction, geometry, j):
-    p, r = geometry.position, geometry.rotation
-    v = (origin[0] - p[j, 0], origin[1] - p[j, 1], origin[2] - p[j, 2])
-    o = (v[0] * r[j, 0, 0] + v[1] * r[j, 1, 0] + v[2] * r[j, 2, 0],
-         v[0] * r[j, 0, 1] + v[1] * r[j, 1, 1] + v[2] * r[j, 2, 1],
-         v[0] * r[j, 0, 2] + v[1] * r[j, 1, 2] + v[2] * r[j, 2, 2])
-    d = (direction[0] * r[j, 0, 0] + direction[1] * r[j, 1, 0] + direction[2] * r[j, 2, 0],
-         direction[0] * r[j, 0, 1] + direction[1] * r[j, 1, 1] + direction[2] * r[j, 2, 1],
-         direction[0] * r[j, 0, 2] + direction[1] * r[j, 1, 2] + direction[2] * r[j, 2, 2])
-    return o, d
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")

@@ -16,7 +16,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from ..math3d import quat_to_matrix
+from ..math3d import body_frame_ray, quat_to_matrix
 from .geometry import NO_HIT
 
 from . import box, capsule, compound, convex, cylinder, sphere
@@ -136,15 +136,9 @@ def part_ray(kind, dims, hulls, h, o, d, reach):
 def compound_ray(hulls, parts, h, o, d, reach):
     """ray() of compound body h: each part asked in its own frame, the nearest hit kept."""
     best, normal = NO_HIT, (0.0, 0.0, 0.0)
-    q, t = parts.position, parts.rotation
+    t = parts.rotation
     for k in range(parts.start[h], parts.start[h] + parts.count[h]):
-        v = (o[0] - q[k, 0], o[1] - q[k, 1], o[2] - q[k, 2])
-        local_o = (v[0] * t[k, 0, 0] + v[1] * t[k, 1, 0] + v[2] * t[k, 2, 0],
-                   v[0] * t[k, 0, 1] + v[1] * t[k, 1, 1] + v[2] * t[k, 2, 1],
-                   v[0] * t[k, 0, 2] + v[1] * t[k, 1, 2] + v[2] * t[k, 2, 2])
-        local_d = (d[0] * t[k, 0, 0] + d[1] * t[k, 1, 0] + d[2] * t[k, 2, 0],
-                   d[0] * t[k, 0, 1] + d[1] * t[k, 1, 1] + d[2] * t[k, 2, 1],
-                   d[0] * t[k, 0, 2] + d[1] * t[k, 1, 2] + d[2] * t[k, 2, 2])
+        local_o, local_d = body_frame_ray(o, d, parts, k)
         dims = (parts.dimensions[k, 0], parts.dimensions[k, 1], parts.dimensions[k, 2])
         hit, n = part_ray(parts.shape[k], dims, hulls, parts.hull[k], local_o, local_d, min(best, reach))
         if hit < best:
