@@ -8,11 +8,10 @@ when it is edited itself (those two are the World's job, between steps).
 Bodies a joint holds together freeze and wake as one (a robot standing still sleeps whole; a
 link knocked wakes its robot): a jointed body freezes only with every moving body of its group.
 """
-import numpy as np
 from numba import njit
 
 from .constants import WAKE_SPEED_FACTOR
-from .joints import BODY_A, BODY_B, find_root
+from .joints import BODY_A, BODY_B, ISLAND_BODIES, ISLAND_BODY_START
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True)
@@ -101,29 +100,22 @@ def wake_joint_groups(bodies, joints):
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def freeze_joint_groups(bodies, joints, time_to_freeze):
-    """Freezes the groups of jointed moving bodies (immovable ones and the world hold, not
-    join) whose every member has been slow for time_to_freeze (update_freezing keeps their
-    timers). Returns how many bodies froze."""
-    count = joints.count[0]
-    if count == 0:
-        return 0
-    parent = np.arange(len(bodies.active))
-    for j in range(count):
-        a, b = joints.links[j, BODY_A], joints.links[j, BODY_B]
-        if a >= 0 and b >= 0 and not bodies.immovable[a] and not bodies.immovable[b]:
-            parent[find_root(parent, a)] = find_root(parent, b)
-    ready = np.ones(len(bodies.active), np.bool_)
-    for j in range(count):
-        for body in (joints.links[j, BODY_A], joints.links[j, BODY_B]):
-            if body >= 0 and not bodies.immovable[body]:
-                if not (bodies.awake[body] and bodies.freeze_timer[body] >= time_to_freeze):
-                    ready[find_root(parent, body)] = False
+    """Freezes the islands of jointed moving bodies (grouped by this step's prepare_joints:
+    immovable ones and the world hold, not join) whose every body has been slow for
+    time_to_freeze (update_freezing keeps their timers). Returns how many bodies froze."""
+    start, members = joints.islands[ISLAND_BODY_START], joints.islands[ISLAND_BODIES]
     frozen = 0
-    for j in range(count):
-        for body in (joints.links[j, BODY_A], joints.links[j, BODY_B]):
-            if body >= 0 and bodies.awake[body] and ready[find_root(parent, body)]:
-                bodies.frozen[body] = True
-                bodies.awake[body] = False
-                bodies.velocity[body, :] = 0.0
-                frozen += 1
+    for island in range(joints.count[1]):
+        ready = True
+        for place in range(start[island], start[island + 1]):
+            body = members[place]
+            ready = ready and bodies.awake[body] and bodies.freeze_timer[body] >= time_to_freeze
+        if not ready:
+            continue
+        for place in range(start[island], start[island + 1]):
+            body = members[place]
+            bodies.frozen[body] = True
+            bodies.awake[body] = False
+            bodies.velocity[body, :] = 0.0
+            frozen += 1
     return frozen
