@@ -169,6 +169,25 @@ def test_position_motor_holds_an_arm_level():
     assert joint["effort"] == pytest.approx(2.0 * G * 0.5 * math.cos(0.3), rel=0.01)
 
 
+def test_position_motor_target_moves_at_its_velocity():
+    """A position motor's `velocity` moves its target between commands: an arm follows a ramp
+    of 0.4 rad/s given once, in batches of steps, without the lag a fixed target would give."""
+    world = World(UNFROZEN, ground=None)
+    world.add_body({"name": "arm", "size": [1.0, 0.05, 0.05], "mass": 2.0, "position": [0.5, 0, 2]})
+    world.add_joint({"name": "shoulder", "type": "revolute", "child": "arm", "anchor": [0, 0, 2],
+                     "axis": [0, -1, 0], "motor": {"mode": "position", "target": 0.0, "velocity": 0.4,
+                                                   "max_effort": 100.0}})
+    for _ in range(RATE // 4):
+        world.step(4)
+    joint = world.joint("shoulder")
+    assert joint["motor"]["target"] == pytest.approx(0.4, abs=1e-9)
+    assert joint["position"] == pytest.approx(0.4, abs=2e-3)
+    assert joint["velocity"] == pytest.approx(0.4, abs=1e-2)
+    world.edit_joint("shoulder", motor={"velocity": 0.0})  # an edit keeps the target where it moved to
+    world.step(RATE)
+    assert world.joint("shoulder")["position"] == pytest.approx(0.4, abs=1e-3)
+
+
 def test_continuous_joint_counts_turns():
     world = World(UNFROZEN, ground=None)
     world.add_body({"name": "wheel", "shape": "cylinder", "radius": 0.3, "length": 0.1,

@@ -27,8 +27,12 @@ class JointRegistry:
         return list(self._names)
 
     def spec(self, name):
-        self.row(name)  # KeyError naming it
-        return self._specs[name]
+        """The joint's spec, its motor's target as it stands (a position motor's moves at its
+        velocity)."""
+        row = self.row(name)  # KeyError naming it
+        spec = self._specs[name]
+        spec["motor"]["target"] = float(self.arrays.values[row, MOTOR_TARGET])
+        return spec
 
     def row(self, name):
         try:
@@ -56,7 +60,7 @@ class JointRegistry:
         a.row_values[count, :, IMPULSE] = 0.0
         a.count[0] = count + 1
         self._names.append(name)
-        self._specs[name] = {**joint, "name": name}
+        self._specs[name] = {**joint, "name": name, "motor": dict(joint["motor"])}
         self.edit(name, joint)
 
     def edit(self, name, fields):

@@ -341,6 +341,9 @@ def prepare_joints(joints, bodies, dt):
                     # The velocity the target moves at, and a share of the way to it.
                     goal = (joints.values[j, FEED_FORWARD]
                             + POSITION_MOTOR_RATE * (joints.values[j, MOTOR_TARGET] - position) * inv_dt)
+                    # The target moves on at its velocity: a trajectory's feed-forward carries
+                    # it between the commands (a batch of steps between two publishes).
+                    joints.values[j, MOTOR_TARGET] += joints.values[j, FEED_FORWARD] * dt
                 goal = min(max(goal, -joints.values[j, MAX_SPEED]), joints.values[j, MAX_SPEED])
                 joints.row_values[j, MOTOR_ROW, COLLISION_TARGET] = goal
                 joints.row_values[j, MOTOR_ROW, CONTACT_TARGET] = goal
