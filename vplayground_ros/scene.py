@@ -22,12 +22,11 @@ from .physics.math3d import quaternions_to_matrices
 from .resources import find_shared
 from .robots import validate_robot, world_robots
 from .sensors import validate_sensors
+from .urdf_robots import add_robot_entry, check_against_model, validate_entry
 
 SCENE_VERSION = 1
 TOP_LEVEL_KEYS = {"version", "settings", "ground", "playground", "bodies", "vehicles", "robots",
                   "joints", "sensors"}
-ROBOT_ENTRY_KEYS = {"name", "urdf", "position", "rpy", "quaternion", "fixed_base", "self_collide",
-                    "joint_positions"}
 PLAYGROUND_KEYS = {"mesh", "position", "rpy", "scale"}
 MAX_PLAYGROUND_TRIANGLES = 500_000  # beyond this the octree and the viewer stop being real-time
 # Files are measured before they are read, so a hostile or mistaken path (a multi-gigabyte file)
@@ -329,31 +328,14 @@ def validate_scene(scene, base, max_bodies=None, directories=None, frames=DEFAUL
 
 
 def validate_robots(scene, base, directories, owners):
-    """The scene's `robots` (URDF robots): each entry checked and its description read into a
-    urdf_import.RobotModel, the file found as a mesh is; `owners` (body and vehicle names)
-    gains their bodies. Returns [(entry, model)]."""
+    """The scene's `robots` (URDF robots): each entry checked (urdf_robots.validate_entry) and
+    its description read into a urdf_import.RobotModel, the file found as a mesh is; `owners`
+    (body and vehicle names) gains their bodies. Returns [(entry, model)]."""
     from .urdf_import import UrdfError, robot_model  # (urdf_import reads meshes through this module)
     robots = []
     for k, raw in enumerate(validate_list(scene, "robots")):
         path = f"robots[{k}]"
-        specs.mapping(raw, path, ROBOT_ENTRY_KEYS)
-        for key in ("name", "urdf"):
-            if key not in raw:
-                raise specs.SpecError(f"{path}.{key}", "missing (a robot is a name and a URDF file)")
-        fields = specs.validate_body_fields({key: raw[key] for key in ("name", "position", "rpy", "quaternion")
-                                             if key in raw}, path)
-        entry = {"name": fields["name"], "urdf": raw["urdf"]}
-        for key in ("fixed_base", "self_collide"):
-            if raw.get(key) is not None:
-                entry[key] = specs.boolean(raw[key], f"{path}.{key}")
-        positions = raw.get("joint_positions") or {}
-        if not isinstance(positions, dict):
-            raise specs.SpecError(f"{path}.joint_positions", "expected a mapping {joint: rad or m}")
-        entry["joint_positions"] = {str(joint): specs.number(value, f"{path}.joint_positions.{joint}",
-                                                             -specs.MAX_COORDINATE, specs.MAX_COORDINATE)
-                                    for joint, value in positions.items()}
-        if not isinstance(raw["urdf"], str) or not raw["urdf"]:
-            raise specs.SpecError(f"{path}.urdf", "expected a file name")
+        entry, fields = validate_entry(raw, path)
         file = resolve_mesh(raw["urdf"], base, directories, f"{path}.urdf")
         try:
             model = robot_model(file, entry["name"], fields.get("position", [0.0, 0.0, 0.0]),
@@ -362,6 +344,7 @@ def validate_robots(scene, base, directories, owners):
                                 label=f"{path}.urdf: {file}", quaternion=fields.get("quaternion"))
         except UrdfError as error:
             raise specs.SpecError("", str(error)) from None
+        check_against_model(entry, model, path)
         for body in model.bodies:
             if body["name"] in owners:
                 raise specs.SpecError(f"{path}.name", f"its link body {body['name']!r} is {owners[body['name']]}")
@@ -414,15 +397,9 @@ def load_world(path_or_dict, max_bodies=None, directories=None, frames=DEFAULT_F
         if dropped:
             log.warning("%s: playground mesh %s: dropped %d degenerate triangles", label,
                         spec["mesh"], dropped)
-    from .urdf_import import add_robot  # (urdf_import reads meshes through this module)
-    for k, (entry, model) in enumerate(robots):
-        try:
-            add_robot(world, model)
-        except ValueError as error:
-            raise SceneError(f"{label}: robots[{k}]: {error}") from None
-        world.robot_specs.append({**entry, "bodies": [b["name"] for b in model.bodies],
-                                  "joints": [j["name"] for j in model.joints]})
+    # Vehicles before robots: the first of them stands in the root namespace.
     for key, entries, add in (("bodies", bodies, world.add_body), ("vehicles", vehicles, world.add_vehicle),
+                              ("robots", robots, lambda pair, path: add_robot_entry(world, *pair, path)),
                               ("joints", joints, world.add_joint)):
         for k, entry in enumerate(entries):
             try:
@@ -456,19 +433,19 @@ def joint_spec(joint):
 def saved_robots(world):
     """The world's URDF robots as scene entries (the root where it stands now, each joint's
     position; link velocities are not kept), and the names of the bodies and joints they hold.
-    A robot one of whose bodies is gone is saved as its remaining bodies and joints."""
-    present, joints = set(world.body_names()), set(world.joint_names())
+    (A robot that lost a body is no longer listed: what is left is saved as bodies and joints.)"""
     entries, parts = [], set()
     for spec in world.robot_specs:
-        if not (set(spec["bodies"]) <= present and set(spec["joints"]) <= joints):
-            continue
         root = world.body(spec["bodies"][0])
-        prefix = spec["name"] + "."
-        entry = {key: spec[key] for key in ("name", "urdf", "fixed_base", "self_collide") if key in spec}
+        joints = spec["model"].joint_names
+        entry = {key: spec[key] for key in ("name", "urdf", "fixed_base", "self_collide", "namespace", "joints",
+                                            "drive", "localization", "publish_odom_tf") if key in spec}
+        if entry["joints"] == list(joints):  # the default order
+            del entry["joints"]
         entry.update(position=root["position"], quaternion=root["quaternion"],
-                     joint_positions={name[len(prefix):]: world.joint(name)["position"] for name in spec["joints"]})
+                     joint_positions={joint: world.joint(entity)["position"] for joint, entity in joints.items()})
         entries.append(entry)
-        parts |= set(spec["bodies"]) | set(spec["joints"])
+        parts |= set(spec["bodies"]) | set(joints.values())
     return entries, parts
 
 

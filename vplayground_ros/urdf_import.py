@@ -27,8 +27,10 @@ from .scene import read_mesh
 
 # What a robot description becomes: body specs (the root's first), joint specs, each link's body
 # and pose in that body's frame (4x4), and the description's text (for robot_description).
-# `self_collide`: whether its links collide with each other.
-RobotModel = namedtuple("RobotModel", "bodies joints link_frames description self_collide")
+# `self_collide`: whether its links collide with each other. `link_parents`: {link: its parent
+# link} (the root has none; parents before children); `joint_names`: {URDF name: the World's
+# joint} of the revolute, continuous and prismatic joints, in the description's order.
+RobotModel = namedtuple("RobotModel", "bodies joints link_frames description self_collide link_parents joint_names")
 
 JOINT_TYPES = {"revolute": "revolute", "continuous": "continuous", "prismatic": "prismatic"}
 MAX_LINKS = 256
@@ -270,7 +272,7 @@ def robot_model(source, name, position=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), fix
         if owner == root and fixed:
             spec["immovable"] = True
         body_specs.append(spec)
-    joint_specs = []
+    joint_specs, joint_names = [], {}
     for link in order[1:]:
         joint = parent_joint[link]
         if joint.type == "fixed":
@@ -303,7 +305,10 @@ def robot_model(source, name, position=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), fix
             joint_specs.append(specs.validate_joint(spec, f"joint {joint.name!r}"))
         except specs.SpecError as error:
             raise UrdfError(f"{label}: {error}") from None
-    return RobotModel(body_specs, joint_specs, link_frames, text, bool(self_collide))
+        joint_names[joint.name] = spec["name"]
+    link_parents = {link: parent_joint[link].parent for link in order[1:]}
+    joint_names = {joint.name: joint_names[joint.name] for joint in robot.joints if joint.name in joint_names}
+    return RobotModel(body_specs, joint_specs, link_frames, text, bool(self_collide), link_parents, joint_names)
 
 
 def joint_motion(joint, value, label):

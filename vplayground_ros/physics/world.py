@@ -128,8 +128,9 @@ class World(WorldQueries):
         # The scene's validated `sensors` entries: not physics (vplayground_ros.sensors samples
         # them through cast_rays), but part of the scene, kept and saved with it.
         self.sensor_specs = []
-        # The scene's `robots` (URDF robots, vplayground_ros.urdf_import), likewise: each entry
-        # as validated, with the names of the bodies and joints it made.
+        # The URDF robots (vplayground_ros.urdf_robots), likewise: each entry as validated, with
+        # its namespace and the bodies it made; replaced, never changed in place, so that whoever
+        # follows it sees it change. A robot losing a body leaves it (remove_bodies).
         self.robot_specs = []
         self._centre = np.zeros(3)  # world_centre(), kept with the playground
         self.stats = {"woken": 0, "frozen": 0, "pairs": 0, "points": 0, "triangles": 0}
@@ -202,7 +203,7 @@ class World(WorldQueries):
         # Its ROS namespace (vplayground_ros.robots), fixed now so that no later change moves its
         # topics: the first robot stands in the root namespace, each other in its name's (with
         # '_' for the '.' and '-' a name may have and a namespace may not).
-        taken = {self._vehicles.spec(other)["namespace"]: other for other in self.vehicle_names()}
+        taken = self.robot_namespaces()
         vehicle.setdefault("namespace", re.sub(r"[^A-Za-z0-9_]", "_", name) if "" in taken else "")
         if vehicle["namespace"] in taken:
             raise specs.SpecError(f"{path}.namespace", f"{vehicle['namespace']!r} is the namespace of "
@@ -313,6 +314,12 @@ class World(WorldQueries):
     def remove_body(self, name):
         self.remove_bodies([name])
 
+    def robot_namespaces(self):
+        """{ROS namespace: robot} of the vehicles and the URDF robots (robot_specs)."""
+        taken = {self._vehicles.spec(other)["namespace"]: other for other in self.vehicle_names()}
+        taken.update({robot["namespace"]: robot["name"] for robot in self.robot_specs})
+        return taken
+
     def remove_bodies(self, names):
         """Removes many bodies at once; a KeyError for an unknown name removes none. What they
         touch is woken and their contacts dropped in one pass: one by one, each removal scans
@@ -328,6 +335,10 @@ class World(WorldQueries):
         self._forget_contacts(slots)
         for name, slot in zip(names, slots):
             self._release(name, int(slot))
+        gone = set(names)
+        if any(gone.intersection(robot["bodies"]) for robot in self.robot_specs):
+            # A robot missing a link is no longer one: what is left stays as bodies and joints.
+            self.robot_specs = [robot for robot in self.robot_specs if not gone.intersection(robot["bodies"])]
 
     def _release(self, name, slot):
         """Frees a body's slot and name (what it touched already woken)."""
@@ -425,6 +436,26 @@ class World(WorldQueries):
                 "anchor": (child_centre + child_rotation @ frames[1, ANCHOR:ANCHOR + 3]).tolist(),
                 "axis": axis.tolist(), "position": float(values[POSITION]),
                 "velocity": float(values[SPEED]), "effort": float(values[EFFORT])}
+
+    def joint_states(self, names):
+        """(positions, velocities, efforts) arrays of the joints `names`, as joint() has them."""
+        arrays = self._joints.arrays
+        measure_joints(self._bodies, arrays)
+        rows = [self._joints.row(name) for name in names]
+        values = arrays.values[rows]
+        return values[:, POSITION].copy(), values[:, SPEED].copy(), values[:, EFFORT].copy()
+
+    def drive_joints(self, motors):
+        """{joint: partial motor mapping} (edit_joint's `motor`), all checked before any is
+        set; the bodies they hold woken. For controllers: one call per command."""
+        edits = {name: specs.validate_joint_edit({"motor": motor}, name, self._joints.spec(name)["type"],
+                                                 self._joints.spec(name))
+                 for name, motor in motors.items()}
+        for name, edit in edits.items():
+            self._joints.edit(name, edit)
+            for slot in self._joints.slots(name):
+                if slot != WORLD_SIDE:
+                    self._wake(slot)
 
     def _pose(self, slot):
         """(centre of mass, rotation matrix) of a body, or the world's (WORLD_SIDE)."""
