@@ -22,7 +22,9 @@ from .parameters import frames as frame_names
 from .odometry import OdometryTracker
 from .physics.math3d import quaternions_to_matrices
 from .robot_description import robot_description
-from .robots import footprint_pose, robot, robot_transforms
+from .robots import as_pose, compose, footprint_pose, inverse, robot, robot_transforms
+from .urdf_robots import (WHEEL_ODOMETRY_COVARIANCE, WheelOdometry, fixed_edges, link_edges, publishing_view,
+                          root_pose, wheel_joints)
 
 Topic = namedtuple("Topic", "key name type qos")
 # qos: "reliable_1", "reliable_10", "reliable_100", "latched" (reliable, transient local, depth 1)
@@ -167,6 +169,8 @@ class Broadcaster:
         self._pose_block = None  # (positions, quaternions, their (N, 7) rows) last made
         self._tf_frames = None   # (key, rows of the bodies on /tf, parents, children) last made
         self._robots = None      # (key, [robots.Robot]) last made
+        self._urdf_robots = None  # (key, [urdf_robots.UrdfRobot]) last made
+        self._wheel_odometry = {}  # URDF robot name -> its WheelOdometry
         self._odometry = {}      # robot name -> (OdometryTracker, its error model)
         self._last_clock = -math.inf
         self._last_clock_step = None  # (world, step) of the last batch's /clock
@@ -273,6 +277,17 @@ class Broadcaster:
             self._robots = cached = (key, made)
         return cached[1]
 
+    def urdf_robots(self, snapshot):
+        """The URDF robots (urdf_robots.UrdfRobot) of the snapshot, made again when they, the
+        bodies' layout or the frame parameters change."""
+        key = (snapshot.robot_specs, snapshot.names, self.parameters["localization"], self.parameters["publish_odom_tf"])
+        cached = self._urdf_robots
+        if cached is None or cached[0][0] is not key[0] or cached[0][1] is not key[1] or cached[0][2:] != key[2:]:
+            rows = {name: row for row, name in enumerate(snapshot.names)} if key[0] else {}
+            made = [publishing_view(spec, rows, key[2], key[3]) for spec in snapshot.robot_specs]
+            self._urdf_robots = cached = (key, made)
+        return cached[1]
+
     def wanted(self, key):
         topic = self.topics[key]
         return any(sink.subscribed(topic) for sink in self.sinks)
@@ -368,28 +383,31 @@ class Broadcaster:
         """The sensors' static frames made again when the world, its sensors or the robots
         changed (on the simulation thread, which may read the world): True when they differ
         from those last sent."""
-        world, robots = self.sim.world, self.robots(snapshot)
-        key = (world, world.sensor_specs, robots)
+        world, robots, urdf_robots = self.sim.world, self.robots(snapshot), self.urdf_robots(snapshot)
+        key = (world, world.sensor_specs, robots, urdf_robots)
         if self._static_key is not None and all(a is b for a, b in zip(key, self._static_key)):
             return False
         self._static_key = key
         frames = sensor_messages.static_frames(world.sensor_specs, mount_frame(self.frames, robots),
                                                sensor_frame(robots))
+        frames += [edge for r in urdf_robots for edge in fixed_edges(r)]
         changed = frames != self._sensor_frames
         # The bodies that carry a sensor, whose frames /tf must have: for the publisher thread,
         # which reads no World.
         self._carriers = frozenset(spec["parent"] for spec in world.sensor_specs) - set(snapshot.vehicle_specs)
         self._sensor_frames = frames
-        self._describe_robots(snapshot, robots, world.sensor_specs)
+        self._describe_robots(snapshot, robots, urdf_robots, world.sensor_specs)
         return changed
 
-    def _describe_robots(self, snapshot, robots, sensor_specs):
-        """Each robot's robot_description (URDF, latched), sent when it differs from the last
-        one; a robot that is gone leaves no description for a newcomer."""
+    def _describe_robots(self, snapshot, robots, urdf_robots, sensor_specs):
+        """Each robot's robot_description (URDF, latched; a URDF robot's as loaded), sent when it
+        differs from the last one; a robot that is gone leaves no description for a newcomer."""
         current = {}
-        for r in robots:
+        texts = [(r, robot_description(snapshot.vehicle_specs[r.name], sensor_specs, r.name, self.frames))
+                 for r in robots] + [(r, r.description) for r in urdf_robots]
+        for r, text in texts:
             key = self.robot_topic(r, "robot_description")
-            current[key] = text = robot_description(snapshot.vehicle_specs[r.name], sensor_specs, r.name, self.frames)
+            current[key] = text
             if self._descriptions.get(key) != text:
                 self.send(key, messages.string(text), snapshot.time)
         for key in self._descriptions.keys() - current.keys():
@@ -585,6 +603,7 @@ class Broadcaster:
             self.send(self.robot_topic(r, "joint_states"), messages.joint_states(snap, r.name), snap.time)
             self.send(self.robot_topic(r, "command"), messages.car_command(snap, r.name, r.frames.base), snap.time)
             moving += transforms
+        moving += self.publish_urdf_robots(snap)
         for parent, child, pose in [*moving, *self._sensor_frames]:  # the sensors': static, the same each time
             self.send("transforms", cdr.transform_stamped(snap.time, parent, child, pose), snap.time)
         rows, parents, children = self.tf_frames(snap, moving)
@@ -597,6 +616,50 @@ class Broadcaster:
             if moving:
                 poses = np.concatenate([poses, np.asarray([p for _, _, p in moving], float).reshape(-1, 7)])
             self.send("tf", self.tf_encoder.encode(snap.time, parents, children, poses), snap.time)
+
+    def publish_urdf_robots(self, snap):
+        """Each URDF robot's joint_states and, with a drive, its wheel odometry; returns the
+        /tf edges of its moving links and of its root (in the world, or REP 105's chain)."""
+        edges, world_frame = [], self.frames.world
+        if self._wheel_odometry.keys() - snap.robot_joints.keys():  # a robot gone: spawned again, it starts afresh
+            self._wheel_odometry = {n: o for n, o in self._wheel_odometry.items() if n in snap.robot_joints}
+        for r in self.urdf_robots(snap):
+            positions, velocities, efforts = snap.robot_joints[r.name]
+            self.send(self.robot_topic(r, "joint_states"),
+                      messages.joint_state(snap.time, r.joint_names, positions, velocities, efforts), snap.time)
+            root = root_pose(r, snap.state)
+            if r.drive is None:
+                edges.append((world_frame, r.frame(r.root), root))
+            else:
+                edges += self._drive_odometry(r, snap, root, positions)
+            edges += link_edges(r, snap.state)
+        return edges
+
+    def _drive_odometry(self, r, snap, root, positions):
+        """A drive's odometry from its wheel joints (odom -> root, the message), and the true
+        pose over it (<world_frame> -> odom) with ground_truth localization."""
+        wheels = [positions[r.joint_names.index(joint)] for joint in wheel_joints(r.drive)]
+        odometry = self._wheel_odometry.get(r.name)
+        if odometry is None or odometry.drive is not r.drive or snap.time < odometry.time:
+            level = footprint_pose(root[:3], root[3:], 0.0)[1]  # the heading alone
+            yaw = 2.0 * math.atan2(level[2], level[3])
+            odometry = self._wheel_odometry[r.name] = WheelOdometry(r.drive, (root[0], root[1], yaw), wheels, snap.time)
+        else:
+            odometry.update(wheels, snap.time)
+        measured = odometry.pose()
+        odom = r.frame(self.frames.odom)
+        edges = []
+        if r.localization == "ground_truth":
+            truth = (root[:3], root[3:])
+            edges.append((self.frames.world, odom, as_pose(compose(truth, inverse((measured[:3], measured[3:]))))))
+        if r.publish_odom_tf:
+            edges.append((odom, r.frame(r.root), measured))
+        turn = quaternions_to_matrices(np.asarray(measured[3:], float)[None])[0]
+        self.send(self.robot_topic(r, "odom"), messages.odometry(
+            snap.time, odom, r.frame(r.root), (measured[:3], measured[3:]), measured[3:],
+            turn @ [odometry.linear, 0.0, 0.0], [0.0, 0.0, odometry.angular], WHEEL_ODOMETRY_COVARIANCE,
+            WHEEL_ODOMETRY_COVARIANCE), snap.time)
+        return edges
 
     def odometry_tracker(self, name, spec, snap, truth, velocity):
         """The robot's OdometryTracker, started at the true pose when the robot is new (or its

@@ -206,6 +206,8 @@ class FoxgloveServer:
         sub = self.inputs.get(topic)
         if sub is None and topic in self.runtime.inputs.command_topics():  # a namespaced robot's cmd_vel
             sub = self.inputs[self.runtime.resolve_name("cmd_vel")]
+        if sub is None:  # a URDF robot's command topic
+            sub = self.runtime.inputs.robot_inputs().get(topic, (None,))[0]
         if sub is None and topic in NAVIGATION_GOALS:
             self.runtime.log.debug(f"foxglove: {channel.topic}: a navigation goal, ignored (no planner)")
             return

@@ -27,6 +27,18 @@ SUBSCRIPTIONS = [
 ]
 
 
+# What a URDF robot takes under its namespace (urdf_robots), keyed as Inputs.handle knows them;
+# cmd_vel only with a drive.
+JOINT_STATE, FLOAT64_ARRAY = "sensor_msgs/msg/JointState", "std_msgs/msg/Float64MultiArray"
+URDF_ROBOT_INPUTS = [
+    Subscription("joint_commands", "joint_commands", JOINT_STATE),
+    Subscription("position_commands", "position_commands", FLOAT64_ARRAY),
+    Subscription("velocity_commands", "velocity_commands", FLOAT64_ARRAY),
+    Subscription("effort_commands", "effort_commands", FLOAT64_ARRAY),
+    Subscription("joint_trajectory", "joint_trajectory", "trajectory_msgs/msg/JointTrajectory"),
+]
+
+
 def subscriptions(cmd_vel_stamped):
     """The subscription table; cmd_vel is TwistStamped when the parameter says so."""
     return [s._replace(type=TWIST_STAMPED) if s.key == "cmd_vel" and cmd_vel_stamped else s
@@ -49,23 +61,38 @@ def from_cdr(type_name, data):
 
 
 class Inputs:
-    """`robots` (snapshot -> [robots.Robot]) and `resolve` (relative name -> absolute, remaps
-    applied) are the Broadcaster's: each robot's cmd_vel is its namespace's."""
+    """`robots` and `urdf_robots` (snapshot -> [robots.Robot], [urdf_robots.UrdfRobot]) and
+    `resolve` (relative name -> absolute, remaps applied) are the Broadcaster's: each robot's
+    cmd_vel is its namespace's. `control` (urdf_robots.RobotControl) applies the URDF robots'
+    commands on the simulation thread."""
 
-    def __init__(self, sim, requests, parameters, log, robots, resolve):
+    def __init__(self, sim, requests, parameters, log, robots, resolve, urdf_robots=lambda snapshot: [],
+                 control=None):
         self.sim = sim
         self.requests = requests
         self.parameters = parameters
         self.log = log
         self.robots = robots
+        self.urdf_robots = urdf_robots
+        self.control = control
         self.resolve = resolve
         self.handlers = {"cmd_vel": self.cmd_vel, "clicked_point": self.clicked_point,
                          "initial_pose": self.initial_pose, "push": self.push}
 
     def command_topics(self):
-        """{absolute cmd_vel topic: robot name} of every robot now (the root namespace's is
-        cmd_vel's own subscription; the transports subscribe to the others as robots come)."""
-        return {self.resolve(robot.topic("cmd_vel")): robot.name for robot in self.robots(self.sim.snapshot)}
+        """{absolute cmd_vel topic: robot name} of every robot now, vehicles and URDF robots
+        with a drive (the root namespace's is cmd_vel's own subscription; the transports
+        subscribe to the others as robots come)."""
+        snapshot = self.sim.snapshot
+        topics = {self.resolve(robot.topic("cmd_vel")): robot.name for robot in self.robots(snapshot)}
+        topics.update({self.resolve(robot.topic("cmd_vel")): robot.name for robot in self.urdf_robots(snapshot)
+                       if robot.drive is not None})
+        return topics
+
+    def robot_inputs(self):
+        """{absolute topic: (Subscription, robot name)} of the URDF robots' command topics now."""
+        return {self.resolve(robot.topic(sub.name)): (sub, robot.name)
+                for robot in self.urdf_robots(self.sim.snapshot) for sub in URDF_ROBOT_INPUTS}
 
     def handle(self, key, msg, topic=None):
         """Runs the handler of subscription `key` (cmd_vel: `topic` says which, absolute; the
@@ -74,8 +101,10 @@ class Inputs:
         try:
             if key == "cmd_vel":
                 self.cmd_vel(msg, topic or self.resolve("cmd_vel"))
-            else:
+            elif key in self.handlers:
                 self.handlers[key](msg)
+            else:
+                self.robot_command(key, msg, topic)
         except (AttributeError, TypeError, ValueError) as error:
             self.log.warning(f"{key}: malformed message ignored ({error})")
         except TimeoutError as error:
@@ -102,8 +131,38 @@ class Inputs:
             self.log.warning(f"{topic} with non-finite values ignored")
             return
         car = self.command_topics().get(topic)
-        if car is not None:
+        if car is None:
+            return
+        if any(robot.name == car for robot in self.urdf_robots(self.sim.snapshot)):
+            self.submit(topic, lambda world: self.control.drive(world, car, speed, yaw_rate, timeout))
+        else:
             self.submit(topic, lambda world: world.drive(car, speed, yaw_rate, timeout))
+
+    def robot_command(self, key, msg, topic):
+        """A URDF robot's command (URDF_ROBOT_INPUTS) on `topic` (absolute), checked here and
+        applied on the simulation thread; one that names no joint of the robot is logged."""
+        entry = self.robot_inputs().get(topic)
+        if entry is None or entry[0].key != key:
+            return
+        robot = entry[1]
+        control = self.control
+        if key == "joint_commands":
+            names = [str(n) for n in msg.name]
+            kind, values, velocities = joint_state_command(msg, len(names))
+            self.submit(topic, lambda world: control.command(world, robot, kind, names, values, velocities))
+        elif key == "joint_trajectory":
+            names, start, times, positions, velocities = trajectory_command(msg)
+            self.submit(topic, lambda world: control.follow(world, robot, names, start, times, positions, velocities))
+        else:
+            values = [float(v) for v in msg.data]
+            kind = key[:-len("_commands")]
+
+            def command(world):
+                order = control.robot(world, robot)["joints"]
+                if len(values) != len(order):
+                    raise ValueError(f"{len(values)} values for the {len(order)} joints {', '.join(order)}")
+                control.command(world, robot, kind, order, values)
+            self.submit(topic, command)
 
     def frames(self):
         return frame_names(self.parameters)
@@ -172,3 +231,50 @@ class Inputs:
             dt = 1.0 / world.settings["steps_per_second"]
             world.apply_impulse(name, [f * dt for f in force], [t * dt for t in torque])
         self.submit("~/push", push)
+
+
+def joint_state_command(msg, count):
+    """(kind, values, feed-forward velocities or None) of a JointState command: its positions
+    (with its velocities, if as many), else its velocities, else its efforts."""
+    positions, velocities, efforts = ([float(v) for v in values] for values in (msg.position, msg.velocity, msg.effort))
+    if count == 0:
+        raise ValueError("no joint named")
+    for kind, values in (("position", positions), ("velocity", velocities), ("effort", efforts)):
+        if values and len(values) != count:
+            raise ValueError(f"{len(values)} {kind} values for {count} names")
+    if positions:
+        return "position", positions, velocities or None
+    if velocities:
+        return "velocity", velocities, None
+    if efforts:
+        return "effort", efforts, None
+    raise ValueError("no position, velocity or effort given")
+
+
+def trajectory_command(msg):
+    """(joint names, start time in s or None for now, [time_from_start], positions (P, J),
+    velocities (P, J) or None) of a JointTrajectory, checked: every point with a position per
+    joint, times increasing."""
+    names = [str(n) for n in msg.joint_names]
+    if not names:
+        raise ValueError("no joint_names")
+    points = list(msg.points)
+    if not points:
+        raise ValueError("no points")
+    times, positions, velocities = [], [], []
+    for k, point in enumerate(points):
+        t = float(point.time_from_start.sec) + 1e-9 * float(point.time_from_start.nanosec)
+        if times and t <= times[-1] or t < 0.0:
+            raise ValueError(f"points[{k}].time_from_start {t:g} s: times must increase")
+        p, v = [float(x) for x in point.positions], [float(x) for x in point.velocities]
+        if len(p) != len(names) or (v and len(v) != len(names)):
+            raise ValueError(f"points[{k}]: {len(p)} positions, {len(v)} velocities for {len(names)} joints")
+        if not all(math.isfinite(x) for x in p + v):
+            raise ValueError(f"points[{k}]: not finite")
+        times.append(t)
+        positions.append(p)
+        velocities.append(v)
+    stamp = float(msg.header.stamp.sec) + 1e-9 * float(msg.header.stamp.nanosec)
+    given = all(velocities)
+    return (names, stamp if stamp > 0.0 else None, times, np.array(positions),
+            np.array(velocities) if given else None)

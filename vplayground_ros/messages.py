@@ -367,6 +367,13 @@ def joint_states(snapshot, name):
                                                  "position": position, "velocity": velocity})
 
 
+def joint_state(seconds, names, positions, velocities=(), efforts=()):
+    """sensor_msgs/JointState of named joints (a URDF robot's)."""
+    return encode("sensor_msgs/msg/JointState", {
+        "header": header(seconds, ""), "name": list(names), "position": [float(v) for v in positions],
+        "velocity": [float(v) for v in velocities], "effort": [float(v) for v in efforts]})
+
+
 def car_command(snapshot, name, frame):
     v = snapshot.vehicles[name]
     return encode("geometry_msgs/msg/TwistStamped", {

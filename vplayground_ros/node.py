@@ -185,7 +185,7 @@ class SimulatorNode(Node):
                                      lambda msg, key=sub.key: runtime.inputs.handle(key, msg),
                                      COMMAND_QOS if sub.key == "cmd_vel" else QOS["reliable_10"])
         self._command_type = interface_class(next(sub.type for sub in table if sub.key == "cmd_vel"))
-        self._commands = {}  # absolute topic -> subscription of a namespaced robot's cmd_vel
+        self._commands = {}  # absolute topic -> subscription of a robot's (a namespaced cmd_vel, a URDF robot's commands)
         self._follow_robots()
         self.create_timer(ROBOT_POLL_PERIOD, self._follow_robots)
         missing = []
@@ -214,13 +214,18 @@ class SimulatorNode(Node):
             runtime.requests.actions_served = True
 
     def _follow_robots(self):
-        """Each namespaced robot's cmd_vel, subscribed as robots come (a spawn, another scene)
-        and dropped as they go; the root namespace's is the table's own subscription."""
+        """Each namespaced robot's cmd_vel and each URDF robot's command topics, subscribed as
+        robots come (a spawn, another scene) and dropped as they go; the root namespace's
+        cmd_vel is the table's own subscription."""
         inputs = self.runtime.inputs
-        wanted = set(inputs.command_topics()) - {inputs.resolve("cmd_vel")}
-        for topic in wanted - self._commands.keys():
+        wanted = {topic: ("cmd_vel", self._command_type) for topic in inputs.command_topics()}
+        wanted.update({topic: (sub.key, interface_class(sub.type)) for topic, (sub, _) in inputs.robot_inputs().items()})
+        wanted.pop(inputs.resolve("cmd_vel"), None)
+        for topic in wanted.keys() - self._commands.keys():
+            key, kind = wanted[topic]
             self._commands[topic] = self.create_subscription(
-                self._command_type, topic, lambda msg, t=topic: inputs.handle("cmd_vel", msg, t), COMMAND_QOS)
+                kind, topic, lambda msg, t=topic, k=key: inputs.handle(k, msg, t),
+                COMMAND_QOS if key == "cmd_vel" else QOS["reliable_10"])
         for topic in self._commands.keys() - wanted:
             self.destroy_subscription(self._commands.pop(topic))
 

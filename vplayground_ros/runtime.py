@@ -11,6 +11,7 @@ from .inputs import Inputs
 from .parameters import FRAMES, PHYSICS, Parameters, frames, parameter_table, settings_from
 from .services import guarded, service_table
 from .standard_services import standard_service_table
+from .urdf_robots import RobotControl
 
 
 class Runtime:
@@ -31,7 +32,10 @@ class Runtime:
         self.broadcaster = Broadcaster(sim, self.parameters, log, resolve_name)
         if recorder is not None:
             self.broadcaster.add_sink(BagSink(recorder))
-        self.inputs = Inputs(sim, self.requests, self.parameters, log, self.broadcaster.robots, resolve_name)
+        self.robot_control = RobotControl()
+        sim.controllers.append(self.robot_control.before_batch)
+        self.inputs = Inputs(sim, self.requests, self.parameters, log, self.broadcaster.robots, resolve_name,
+                             self.broadcaster.urdf_robots, self.robot_control)
         self.services = service_table(self) + [guarded(self, s) for s in standard_service_table(self)]
         self.sim.real_time_factor = self.parameters["real_time_factor"]
         self._stop = threading.Event()

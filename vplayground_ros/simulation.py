@@ -66,6 +66,8 @@ class Snapshot:
     readings: list = field(default_factory=list)
     vehicle_specs: dict = field(default_factory=dict)  # vehicle name -> World.vehicle() (shared)
     scenery: "Scenery" = None
+    robot_specs: list = field(default_factory=list)  # World.robot_specs (URDF robots; shared)
+    robot_joints: dict = field(default_factory=dict)  # URDF robot name -> World.joint_states of its joints
 
 
 # The static world as the publisher draws it (shared by snapshots until it changes):
@@ -74,7 +76,8 @@ class Snapshot:
 Scenery = namedtuple("Scenery", "ground triangles version")
 
 # What the snapshots of one world's layout share, taken once per layout rather than per batch.
-SharedLayout = namedtuple("SharedLayout", "world version names vehicle_names properties vehicle_specs scenery")
+SharedLayout = namedtuple("SharedLayout", "world version names vehicle_names properties vehicle_specs scenery "
+                                         "robot_specs")
 
 
 class Simulation:
@@ -104,6 +107,7 @@ class Simulation:
         # after it, so what is published carries the same times at any real-time factor.
         self.next_publish_time = math.inf
         self.sensors = Sensors()  # the world's `sensors:`, read when due after a step
+        self.controllers = []     # fn(world) run before each batch of steps (the robots' trajectories): True if it changed something
         self.removed = []          # names of bodies removed for going non-finite or away
         self.faults = []           # texts of the first exceptions survived (listeners, steps, ROS callbacks)
         self.fault_count = 0       # all of them
@@ -260,6 +264,9 @@ class Simulation:
                 resting, second = self._resting(world), world.step_count // rate
                 started, engine_before = time.perf_counter(), world.engine_cpu_seconds
                 try:
+                    for controller in self.controllers:
+                        if controller(world):  # it moved targets: what rested may move
+                            self._touched = True
                     world.step(steps)
                     if self.paused:  # only now: while a batch runs its steps are still pending
                         self._pending_steps -= steps
@@ -381,7 +388,9 @@ class Simulation:
             state={**self._motion_state(world, layout), **layout.properties},
             vehicles={name: world.vehicle_state(name) for name in layout.vehicle_names},
             contacts=world.contacts() if self.with_contacts else None,
-            vehicle_specs=layout.vehicle_specs, scenery=layout.scenery)
+            vehicle_specs=layout.vehicle_specs, scenery=layout.scenery, robot_specs=layout.robot_specs,
+            robot_joints={robot["name"]: world.joint_states(robot["model"].joint_names.values())
+                          for robot in layout.robot_specs})
 
     def _resting(self, world):
         """Every body was frozen or immovable in the last snapshot of this world and no command
@@ -425,5 +434,5 @@ class Simulation:
                 scenery = Scenery(world.ground, triangles, world.scenery_version)
             layout = self._layout = SharedLayout(
                 world, version, world.body_names(), vehicle_names, properties,
-                {name: world.vehicle(name) for name in vehicle_names}, scenery)
+                {name: world.vehicle(name) for name in vehicle_names}, scenery, world.robot_specs)
         return layout

@@ -329,6 +329,21 @@ def joint_motion(joint, value, label):
     return motion
 
 
+def renamed(model, old, new):
+    """The RobotModel of robot `old` with its bodies and joints named after `new` instead."""
+    def rename(name):
+        return new + name[len(old):]
+    bodies = [{**spec, "name": rename(spec["name"])} for spec in model.bodies]
+    joints = [{**spec, "name": rename(spec["name"]), "parent": rename(spec["parent"]), "child": rename(spec["child"])}
+              for spec in model.joints]
+    for spec in bodies + joints:
+        if not specs.NAME_PATTERN.fullmatch(spec["name"]):
+            raise UrdfError(f"the name {spec['name']!r} is longer than 64 characters (give the robot a shorter name)")
+    return model._replace(bodies=bodies, joints=joints,
+                          link_frames={link: (rename(body), pose) for link, (body, pose) in model.link_frames.items()},
+                          joint_names={joint: rename(entity) for joint, entity in model.joint_names.items()})
+
+
 def body_name(robot, link, label):
     return entity_name(robot, link, "link", label)
 

@@ -37,6 +37,10 @@ DRIVE_KEYS = {"type", "left_wheel_names", "right_wheel_names", "wheel_separation
 DRIVE_TYPES = ("diff_drive",)
 LOCALIZATIONS = ("ground_truth", "none")
 COMMAND_KINDS = ("position", "velocity", "effort")
+# diff_drive_controller's default pose and twist covariance diagonals (x y z roll pitch yaw):
+# the wheels' odometry is not exact (they slip), and a filter fusing it must know.
+WHEEL_ODOMETRY_COVARIANCE = [(0.01 if row == 5 else 0.001) if row == column else 0.0
+                             for row in range(6) for column in range(6)]
 # An effort command is a velocity motor whose effort bound is the effort, aiming at the joint's
 # speed limit (or this, without one): it pushes with exactly that effort until the limit.
 EFFORT_SPEED = 1.0e3
@@ -195,17 +199,20 @@ def body_matrices(state, rows):
 
 
 def link_edges(robot, state):
-    """([(parent frame, child frame, xyz + xyzw)] of the joints whose two links lie in different
-    bodies (moving), [those in one body] (fixed)), from the bodies' poses in `state`."""
+    """[(parent frame, child frame, xyz + xyzw)] of the joints between links of different bodies,
+    from the bodies' poses in `state`."""
     bodies = body_matrices(state, robot.body_rows)
     poses = {link: bodies[body] @ pose for link, _, body, pose in robot.links}
-    moving, fixed = [], []
     body_of = {link: body for link, _, body, _ in robot.links}
-    for link, parent, body, _ in robot.links[1:]:
-        relative = np.linalg.solve(poses[parent], poses[link])
-        edge = (robot.frame(parent), robot.frame(link), matrix_pose(relative))
-        (fixed if body_of[parent] == body else moving).append(edge)
-    return moving, fixed
+    return [(robot.frame(parent), robot.frame(link), matrix_pose(np.linalg.solve(poses[parent], poses[link])))
+            for link, parent, body, _ in robot.links[1:] if body_of[parent] != body]
+
+
+def fixed_edges(robot):
+    """The same for the links lumped into one body: fixed, from the description."""
+    frames = {link: (body, pose) for link, _, body, pose in robot.links}
+    return [(robot.frame(parent), robot.frame(link), matrix_pose(np.linalg.solve(frames[parent][1], pose)))
+            for link, parent, body, pose in robot.links[1:] if frames[parent][0] == body]
 
 
 def root_pose(robot, state):
@@ -319,8 +326,14 @@ class RobotControl:
     drives turned into wheel speeds (stopped after `cmd_vel_timeout` without a command)."""
 
     def __init__(self):
-        self.trajectories = {}  # (robot, joint) -> the Trajectory that moves it
+        self.world = None          # the World the commands below were given in
+        self.trajectories = {}     # (robot, joint) -> the Trajectory that moves it
         self.drive_deadlines = {}  # robot -> simulated s its last cmd_vel lapses at
+
+    def _attend(self, world):
+        """Commands given in another World (a scene loaded, a reset) are forgotten."""
+        if world is not self.world:
+            self.world, self.trajectories, self.drive_deadlines = world, {}, {}
 
     @staticmethod
     def robot(world, name):
@@ -333,6 +346,7 @@ class RobotControl:
         """Motors of `joints` (URDF names) to `values`: position targets (with `velocities` as
         their feed-forward), velocities or efforts. A command for a joint ends the trajectory
         that moved it."""
+        self._attend(world)
         spec = self.robot(world, name)
         entities = spec["model"].joint_names
         motors = {}
@@ -362,6 +376,7 @@ class RobotControl:
 
     def follow(self, world, name, joints, start, times, positions, velocities):
         """Follows a trajectory of `joints` from `start` (simulated s; None: now)."""
+        self._attend(world)
         spec = self.robot(world, name)
         entities = spec["model"].joint_names
         missing = [joint for joint in joints if joint not in entities]
@@ -387,8 +402,12 @@ class RobotControl:
     def before_batch(self, world):
         """Trajectories sampled at the batch's start (their motors' targets move on at the
         sampled velocity through it); lapsed drives stopped; robots gone forgotten."""
+        self._attend(world)
+        if not (self.drive_deadlines or self.trajectories):
+            return False
         present = {r["name"] for r in world.robot_specs}
         now = world.time
+        stopped = False
         for name, deadline in list(self.drive_deadlines.items()):
             if name not in present:
                 del self.drive_deadlines[name]
@@ -396,6 +415,9 @@ class RobotControl:
                 del self.drive_deadlines[name]
                 wheels = wheel_joints(self.robot(world, name)["drive"])
                 self.command(world, name, "velocity", wheels, [0.0] * len(wheels))
+                stopped = True
+        if not self.trajectories:
+            return stopped
         by_trajectory = {}
         for (name, joint), trajectory in list(self.trajectories.items()):
             if name not in present:
@@ -410,3 +432,4 @@ class RobotControl:
             if not done:
                 for joint in joints:
                     self.trajectories[(name, joint)] = trajectory
+        return True

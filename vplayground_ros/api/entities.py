@@ -13,8 +13,9 @@ from ..frame_names import node_frames, sensor_frames, sensor_frames_taken
 from ..physics import specs
 from ..physics.world import prepare_body
 from ..robots import validate_robot, world_robots
-from ..scene import body_mesh_points
+from ..scene import body_mesh_points, resolve_mesh
 from ..sensors import TYPES as SENSOR_TYPES, validate_sensor
+from ..urdf_robots import add_robot_entry, check_against_model, validate_entry
 from .descriptions import describe, describe_sensor
 from .frames import frame_pose, pose_in_world
 from .name_filter import MAX_FILTER, match_names
@@ -107,11 +108,36 @@ class EntityRequests:
             item.update(pose_fields(pose, f"{path}.initial_pose"))
             if "quaternion" in item:
                 item.pop("rpy", None)  # the pose's orientation wins over the spec's
+        if "urdf" in item:
+            return path, "robot", self._prepare_robot(item, path, frame), rename, ""
         vehicle = "wheels" in item or "chassis" in item
         # A body's hull and mass are checked here too: a list is refused before the world is
         # asked, not rolled back (which would wake what the bodies touched).
         spec = validate_robot(specs.validate_vehicle(item, path), path) if vehicle else prepare_body(item, path)[0]
         return path, vehicle, spec, rename, frame
+
+    def _prepare_robot(self, item, path, frame):
+        """(entry, RobotModel) of a URDF robot to spawn: `urdf` a file (found as a mesh is, in
+        the scene directories) or the description's text; placed in the world frame."""
+        from ..urdf_import import UrdfError, robot_model
+        if frame and frame != self.frames().world:
+            raise RequestError(INVALID_POSE, f"{path}.initial_pose.header.frame_id: a robot is placed in the world "
+                                             f"frame ({self.frames().world!r} or empty), not {specs.quote(frame)}")
+        entry, fields = validate_entry(item, path)
+        source = entry["urdf"]
+        if not source.lstrip().startswith("<"):
+            source = str(resolve_mesh(source, Path.cwd(), self.scene_directories, f"{path}.urdf"))
+            entry["urdf"] = source
+        try:
+            model = robot_model(source, entry["name"], fields.get("position", [0.0, 0.0, 0.0]),
+                                fields.get("rpy", [0.0, 0.0, 0.0]), entry.get("fixed_base"),
+                                entry.get("self_collide", False), entry["joint_positions"],
+                                label=f"{path}.urdf", quaternion=fields.get("quaternion"))
+        except UrdfError as error:
+            raise RequestError(FAILED, str(error)) from None
+        check_against_model(entry, model, path)
+        entry.update({key: fields[key] for key in ("position", "rpy", "quaternion") if key in fields})
+        return entry, model
 
     def _spawn(self, world, prepared, cap, frames):
         self._check_world("spawning")
@@ -125,7 +151,11 @@ class EntityRequests:
         # Bodies and vehicles first: a sensor of the request rides the body of the request that
         # its parent names, under the name that body gets.
         renamed = {}
+        robots = []  # (path, entry, model) under the names they get
         for path, vehicle, spec, rename, frame in prepared:
+            if vehicle == "robot":
+                robots.append(self._name_robot(world, path, *spec, rename, names, suffixes, frames_taken))
+                continue
             if vehicle == "sensor":
                 continue
             name = spec.get("name")
@@ -143,7 +173,8 @@ class EntityRequests:
                     pose.setdefault("quaternion", [0.0, 0.0, 0.0, 1.0])  # none given: the frame's
                 spec.update(in_world(world, frame, pose, f"{path}.initial_pose", frames))
             check_inside(world, spec["position"], f"{path}.position")
-        parents = set(existing) | {spec.get("name") for _, kind, spec, _, _ in prepared if kind != "sensor"}
+        parents = set(existing) | {spec.get("name") for _, kind, spec, _, _ in prepared if kind in (True, False)}
+        parents |= {body["name"] for _, _, model in robots for body in model.bodies}
         sensors = []
         for path, vehicle, spec, rename, _ in prepared:
             if vehicle != "sensor":
@@ -169,8 +200,10 @@ class EntityRequests:
         added = []
         try:
             for _, vehicle, spec, _, _ in prepared:
-                if vehicle != "sensor":
+                if vehicle in (True, False):
                     added.append(world.add_vehicle(spec) if vehicle else world.add_body(spec))
+            for path, entry, model in robots:
+                added += add_robot_entry(world, entry, model, path)
             if sensors or added:  # with the robots' namespaces, which adding gave them
                 check_sensors([*world.sensor_specs, *sensors], world_robots(world, frames))
         except Exception:
@@ -178,7 +211,39 @@ class EntityRequests:
             raise
         if sensors:  # a new list: whoever follows the sensors sees them change
             world.sensor_specs = [*world.sensor_specs, *sensors]
-        return reply(OK, ", ".join(added + [s["name"] for s in sensors]))
+        robot_bodies = {body["name"] for _, _, model in robots for body in model.bodies}
+        return reply(OK, ", ".join([name for name in added if name not in robot_bodies]
+                                   + [entry["name"] for _, entry, _ in robots] + [s["name"] for s in sensors]))
+
+    @staticmethod
+    def _name_robot(world, path, entry, model, rename, names, suffixes, frames_taken):
+        """A spawned robot's name and its bodies' against the world's and the request's others
+        (`names`, which gains them): NAME_NOT_UNIQUE, or with `rename` the next free name."""
+        from ..urdf_import import UrdfError, renamed
+        taken = names | {robot["name"] for robot in world.robot_specs}
+
+        def clash(name, bodies):
+            return next((n for n in [name, *bodies] if n in taken), None)
+        name, bodies = entry["name"], [body["name"] for body in model.bodies]
+        found = clash(name, bodies)
+        if found is not None:
+            if not rename:
+                raise RequestError(NAME_NOT_UNIQUE, f"{path}.name: {taken_name(found, frames_taken)} (a robot's name "
+                                                    "and its links' bodies, <name>.<link>; allow_renaming: true "
+                                                    "picks a free name)")
+            while found is not None:
+                taken.add(name)
+                new = unique_name(entry["name"], taken, suffixes)
+                try:
+                    model = renamed(model, name, new)
+                except UrdfError as error:
+                    raise RequestError(FAILED, f"{path}.name: {error}") from None
+                name, bodies = new, [body["name"] for body in model.bodies]
+                found = clash(name, bodies)
+            entry = {**entry, "name": name}
+        names.update([name, *bodies])
+        check_inside(world, model.bodies[0]["position"], f"{path}.position")
+        return path, entry, model
 
     @handled
     def edit(self, text):
@@ -303,6 +368,8 @@ class EntityRequests:
 
     @staticmethod
     def _remove(world, doomed, strict):
+        robots = {robot["name"]: robot["bodies"] for robot in world.robot_specs}
+        doomed = [body for name in doomed for body in robots.get(name, [name])]  # a URDF robot: its links
         present = set(world.body_names())
         sensors = {s["name"] for s in world.sensor_specs} & set(doomed)
         if strict and doomed and doomed[0] not in present and doomed[0] not in sensors:

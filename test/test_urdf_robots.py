@@ -1,0 +1,273 @@
+"""URDF robots as a ROS stack sees them (issue 38): joint_states, robot_description and the link
+tree on /tf checked against the description by an independent reader (yourdfpy's forward
+kinematics), commands on every command topic, a trajectory followed on the simulation's clock,
+the Husky's differential drive with Clearpath's own controller settings, spawn and remove."""
+import logging
+import math
+import re
+import os
+from types import SimpleNamespace as NS
+
+import numpy as np
+import pytest
+import yaml
+
+from vplayground_ros.cli import parse_args
+from vplayground_ros.interfaces import decoder
+from vplayground_ros.runtime import Runtime
+from vplayground_ros.scene import SceneError, load_world, world_to_scene
+from vplayground_ros.simulation import Simulation
+from vplayground_ros.urdf_robots import RobotControl
+from helpers import wait_for
+from test_broadcast import Collector
+from test_robots import chain, tree
+
+pybullet_data = pytest.importorskip("pybullet_data")
+yourdfpy = pytest.importorskip("yourdfpy")
+
+KUKA = os.path.join(pybullet_data.getDataPath(), "kuka_iiwa", "model.urdf")
+HUSKY = os.path.join(pybullet_data.getDataPath(), "husky", "husky.urdf")
+ARM_JOINTS = [f"lbr_iiwa_joint_{k}" for k in range(1, 8)]
+# Clearpath's husky_control (control.yaml): the Husky's diff_drive_controller settings, with
+# the wheel radius of this description (its wheels' collision cylinders: 0.17775 m).
+HUSKY_DRIVE = {"left_wheel_names": ["front_left_wheel", "rear_left_wheel"],
+               "right_wheel_names": ["front_right_wheel", "rear_right_wheel"],
+               "wheel_separation": 0.555, "wheel_radius": 0.17775, "wheel_separation_multiplier": 1.875}
+SCENE = {"version": 1, "robots": [{"name": "kuka", "urdf": KUKA},
+                                  {"name": "husky", "urdf": HUSKY, "position": [4, 0, 0.02], "drive": HUSKY_DRIVE}]}
+JOINT_STATE = decoder("sensor_msgs/msg/JointState")
+ODOMETRY = decoder("nav_msgs/msg/Odometry")
+STRING = decoder("std_msgs/msg/String")
+TF = decoder("tf2_msgs/msg/TFMessage")
+
+
+@pytest.fixture
+def run():
+    started = []
+
+    def go(scene=SCENE):
+        options = parse_args(["--no-record", "--real-time-factor", "0"])
+        sim = Simulation(load_world(scene), real_time_factor=0.0)
+        runtime = Runtime(sim, options, logging.getLogger("test_urdf_robots"))
+        runtime.parameters.set({"cmd_vel_timeout": 1000.0})  # as fast as it goes, commands lag in sim time
+        sink = Collector()
+        runtime.broadcaster.add_sink(sink)
+        runtime.start()
+        started.append(runtime)
+        return runtime, sink
+    yield go
+    for runtime in started:
+        runtime.stop()
+
+
+def advance(runtime, seconds):
+    start = runtime.sim.snapshot.time
+    assert wait_for(lambda: runtime.sim.snapshot.time >= start + seconds, 120)
+
+
+def latest(sink, key, decode=JOINT_STATE):
+    return sink.of(key, decode)[-1][1]
+
+
+def joint_command(names, position=(), velocity=(), effort=()):
+    return NS(name=list(names), position=list(position), velocity=list(velocity), effort=list(effort))
+
+
+def duration(seconds):
+    return NS(sec=int(seconds), nanosec=int(round((seconds % 1) * 1e9)))
+
+
+def trajectory(names, points, stamp=0.0):
+    return NS(header=NS(stamp=duration(stamp), frame_id=""), joint_names=list(names),
+              points=[NS(positions=list(p), velocities=list(v), accelerations=[], effort=[],
+                         time_from_start=duration(t)) for t, p, v in points])
+
+
+def pose_matrix(transform):
+    t, q = transform.translation, transform.rotation
+    x, y, z, w = q.x, q.y, q.z, q.w
+    matrix = np.eye(4)
+    matrix[:3, :3] = [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                      [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                      [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]
+    matrix[:3, 3] = [t.x, t.y, t.z]
+    return matrix
+
+
+def test_joint_states_description_and_link_tree_agree_with_the_description(run):
+    """joint_states carries the URDF's joint names; robot_description is the file as loaded; the
+    links' transforms on /tf are what the description's kinematics give for those positions."""
+    runtime, sink = run()
+    runtime.inputs.handle("joint_commands", joint_command(ARM_JOINTS, [0.3, 0.5, -0.2, -1.0, 0.4, 0.6, 0.1]),
+                          "/joint_commands")
+    advance(runtime, 2.0)
+    runtime.sim.stop()
+    runtime.stop()
+    assert latest(sink, "/robot_description", STRING).data == open(KUKA).read()
+    husky = latest(sink, "/husky/robot_description", STRING).data  # xacro's $(optenv ...) expanded
+    assert "$(" not in husky and "husky_robot" in husky and husky.count("<link ") == open(HUSKY).read().count("<link ")
+    state = latest(sink, "/joint_states")
+    assert list(state.name) == ARM_JOINTS
+    assert list(latest(sink, "/husky/joint_states").name) == [
+        "front_left_wheel", "front_right_wheel", "rear_left_wheel", "rear_right_wheel"]
+    parent_of = tree(sink)
+    assert chain(parent_of, "lbr_iiwa_link_7") == [f"lbr_iiwa_link_{k}" for k in range(7, -1, -1)] + ["world"]
+    assert chain(parent_of, "husky/front_left_wheel_link") == [
+        "husky/front_left_wheel_link", "husky/base_link", "husky/base_footprint", "husky/odom", "world"]
+    assert parent_of["husky/imu_link"] == "husky/base_link"  # a lumped link: on /tf_static
+    # The tip in the base by the published edges against yourdfpy's kinematics at the published
+    # positions (the same snapshot: the last state round).
+    edges = {t.child_frame_id: pose_matrix(t.transform) for t in latest(sink, "tf", TF).transforms}
+    tip = np.eye(4)
+    for k in range(1, 8):
+        tip = tip @ edges[f"lbr_iiwa_link_{k}"]
+    robot = yourdfpy.URDF.load(KUKA, load_meshes=False, build_collision_scene_graph=False)
+    robot.update_cfg(dict(zip(state.name, state.position)))
+    expected = robot.get_transform("lbr_iiwa_link_7", "lbr_iiwa_link_0")
+    assert np.abs(tip[:3, 3] - expected[:3, 3]).max() < 1e-4
+    assert np.abs(tip[:3, :3] - expected[:3, :3]).max() < 1e-4
+    assert np.allclose(state.position, [0.3, 0.5, -0.2, -1.0, 0.4, 0.6, 0.1], atol=2e-3)  # the command held
+
+
+def test_every_command_topic_moves_the_arm(run):
+    runtime, sink = run({"version": 1, "robots": [{"name": "kuka", "urdf": KUKA, "joints": ARM_JOINTS[::-1]}]})
+    inputs = runtime.inputs
+    targets = [0.2, -0.3, 0.4, -0.5, 0.3, -0.2, 0.1]
+    inputs.handle("position_commands", NS(data=targets), "/position_commands")  # in `joints` order: 7 to 1
+    advance(runtime, 2.0)
+    assert np.allclose(latest(sink, "/joint_states").position, targets[::-1], atol=2e-3)
+    inputs.handle("velocity_commands", NS(data=[0.5] + [0.0] * 6), "/velocity_commands")
+    advance(runtime, 0.5)
+    assert latest(sink, "/joint_states").velocity[6] == pytest.approx(0.5, abs=1e-3)
+    inputs.handle("joint_commands", joint_command(["lbr_iiwa_joint_7"], velocity=[-0.25]), "/joint_commands")
+    advance(runtime, 0.5)
+    assert latest(sink, "/joint_states").velocity[6] == pytest.approx(-0.25, abs=1e-3)
+    # Malformed commands change nothing: the arm's other joints hold still where they were.
+    before = latest(sink, "/joint_states").position[:6]
+    inputs.handle("position_commands", NS(data=[0.0] * 3), "/position_commands")
+    inputs.handle("joint_commands", joint_command(["no_such_joint"], [1.0]), "/joint_commands")
+    inputs.handle("joint_commands", joint_command(ARM_JOINTS, [float("nan")] * 7), "/joint_commands")
+    advance(runtime, 0.5)
+    assert np.allclose(latest(sink, "/joint_states").position[:6], before, atol=1e-3)
+    assert runtime.sim.fault_count == 0
+
+
+def test_an_effort_command_pushes_with_that_effort():
+    """An effort is a constant torque (below the joint's speed limit): the joint reports it, and
+    its speed grows linearly from rest."""
+    world = load_world({"version": 1, "settings": {"gravity": [0, 0, 0]}, "robots": [{"name": "kuka", "urdf": KUKA}]})
+    control = RobotControl()
+    joint = ["kuka.lbr_iiwa_joint_7"]
+    control.command(world, "kuka", "effort", ["lbr_iiwa_joint_7"], [0.02])
+    world.step(8)
+    _, first, efforts = world.joint_states(joint)
+    world.step(8)
+    _, second, _ = world.joint_states(joint)
+    assert efforts[0] == pytest.approx(0.02, rel=1e-9)
+    assert first[0] > 0.0 and second[0] == pytest.approx(2 * first[0], rel=0.02)
+    # Beyond the URDF's limits (300 N m, 10 rad/s): the light last link turns at its speed limit.
+    control.command(world, "kuka", "effort", ["lbr_iiwa_joint_7"], [-1e6])
+    world.step(1)
+    _, velocity, effort = world.joint_states(joint)
+    assert velocity[0] == pytest.approx(-10.0, rel=1e-6) and -300.0 <= effort[0] < 0.0
+
+
+def test_a_trajectory_is_followed_within_a_degree(run):
+    """A joint_trajectory_controller-style trajectory (positions and velocities at 0.1 s) of a
+    sine at 0.5 Hz on every joint, followed on the simulation's clock in the node's batches."""
+    runtime, sink = run({"version": 1, "robots": [{"name": "kuka", "urdf": KUKA}]})
+    amplitude, omega = 0.4, 2 * math.pi * 0.5
+    times = np.arange(1, 41) * 0.1
+    points = [(t, [amplitude * math.sin(omega * t)] * 7, [amplitude * omega * math.cos(omega * t)] * 7) for t in times]
+    start = runtime.sim.snapshot.time + 1.0  # the header's stamp: it starts then, held till then
+    first = [(0.5, [0.0] * 7, [0.0] * 7)] + [(t + 0.5, p, v) for t, p, v in points]
+    runtime.inputs.handle("joint_trajectory", trajectory(ARM_JOINTS, first, stamp=start), "/joint_trajectory")
+    advance(runtime, 6.0)
+    errors = []
+    for seconds, state in sink.of("/joint_states", JOINT_STATE):
+        t = seconds - start - 0.5
+        if 0.5 <= t <= 4.0:  # past the first second of the sine's velocity jump from rest
+            errors.append(np.abs(np.array(state.position) - amplitude * math.sin(omega * t)).max())
+    assert len(errors) > 50
+    assert max(errors) < math.radians(1.0)
+    final = latest(sink, "/joint_states")
+    assert np.allclose(final.position, points[-1][1], atol=math.radians(0.2))  # held at the last point
+
+
+def test_the_husky_drives_a_commanded_circle_and_its_wheel_odometry_follows(run):
+    """cmd_vel on the Husky's namespace, Clearpath's controller settings: 0.5 m/s at 0.2 rad/s is
+    a 2.5 m circle; its wheel odometry (odom -> base_footprint) keeps near the truth."""
+    runtime, sink = run()
+    runtime.inputs.handle("cmd_vel", NS(linear=NS(x=0.5, y=0.0, z=0.0), angular=NS(x=0.0, y=0.0, z=0.2)),
+                          "/husky/cmd_vel")
+    advance(runtime, 3.0)
+    positions = []
+    start = runtime.sim.snapshot.time
+    while runtime.sim.snapshot.time < start + 32.0:  # a whole circle
+        snap = runtime.sim.snapshot
+        positions.append(snap.state["positions"][snap.names.index("husky.base_footprint")][:2].copy())
+        advance(runtime, 0.25)
+    points = np.array(positions)
+    a = np.c_[2 * points, np.ones(len(points))]
+    cx, cy, k = np.linalg.lstsq(a, (points ** 2).sum(axis=1), rcond=None)[0]
+    radius = math.sqrt(k + cx * cx + cy * cy)
+    assert radius == pytest.approx(2.5, rel=0.03)
+    assert np.std(np.hypot(points[:, 0] - cx, points[:, 1] - cy)) < 0.05  # a circle, not a spiral
+    runtime.sim.stop()
+    runtime.stop()  # the last state goes out: odometry and the snapshot at one time
+    odometry = latest(sink, "/husky/odom", ODOMETRY)
+    snap = runtime.sim.snapshot
+    assert odometry.header.stamp.sec + 1e-9 * odometry.header.stamp.nanosec == pytest.approx(snap.time, abs=1e-6)
+    assert (odometry.header.frame_id, odometry.child_frame_id) == ("husky/odom", "husky/base_footprint")
+    assert odometry.twist.twist.linear.x == pytest.approx(0.5, rel=0.05)
+    assert odometry.twist.twist.angular.z == pytest.approx(0.2, rel=0.05)
+    truth = snap.state["positions"][snap.names.index("husky.base_footprint")]
+    pose = odometry.pose.pose.position
+    assert math.hypot(pose.x - truth[0], pose.y - truth[1]) < 0.1 * 2 * math.pi * 2.5  # within 10 % of the way
+
+
+def test_robots_spawn_and_go_whole(run, tmp_path):
+    runtime, sink = run({"version": 1, "bodies": [{"name": "crate", "position": [5, 5, 0.5]}]})
+    requests = runtime.requests
+    requests.scene_directories = [os.path.dirname(os.path.dirname(KUKA))]
+    ok, message = requests.spawn(yaml.safe_dump({"name": "arm", "urdf": KUKA, "position": [1, 0, 0]}))
+    assert ok, message
+    assert requests.spawn(yaml.safe_dump({"name": "arm", "urdf": KUKA}))[1].startswith("NAME_NOT_UNIQUE")
+    # The description as text: its meshes by absolute path (relative ones have no folder to start from).
+    text = open(KUKA).read().replace('filename="meshes/', f'filename="{os.path.dirname(KUKA)}/meshes/')
+    ok, message = requests.spawn(yaml.safe_dump({"name": "arm", "urdf": text, "position": [-1, 0, 0],
+                                                 "allow_renaming": True}))
+    assert (ok, message) == (True, "RESULT_OK: arm_2")
+    robots = {r["name"]: r["namespace"] for r in runtime.sim.world.robot_specs}
+    assert robots == {"arm": "", "arm_2": "arm_2"}
+    assert wait_for(lambda: "/arm_2/joint_commands" in runtime.inputs.robot_inputs())
+    assert wait_for(lambda: sink.of("/arm_2/robot_description"))
+    (tmp_path / "robot.urdf").write_text(text)
+    outside = requests.spawn(yaml.safe_dump({"name": "other", "urdf": str(tmp_path / "robot.urdf")}))
+    assert not outside[0] and "outside the allowed directories" in outside[1]
+    ok, message = requests.remove(yaml.safe_dump({"entity": "arm_2"}))
+    assert ok and "arm_2.lbr_iiwa_link_7" in message
+    assert [r["name"] for r in runtime.sim.world.robot_specs] == ["arm"]
+    assert not any(name.startswith("arm_2.") for name in runtime.sim.world.body_names())
+    assert wait_for(lambda: "/arm_2/joint_commands" not in runtime.inputs.robot_inputs())
+    saved = world_to_scene(runtime.sim.world)
+    assert [r["name"] for r in saved["robots"]] == ["arm"]
+
+
+@pytest.mark.parametrize("robot, message", [
+    ({"joints": ["lbr_iiwa_joint_1", "elbow"]}, "robots[0].joints: 'elbow' is no revolute"),
+    ({"drive": {**HUSKY_DRIVE, "left_wheel_names": ["lbr_iiwa_joint_1"], "right_wheel_names": ["x"]}},
+     "robots[0].drive.right_wheel_names: 'x' is no revolute or continuous joint"),
+    ({"drive": {"left_wheel_names": ["a"], "right_wheel_names": ["b"], "wheel_radius": 0.1}},
+     "robots[0].drive.wheel_separation: missing"),
+    ({"namespace": "a b"}, "robots[0].namespace: 'a b' is not a relative ROS namespace"),
+])
+def test_bad_robot_entries_are_refused_naming_the_key(robot, message):
+    with pytest.raises(SceneError, match=re.escape(message)):
+        load_world({"version": 1, "robots": [{"name": "kuka", "urdf": KUKA, **robot}]})
+
+
+def test_a_robot_may_not_take_a_namespace_that_is_taken():
+    with pytest.raises(SceneError, match="robots\\[1\\].namespace: 'left' is the namespace of a already"):
+        load_world({"version": 1, "robots": [{"name": "a", "urdf": KUKA, "namespace": "left"},
+                                             {"name": "b", "urdf": KUKA, "namespace": "left", "position": [2, 0, 0]}]})
