@@ -256,7 +256,7 @@ def test_the_standard_services_are_offered_with_their_types(client):
     the same handlers: its definitions from the vendored package where it is not installed."""
     assert client.services["/spawn_entity"]["type"] == "simulation_interfaces/srv/SpawnEntity"
     features = client.call("/get_simulator_features", {}).features
-    assert 0 in features.features and list(features.spawn_formats) == ["yaml"]
+    assert 0 in features.features and list(features.spawn_formats) == ["yaml", "urdf"]
     spawned = client.call("/spawn_entity", {"name": "si_crate", "resource_string": "{shape: box, size: [0.4, 0.4, 0.4]}",
                                             "initial_pose": {"pose": {"position": {"x": 3.0, "y": 6.0, "z": 2.0},
                                                                       "orientation": {"w": 1.0}}}})

@@ -299,7 +299,7 @@ def test_scene_services(ros):
     assert ros.call(SetBool, f"{NS}/set_freezing", SetBool.Request(data=True)).success
     assert ros.node.get_parameter("freezing.enabled").value is True
     features = ros.call(Trigger, f"{NS}/get_simulator_features", Trigger.Request())
-    assert features.success and "spawn_formats: [yaml]" in features.message
+    assert features.success and "spawn_formats: [yaml, urdf]" in features.message
     ros.text("spawn", "{name: temporary}")
     ros.set_parameter("reset_scope", 4, ParameterType.PARAMETER_INTEGER)
     assert ros.call(Trigger, f"{NS}/reset", Trigger.Request()).success

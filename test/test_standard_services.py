@@ -77,7 +77,7 @@ def test_features_name_only_what_is_served(ros):
     assert not listed & {SimulatorFeatures.ENTITY_TAGS, SimulatorFeatures.ENTITY_BOUNDS_CONVEX,
                          SimulatorFeatures.NAMED_POSES, SimulatorFeatures.SPAWNABLES,
                          SimulatorFeatures.ENTITY_INFO_SETTING, SimulatorFeatures.WORLD_TAGS}
-    assert list(features.spawn_formats) == ["yaml"]
+    assert list(features.spawn_formats) == ["yaml", "urdf"]
 
 
 def test_spawn_entity_and_its_result_codes(ros):
@@ -94,8 +94,10 @@ def test_spawn_entity_and_its_result_codes(ros):
     assert spawn(ros, "", allow_renaming=True).result.result == OK
     assert spawn(ros, "nothing", resource="").result.result == SpawnEntity.Response.NO_RESOURCE
     assert spawn(ros, "broken", resource="{shape: [").result.result == SpawnEntity.Response.RESOURCE_PARSE_ERROR
-    urdf = spawn(ros, "robot", resource="<robot name='r'><link name='a'/></robot>")
-    assert urdf.result.result == SpawnEntity.Response.UNSUPPORTED_FORMAT
+    urdf = spawn(ros, "robot", resource="<robot name='r'><link name='a'/></robot>")  # a body needs a shape
+    assert urdf.result.result == SpawnEntity.Response.UNSUPPORTED_ASSETS and "link 'a'" in urdf.result.error_message
+    unreadable = spawn(ros, "robot", resource="<robot name='r'><link name='a'></robot>")
+    assert unreadable.result.result == SpawnEntity.Response.RESOURCE_PARSE_ERROR
     far = call(ros, SpawnEntity, "spawn_entity", name="far", resource_string=BOX, initial_pose=pose(1e7, 0, 0))
     assert far.result.result == SpawnEntity.Response.INVALID_POSE
     unknown_frame = call(ros, SpawnEntity, "spawn_entity", name="lost", resource_string=BOX,
@@ -466,3 +468,51 @@ def test_long_requests_beyond_the_limit_are_refused_at_once(ros):
         ros.client.destroy_client(client)
     finally:
         ros.node._aside_slots = slots
+
+
+def test_a_urdf_robot_spawned_through_the_standard_service_is_a_ros_robot(ros):
+    """SpawnEntity with a URDF (resource_string) and an entity_namespace: the robot is one
+    entity (state, move, delete), publishes joint_states and a latched robot_description under
+    its namespace, and obeys a JointState on its joint_commands, over real ROS topics."""
+    pybullet_data = pytest.importorskip("pybullet_data")
+    from rclpy.qos import DurabilityPolicy, QoSProfile
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import String
+    folder = f"{pybullet_data.getDataPath()}/kuka_iiwa"
+    text = open(f"{folder}/model.urdf").read().replace('filename="meshes/', f'filename="{folder}/meshes/')
+    reply = call(ros, SpawnEntity, "spawn_entity", name="si_arm", resource_string=text, entity_namespace="/cell/arm",
+                 initial_pose=pose(-8.0, -8.0, 0.0))
+    assert reply.result.result == OK, reply.result.error_message
+    assert reply.entity_name == "si_arm"
+    try:
+        play(ros)
+        got = call(ros, GetEntityState, "get_entity_state", entity="si_arm")
+        assert got.result.result == OK and got.state.pose.position.x == pytest.approx(-8.0, abs=1e-6)
+        info = call(ros, GetEntityInfo, "get_entity_info", entity="si_arm")
+        assert info.info.category.category == EntityCategory.CATEGORY_ROBOT
+        assert "si_arm" in call(ros, GetEntities, "get_entities").entities
+        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        descriptions = []
+        ros.client.create_subscription(String, "/cell/arm/robot_description", descriptions.append, latched)
+        ros.listen(JointState, "/cell/arm/joint_states")
+        publisher = ros.client.create_publisher(JointState, "/cell/arm/joint_commands", 10)
+        assert wait_for(lambda: publisher.get_subscription_count() > 0)
+        target = [0.0, 0.4, 0.0, -0.8, 0.0, 0.5, 0.0]
+        command = JointState(name=[f"lbr_iiwa_joint_{k}" for k in range(1, 8)], position=target)
+
+        def holding():
+            publisher.publish(command)
+            latest = ros.latest.get("/cell/arm/joint_states")
+            return latest is not None and max(abs(a - b) for a, b in zip(latest.position, target)) < 2e-3
+        assert wait_for(holding, timeout=30)
+        assert descriptions and "lbr_iiwa_link_7" in descriptions[-1].data
+        moved = EntityState(pose=pose(-6.0, -8.0, 0.0).pose)
+        assert call(ros, SetEntityState, "set_entity_state", entity="si_arm", state=moved).result.result == OK
+        got = call(ros, GetEntityState, "get_entity_state", entity="si_arm")
+        assert got.state.pose.position.x == pytest.approx(-6.0, abs=1e-3)  # moved whole, its joints as they were
+        latest = ros.latest["/cell/arm/joint_states"]
+        assert max(abs(a - b) for a, b in zip(latest.position, target)) < 5e-3
+    finally:
+        assert call(ros, DeleteEntity, "delete_entity", entity="si_arm").result.result == OK
+    assert call(ros, GetEntityState, "get_entity_state", entity="si_arm").result.result == NOT_FOUND
+    assert wait_for(lambda: publisher.get_subscription_count() == 0)  # its command topics dropped with it

@@ -7,6 +7,7 @@ Every handler maps the standard request onto the same Requests handler as the YA
 (api/), so validation, limits and what changes are one code path; the reply's code becomes the
 standard's number for that service (Result.result), its text the error_message.
 """
+import re
 import time
 from pathlib import Path
 
@@ -71,6 +72,19 @@ def plain_pose(pose):
             "orientation": [pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w]}
 
 
+def is_urdf(uri, text):
+    """A URDF (or xacro) robot description rather than this package's YAML entity spec."""
+    if uri:
+        return uri.lower().endswith((".urdf", ".xacro"))
+    return text.lstrip().startswith("<")
+
+
+def robot_name(text):
+    """A spawned robot's name when the request gives none: its description's, as a name may be."""
+    found = re.search(r"<robot\b[^>]*\bname\s*=\s*[\"']([^\"']+)", text)
+    return re.sub(r"[^A-Za-z0-9_.-]", "_", found.group(1))[:64] if found else "robot"
+
+
 def resource_of(request, resource="entity_resource"):
     """(uri, resource_string) of a 1.x request (fields of its own) or a 2.x one (a Resource)."""
     if hasattr(request, resource):
@@ -128,7 +142,7 @@ class StandardServices:
     def features(self, _request):
         return {"features": {
             "features": self.requests.honoured_features(), "spawn_formats": SPAWN_FORMATS,
-            "custom_info": "vplayground_ros: resource_string and uri hold this package's YAML entity spec (spawn) "
+            "custom_info": "vplayground_ros: resource_string and uri hold this package's YAML entity spec or a URDF (spawn) "
                            "or scene (load_world); see its README"}}
 
     # ------------------------------------------------------------------ entities
@@ -162,10 +176,15 @@ class StandardServices:
             text = self._read_resource(uri)
         elif not text:
             raise RequestError(NO_RESOURCE, "both uri and resource_string are empty")
-        try:
-            spec = parse(text, "resource_string" if not uri else uri)
-        except RequestError as error:
-            raise RequestError(RESOURCE_PARSE_ERROR, str(error).partition(": ")[2]) from None
+        if is_urdf(uri, text):  # a robot description: the file's path (confined above), or the text
+            spec = {"urdf": str(local_path(uri)) if uri else text}
+            if not request.name:
+                spec["name"] = robot_name(text)
+        else:
+            try:
+                spec = parse(text, "resource_string" if not uri else uri)
+            except RequestError as error:
+                raise RequestError(RESOURCE_PARSE_ERROR, str(error).partition(": ")[2]) from None
         if not isinstance(spec, dict):
             raise RequestError(UNSUPPORTED_FORMAT, f"the resource is {type(spec).__name__}, not this package's "
                                                      "YAML entity spec (a mapping: shape, size, mass...; spawn_formats "
@@ -183,9 +202,9 @@ class StandardServices:
             if not valid_namespace(namespace):
                 raise RequestError("NAMESPACE_INVALID", f"entity_namespace: {specs.quote(namespace)} is not a ROS "
                                                         "namespace (letters, digits, _ and /)")
-            if "wheels" not in spec and "chassis" not in spec:
-                raise RequestError(FAILED, "entity_namespace: only a vehicle has interfaces to "
-                                                              "put under a namespace")
+            if "wheels" not in spec and "chassis" not in spec and "urdf" not in spec:
+                raise RequestError(FAILED, "entity_namespace: only a vehicle or a URDF robot has interfaces to "
+                                           "put under a namespace")
             spec["namespace"] = namespace.strip("/")
         pose = request.initial_pose
         frame = str(pose.header.frame_id)

@@ -40,6 +40,14 @@ class UrdfError(ValueError):
     """A robot description that cannot be loaded: the message names the file and what is wrong."""
 
 
+class UnreadableUrdf(UrdfError):
+    """Not a description at all: unreadable XML, a file that is not there, xacro failing."""
+
+
+class MissingMesh(UrdfError):
+    """A mesh the description names is not found."""
+
+
 def read_description(source, label):
     """The URDF text of `source` (a path, or the text itself when it starts with '<'), xacro
     expanded. Returns (text, folder relative paths are taken from)."""
@@ -50,7 +58,7 @@ def read_description(source, label):
         try:
             text = path.read_text(encoding="utf-8")
         except OSError as error:
-            raise UrdfError(f"{label}: cannot read it: {error.strerror or error}") from None
+            raise UnreadableUrdf(f"{label}: cannot read it: {error.strerror or error}") from None
         folder = path.resolve().parent
     if Path(str(source)).suffix == ".xacro" or re.search(r"\$[({]", text):
         text = expand_xacro(text, label)
@@ -68,7 +76,7 @@ def expand_xacro(text, label):
         document = parseString(text)
         xacro.process_doc(document)
     except Exception as error:  # xacro raises its own and the XML parser's errors
-        raise UrdfError(f"{label}: xacro could not expand it: {error}") from None
+        raise UnreadableUrdf(f"{label}: xacro could not expand it: {error}") from None
     return document.toxml()
 
 
@@ -79,7 +87,7 @@ def parse(text, label):
         return yourdfpy.URDF.load(StringIO(text), build_scene_graph=False, load_meshes=False,
                                   load_collision_meshes=False).robot
     except Exception as error:  # yourdfpy raises what its XML and number parsing raise
-        raise UrdfError(f"{label}: not a URDF robot yourdfpy can read: {error}") from None
+        raise UnreadableUrdf(f"{label}: not a URDF robot yourdfpy can read: {error}") from None
 
 
 def origin(element):
@@ -108,7 +116,7 @@ def resolve_mesh_file(filename, folder, label, link):
     for candidate in candidates:
         if candidate.is_file():
             return candidate
-    raise UrdfError(f"{label}: link {link!r}: mesh {filename!r} not found (looked in "
+    raise MissingMesh(f"{label}: link {link!r}: mesh {filename!r} not found (looked in "
                     f"{', '.join(str(c) for c in candidates) or 'no package folder'})")
 
 

@@ -51,3 +51,39 @@ def describe_sensor(world, spec):
         "shape": "box",
         "bounds": {"size": [SENSOR_SIZE] * 3},
     }
+
+
+def robot_named(world, name):
+    """The world.robot_specs entry of the URDF robot `name`, or None."""
+    return next((r for r in world.robot_specs if r["name"] == name), None)
+
+
+def describe_robot(world, spec):
+    """A URDF robot as plain data, like describe(): its root link's pose and twist, the mass of
+    all its links, frozen when all are, its entry as properties (without the loaded model) and
+    the box around its links' boxes in the root's frame."""
+    root = world.body(spec["bodies"][0])
+    to_root = np.linalg.inv(pose_matrix(root["position"], root["quaternion"]))
+    corners, mass, frozen = [], 0.0, True
+    for name in spec["bodies"]:
+        link = describe(world, name)
+        mass += link["mass"]
+        frozen = frozen and link["frozen"]
+        frame = to_root @ pose_matrix(link["pose"]["position"], link["pose"]["orientation"])
+        half = 0.5 * np.asarray(link["bounds"]["size"])
+        for signs in np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T:
+            corners.append(frame[:3, :3] @ (signs * half) + frame[:3, 3])
+    corners = np.array(corners)
+    half = np.maximum(np.abs(corners.min(axis=0)), np.abs(corners.max(axis=0)))  # about the root's frame
+    return {
+        "name": spec["name"],
+        "category": "robot",
+        "frame": "world",
+        "pose": {"position": root["position"], "orientation": root["quaternion"]},
+        "twist": {"linear": root["linear_velocity"], "angular": root["angular_velocity"]},
+        "mass": mass,
+        "frozen": frozen,
+        "properties": {key: value for key, value in spec.items() if key not in ("model", "limits")},
+        "shape": "urdf",
+        "bounds": {"size": (2.0 * half).tolist()},
+    }

@@ -6,22 +6,25 @@ cameras' optical frames). A pose's frame_id may be any frame the node publishes 
 import logging
 from pathlib import Path
 
+import numpy as np
 import yaml
 
 from ..broadcast import check_sensors
 from ..frame_names import node_frames, sensor_frames, sensor_frames_taken
 from ..physics import specs
+from ..physics.math3d import matrix_to_quaternion
 from ..physics.world import prepare_body
 from ..robots import validate_robot, world_robots
 from ..scene import body_mesh_points, resolve_mesh
-from ..sensors import TYPES as SENSOR_TYPES, validate_sensor
+from ..sensors import TYPES as SENSOR_TYPES, pose_matrix, validate_sensor
 from ..urdf_robots import add_robot_entry, check_against_model, validate_entry
-from .descriptions import describe, describe_sensor
+from .descriptions import describe, describe_robot, describe_sensor, robot_named
 from .frames import frame_pose, pose_in_world
 from .name_filter import MAX_FILTER, match_names
 from .naming import unique_name
 from .payload import YAML_DUMPER, as_mapping, header_frame, parse, pose_fields, xyz
-from .results import FAILED, INVALID_POSE, NAME_NOT_UNIQUE, NOT_FOUND, OK, RequestError, handled, reply
+from .results import (FAILED, INVALID_POSE, MISSING_ASSETS, NAME_NOT_UNIQUE, NOT_FOUND, OK, RESOURCE_PARSE_ERROR,
+                      UNSUPPORTED_ASSETS, RequestError, handled, reply)
 
 log = logging.getLogger(__name__)
 
@@ -119,7 +122,7 @@ class EntityRequests:
     def _prepare_robot(self, item, path, frame):
         """(entry, RobotModel) of a URDF robot to spawn: `urdf` a file (found as a mesh is, in
         the scene directories) or the description's text; placed in the world frame."""
-        from ..urdf_import import UrdfError, robot_model
+        from ..urdf_import import MissingMesh, UnreadableUrdf, UrdfError, robot_model
         if frame and frame != self.frames().world:
             raise RequestError(INVALID_POSE, f"{path}.initial_pose.header.frame_id: a robot is placed in the world "
                                              f"frame ({self.frames().world!r} or empty), not {specs.quote(frame)}")
@@ -134,7 +137,9 @@ class EntityRequests:
                                 entry.get("self_collide", False), entry["joint_positions"],
                                 label=f"{path}.urdf", quaternion=fields.get("quaternion"))
         except UrdfError as error:
-            raise RequestError(FAILED, str(error)) from None
+            code = (MISSING_ASSETS if isinstance(error, MissingMesh) else
+                    RESOURCE_PARSE_ERROR if isinstance(error, UnreadableUrdf) else UNSUPPORTED_ASSETS)
+            raise RequestError(code, str(error)) from None
         check_against_model(entry, model, path)
         entry.update({key: fields[key] for key in ("position", "rpy", "quaternion") if key in fields})
         return entry, model
@@ -295,6 +300,9 @@ class EntityRequests:
 
     @staticmethod
     def _edit(world, name, label, fields, vehicle_edit, frame, stamped, frames):
+        robot = robot_named(world, name)
+        if robot is not None:
+            return EntityRequests._move_robot(world, robot, label, fields, vehicle_edit, frame, stamped, frames)
         if name not in world.body_names():
             raise RequestError(NOT_FOUND, f"no entity named {label}")
         if vehicle_edit is not None and name not in world.vehicle_names():
@@ -311,6 +319,40 @@ class EntityRequests:
         if vehicle_edit:
             world.edit_vehicle(name, **vehicle_edit)
         return reply(OK, f"edited {name}: {', '.join(sorted(fields) + (['vehicle'] if vehicle_edit else []))}")
+
+    @staticmethod
+    def _move_robot(world, robot, label, fields, vehicle_edit, frame, stamped, frames):
+        """A URDF robot's pose and twist: every link moved as one rigid body with its root (its
+        joints stay as they are); its links' other keys are edited one by one by their names."""
+        other = sorted(set(fields) - stamped) + (["vehicle"] if vehicle_edit is not None else [])
+        if other:
+            raise RequestError(FAILED, f"{label}.{other[0]}: a robot takes a pose and a twist; edit its links "
+                                       f"({robot['bodies'][0]}, ...) for anything else")
+        if frame:
+            fields = in_world(world, frame, fields, "edit.state", frames)
+        root = world.body(robot["bodies"][0])
+        old = pose_matrix(root["position"], root["quaternion"])
+        new = pose_matrix(fields.get("position", root["position"]), fields.get("quaternion", root["quaternion"]))
+        check_inside(world, new[:3, 3].tolist(), f"{label}.position")
+        move = new @ np.linalg.inv(old)
+        linear, angular = fields.get("linear_velocity"), fields.get("angular_velocity")
+        if (linear is not None and any(linear) or angular is not None and any(angular)) and root["immovable"]:
+            raise RequestError(FAILED, f"{label}.twist: its base is fixed (immovable)")
+        edits = {}
+        for body in robot["bodies"]:
+            link = world.body(body)
+            placed = move @ pose_matrix(link["position"], link["quaternion"])
+            edit = {"position": placed[:3, 3].tolist(), "quaternion": matrix_to_quaternion(placed[:3, :3]).tolist()}
+            if linear is not None or angular is not None:
+                spin = np.asarray(angular if angular is not None else root["angular_velocity"], float)
+                base = np.asarray(linear if linear is not None else root["linear_velocity"], float)
+                if not link["immovable"]:
+                    edit["linear_velocity"] = (base + np.cross(spin, placed[:3, 3] - new[:3, 3])).tolist()
+                    edit["angular_velocity"] = spin.tolist()
+            edits[body] = edit
+        for body, edit in edits.items():
+            world.edit_body(body, **edit)
+        return reply(OK, f"edited {robot['name']}: {', '.join(sorted(fields))}")
 
     @staticmethod
     def _edit_sensor(world, name, fields, frames):
@@ -393,6 +435,9 @@ class EntityRequests:
             sensor = sensor_named(world, name)
             if sensor is not None and (sensor["parent"] == "world" or sensor["parent"] in world.body_names()):
                 return describe_sensor(world, sensor)
+            robot = robot_named(world, name)
+            if robot is not None:
+                return describe_robot(world, robot)
             if name not in world.body_names():
                 raise RequestError(NOT_FOUND, f"no entity named {specs.quote(name)}")
             return describe(world, name)

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..physics import specs
 from ..physics.math3d import quaternions_to_matrices
-from .descriptions import SENSOR_SIZE, describe, describe_sensor
+from .descriptions import SENSOR_SIZE, describe, describe_robot, describe_sensor, robot_named
 from .name_filter import match_names
 from .results import FAILED, FEATURE_UNSUPPORTED, NOT_FOUND, RequestError
 
@@ -48,8 +48,18 @@ def entity_table(world):
         reach = np.vstack([reach, np.full((len(sensors), 3), 0.5 * SENSOR_SIZE)])
         linear = np.vstack([linear, np.zeros((len(sensors), 3))])
         angular = np.vstack([angular, np.zeros((len(sensors), 3))])
-    return EntityTable(names, categories, positions - reach, positions + reach, positions, quaternions,
-                       linear, angular, world.time)
+    low, high = positions - reach, positions + reach
+    if world.robot_specs:  # each URDF robot too: its root's state, the box around its links
+        rows = {name: k for k, name in enumerate(names)}
+        links = [[rows[body] for body in robot["bodies"]] for robot in world.robot_specs]
+        roots = [link[0] for link in links]
+        names = names + [robot["name"] for robot in world.robot_specs]
+        categories = np.concatenate([categories, np.full(len(links), ROBOT)])
+        low = np.vstack([low, [low[link].min(axis=0) for link in links]])
+        high = np.vstack([high, [high[link].max(axis=0) for link in links]])
+        positions, quaternions = np.vstack([positions, positions[roots]]), np.vstack([quaternions, quaternions[roots]])
+        linear, angular = np.vstack([linear, linear[roots]]), np.vstack([angular, angular[roots]])
+    return EntityTable(names, categories, low, high, positions, quaternions, linear, angular, world.time)
 
 
 def filtered(table, pattern="", categories=(), tags=(), bounds_type=BOUNDS_EMPTY, points=()):
@@ -114,6 +124,9 @@ class QueryRequests:
             sensor = next((s for s in world.sensor_specs if s["name"] == name), None)
             if sensor is not None and (sensor["parent"] == "world" or sensor["parent"] in world.body_names()):
                 return {**describe_sensor(world, sensor), "time": world.time}
+            robot = robot_named(world, name)
+            if robot is not None:
+                return {**describe_robot(world, robot), "time": world.time}
             if name not in world.body_names():
                 raise RequestError(NOT_FOUND, f"no entity named {specs.quote(name)}")
             return {**describe(world, name), "time": world.time}
@@ -122,4 +135,4 @@ class QueryRequests:
 
 def category_of(description):
     """EntityCategory of a describe() or describe_sensor() result."""
-    return {"vehicle": ROBOT, "immovable": STATIC_OBJECT}.get(description["category"], OBJECT)
+    return {"vehicle": ROBOT, "robot": ROBOT, "immovable": STATIC_OBJECT}.get(description["category"], OBJECT)

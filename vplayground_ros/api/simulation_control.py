@@ -52,7 +52,7 @@ SIMULATOR_FEATURES = {
     "AVAILABLE_WORLDS": 45,          # get_available_worlds: the scene files of scene_directories
     "SPAWNING_ENTITIES": 50,         # ~/spawn with a list, spawn_entities
 }
-SPAWN_FORMATS = ["yaml"]  # this package's entity spec (README, "Scene files"); URDF comes with robots
+SPAWN_FORMATS = ["yaml", "urdf"]  # this package's entity spec (README, "Scene files"), and robot descriptions
 QUIT_DELAY = 0.5  # s from SetSimulationState QUITTING's reply to the end of the run
 MAX_STEPS = 1_000_000  # steps one ~/step may queue (~2 h of simulated time at 128 Hz)
 
