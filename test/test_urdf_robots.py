@@ -271,3 +271,10 @@ def test_a_robot_may_not_take_a_namespace_that_is_taken():
     with pytest.raises(SceneError, match="robots\\[1\\].namespace: 'left' is the namespace of a already"):
         load_world({"version": 1, "robots": [{"name": "a", "urdf": KUKA, "namespace": "left"},
                                              {"name": "b", "urdf": KUKA, "namespace": "left", "position": [2, 0, 0]}]})
+
+
+def test_a_sensor_may_not_publish_on_a_urdf_robots_topic():
+    imu = {"name": "imu", "type": "imu", "parent": "kuka.lbr_iiwa_link_7", "topic": "joint_states"}
+    with pytest.raises(SceneError, match="/joint_states is kuka's joint_states already"):
+        load_world({"version": 1, "robots": [{"name": "kuka", "urdf": KUKA}], "sensors": [imu]})
+    load_world({"version": 1, "robots": [{"name": "kuka", "urdf": KUKA}], "sensors": [{**imu, "topic": "arm_imu"}]})

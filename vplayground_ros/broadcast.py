@@ -848,14 +848,14 @@ def drove(tracker, truth, velocity, seconds):
     return float(np.linalg.norm(np.subtract(truth[0], tracker.position))) <= reach
 
 
-def check_sensors(sensor_specs, robots):
-    """The sensors' topics and frames against each other's, the robots' and the node's
-    (SpecError naming the sensor's key)."""
-    check_sensor_topics(sensor_specs, robots)
+def check_sensors(sensor_specs, robots, robot_specs=()):
+    """The sensors' topics and frames against each other's, the robots' (vehicles; URDF robots
+    in `robot_specs`, World.robot_specs) and the node's (SpecError naming the sensor's key)."""
+    check_sensor_topics(sensor_specs, robots, robot_specs)
     check_sensor_frames(sensor_specs, robots)
 
 
-def check_sensor_topics(sensor_specs, robots):
+def check_sensor_topics(sensor_specs, robots, robot_specs=()):
     """Refuses a sensor whose topic another sensor, a robot or the node publishes on, or the node
     subscribes to (a second type on one name: the node's /tf with an Imu in it), naming both;
     `robots`: robots.Robot of the world's vehicles. Names compared as the root namespace
@@ -867,6 +867,12 @@ def check_sensor_topics(sensor_specs, robots):
     for r in robots:
         taken.update({t.name: f"{r.name}'s {which}" for which, t in robot_topics(r).items()})
         taken[resolve(r.topic("cmd_vel"))] = f"{r.name}'s cmd_vel"
+    from .inputs import URDF_ROBOT_INPUTS
+    for spec in robot_specs:
+        prefix = f"{spec['namespace']}/" if spec["namespace"] else ""
+        suffixes = ["joint_states", "robot_description", *(s.name for s in URDF_ROBOT_INPUTS)]
+        suffixes += ["cmd_vel", "odom"] if spec.get("drive") else []
+        taken.update({resolve(prefix + suffix): f"{spec['name']}'s {suffix}" for suffix in suffixes})
     carriers = {robot.name: robot for robot in robots}
     for spec in sensor_specs:
         for topic in sensor_messages.topics(spec, carriers.get(spec["parent"])):

@@ -407,7 +407,7 @@ def load_world(path_or_dict, max_bodies=None, directories=None, frames=DEFAULT_F
             except ValueError as error:  # checks that need the world (e.g. inside its bounds)
                 raise SceneError(f"{label}: {error}") from None
     try:  # needs the robots' namespaces, which the World gave them
-        check_sensors(sensor_specs, world_robots(world, frames))
+        check_sensors(sensor_specs, world_robots(world, frames), world.robot_specs)
     except specs.SpecError as error:
         raise SceneError(f"{label}: sensors: {error}") from None
     world.sensor_specs = sensor_specs

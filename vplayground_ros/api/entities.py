@@ -210,7 +210,7 @@ class EntityRequests:
             for path, entry, model in robots:
                 added += add_robot_entry(world, entry, model, path)
             if sensors or added:  # with the robots' namespaces, which adding gave them
-                check_sensors([*world.sensor_specs, *sensors], world_robots(world, frames))
+                check_sensors([*world.sensor_specs, *sensors], world_robots(world, frames), world.robot_specs)
         except Exception:
             world.remove_bodies(added)  # all or nothing
             raise
@@ -373,7 +373,7 @@ class EntityRequests:
             clash = next((frame for frame in sensor_frames(edited) if frame in taken), None)
             if clash is not None:
                 raise RequestError(NAME_NOT_UNIQUE, f"{name}.frame_id: {specs.quote(clash)} is {taken[clash]}")
-        check_sensors([*others, edited], world_robots(world, frames))
+        check_sensors([*others, edited], world_robots(world, frames), world.robot_specs)
         world.sensor_specs = [edited if s is spec else s for s in world.sensor_specs]
         return reply(OK, f"edited {name}: {', '.join(sorted(set(fields) - {'name', 'type'}))}")
 
