@@ -34,6 +34,7 @@ TOPICS = {
     f"{NS}/car/command": "geometry_msgs/msg/TwistStamped", f"{NS}/car/markers": "visualization_msgs/msg/MarkerArray",
     f"{NS}/state": "std_msgs/msg/UInt8", f"{NS}/real_time_factor": "std_msgs/msg/Float64",
     "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray", "/robot_description": "std_msgs/msg/String",
+    f"{NS}/robots/visuals": "visualization_msgs/msg/MarkerArray",
 }
 SERVICES = {"spawn", "edit", "remove", "get_entity", "save_scene", "get_entities", "pause", "set_freezing",
             "step", "reset", "wake_all", "get_simulator_features", "load_scene"}

@@ -278,3 +278,32 @@ def test_a_sensor_may_not_publish_on_a_urdf_robots_topic():
     with pytest.raises(SceneError, match="/joint_states is kuka's joint_states already"):
         load_world({"version": 1, "robots": [{"name": "kuka", "urdf": KUKA}], "sensors": [imu]})
     load_world({"version": 1, "robots": [{"name": "kuka", "urdf": KUKA}], "sensors": [{**imu, "topic": "arm_imu"}]})
+
+
+def test_robots_are_drawn_by_their_visual_elements_locked_to_their_links(run):
+    """~/robots/visuals (latched) draws each link's <visual> (meshes as triangles, in the
+    description's colours) in the link's frame, frame-locked so /tf moves it; the robots' bodies
+    (their collision shapes) are left out of the bodies' markers."""
+    runtime, sink = run()
+    advance(runtime, 0.5)
+    runtime.sim.stop()
+    runtime.stop()
+    markers = latest(sink, "robot_visuals", decoder("visualization_msgs/msg/MarkerArray")).markers
+    drawn = [m for m in markers if m.action == 0]
+    robot = yourdfpy.URDF.load(KUKA, load_meshes=False, build_collision_scene_graph=False)
+    kuka = [m for m in drawn if m.header.frame_id.startswith("lbr_iiwa_link_")]
+    assert len(kuka) == sum(len(link.visuals) for link in robot.robot.links)
+    assert all(m.frame_locked and m.type == 11 and len(m.points) % 3 == 0 and m.ns == m.header.frame_id for m in kuka)
+    blue = {m.name: m.color.rgba for m in robot.robot.materials}["Blue"]
+    link_1 = next(m for m in kuka if m.header.frame_id == "lbr_iiwa_link_1")
+    assert [link_1.color.r, link_1.color.g, link_1.color.b, link_1.color.a] == pytest.approx(list(blue))
+    assert any(m.header.frame_id == "husky/front_left_wheel_link" for m in drawn)
+    body_markers = decoder("visualization_msgs/msg/MarkerArray")
+    for key in ("body_markers", "resting_markers"):
+        for _, message in sink.of(key, body_markers):
+            assert not [m for m in message.markers if m.action == 0 and m.id in robot_marker_ids(runtime)]
+
+
+def robot_marker_ids(runtime):
+    names = [body for spec in runtime.sim.world.robot_specs for body in spec["bodies"]]
+    return {runtime.broadcaster.marker_ids[name] for name in names if name in runtime.broadcaster.marker_ids}

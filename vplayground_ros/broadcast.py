@@ -34,6 +34,7 @@ TOPICS = [
     Topic("resting_markers", "~/bodies/resting_markers", "visualization_msgs/msg/MarkerArray", "latched"),
     Topic("poses", "~/bodies/poses", "geometry_msgs/msg/PoseArray", "reliable_1"),
     Topic("scene_markers", "~/scene/markers", "visualization_msgs/msg/MarkerArray", "latched"),
+    Topic("robot_visuals", "~/robots/visuals", "visualization_msgs/msg/MarkerArray", "latched"),
     Topic("contact_points", "~/contacts/points", "sensor_msgs/msg/PointCloud2", "reliable_1"),
     Topic("contact_markers", "~/contacts/markers", "visualization_msgs/msg/MarkerArray", "reliable_1"),
     Topic("transforms", "~/transforms", "geometry_msgs/msg/TransformStamped", "reliable_100"),
@@ -182,6 +183,7 @@ class Broadcaster:
         self._robot_topics = {}         # (robot name, namespace, ROBOT_TOPICS key) -> topic key
         self._carriers = frozenset()    # names of the bodies that carry sensors
         self._descriptions = {}         # robot_description topic key -> the URDF last sent
+        self._visuals_sent = ([], [])   # the URDF robots' frame prefixes and Visual lists last drawn
         self._sensor_topics = {}        # (sensor name, type, suffix) -> topic key
         self._sensor_job = Job("sensors", math.inf, self.publish_readings)  # errors counted like a job's
         self._jobs = {
@@ -410,6 +412,14 @@ class Broadcaster:
             current[key] = text
             if self._descriptions.get(key) != text:
                 self.send(key, messages.string(text), snapshot.time)
+        # The URDF robots' visual elements, locked to their link frames: sent when robots come
+        # or go (an empty message when the last goes).
+        drawn = [(r.prefix, spec["model"].visuals) for r, spec in zip(urdf_robots, snapshot.robot_specs)]
+        if [prefix for prefix, _ in drawn] != self._visuals_sent[0] or any(
+                a is not b for a, b in zip([v for _, v in drawn], self._visuals_sent[1])):
+            if drawn or self._visuals_sent[0]:
+                self.send("robot_visuals", messages.robot_visuals(snapshot.time, drawn), snapshot.time)
+            self._visuals_sent = ([prefix for prefix, _ in drawn], [v for _, v in drawn])
         for key in self._descriptions.keys() - current.keys():
             self.retract(key)
         self._descriptions = current

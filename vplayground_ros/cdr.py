@@ -295,12 +295,16 @@ def clock(seconds):
 def marker_array(seconds, frame, markers):
     """visualization_msgs/MarkerArray of markers given as dicts of Writer.marker's arguments
     (ns, marker_id, kind, action, pose, scale, rgba, frame_locked, points), all stamped
-    `seconds` in `frame`."""
+    `seconds`, in `frame` unless a marker names its own (its key "frame")."""
     stamp = split_stamp(seconds)
     w = Writer()
     w.u32(len(markers))
     for m in markers:
-        w.marker(stamp, frame, **m)
+        if "frame" in m:
+            m = dict(m)
+            w.marker(stamp, m.pop("frame"), **m)
+        else:
+            w.marker(stamp, frame, **m)
     return ENCAPSULATION + bytes(w.data)
 
 

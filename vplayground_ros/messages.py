@@ -218,14 +218,17 @@ class BodyMarkers:
     def layout(self, snapshot, ids):
         s = snapshot.state
         key = (snapshot.names, s["immovable"], s["shapes"], s["dimensions"], s["hull_triangles"], s["parts"], ids,
-               tuple(snapshot.vehicles))
+               snapshot.robot_specs, tuple(snapshot.vehicles))
         cached = self._layout
-        if cached is not None and all(a is b for a, b in zip(key[:7], cached.key[:7])) and key[7:] == cached.key[7:]:
+        if cached is not None and all(a is b for a, b in zip(key[:8], cached.key[:8])) and key[8:] == cached.key[8:]:
             if s["frozen"] is cached.frozen or np.array_equal(s["frozen"] | s["immovable"], cached.at_rest):
                 return cached
         at_rest = s["frozen"] | s["immovable"]
         drawn = at_rest.copy() if self.resting else ~at_rest
         drawn[[snapshot.names.index(name) for name in snapshot.vehicles]] = False
+        # A URDF robot with visual elements is drawn by them (~/<name>/visuals), not its bodies.
+        drawn[[snapshot.names.index(body) for robot in snapshot.robot_specs if robot["model"].visuals
+               for body in robot["bodies"]]] = False
         rows = np.nonzero(drawn)[0]
         kinds = categories(snapshot)[rows]
         picked = rows.tolist()
@@ -259,6 +262,22 @@ class BodyMarkers:
         markers = layout.markers
         return self.encoder.encode(snapshot.time, frame, layout.namespaces, markers.types, markers.ids,
                                    shape_marker_poses(markers, drawn), markers.scales, layout.colours, layout.points)
+
+
+VISUAL_KINDS = {"box": CUBE, "sphere": SPHERE, "cylinder": CYLINDER, "mesh": TRIANGLE_LIST}
+
+
+def robot_visuals(seconds, robots):
+    """The URDF robots' visual elements (urdf_import.Visual; `robots`: [(frame prefix, its
+    Visuals)]) as markers locked to their link frames: sent once, they follow the links as /tf
+    moves them. ns: the link's frame."""
+    markers = [DELETE_ALL]
+    for prefix, visuals in robots:
+        for k, v in enumerate(visuals):
+            m = marker(prefix + v.link, k, VISUAL_KINDS[v.kind], v.pose, v.size, v.rgba,
+                       points=None if v.triangles is None else v.triangles.reshape(-1, 3))
+            markers.append({**m, "frame_locked": True, "frame": prefix + v.link})
+    return marker_array(seconds, "", markers)
 
 
 def marker_array(seconds, frame, markers):

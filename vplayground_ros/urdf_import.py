@@ -12,6 +12,7 @@ A file is read with yourdfpy; xacro (`.xacro`, or `$(...)`/`${...}` in a .urdf) 
 when the xacro package is installed, else refused saying so. Everything is checked before the
 World is touched: what is wrong names the file and the link or joint.
 """
+import logging
 import math
 import os
 import re
@@ -30,10 +31,18 @@ from .scene import read_mesh
 # `self_collide`: whether its links collide with each other. `link_parents`: {link: its parent
 # link} (the root has none; parents before children); `joint_names`: {URDF name: the World's
 # joint} of the revolute, continuous and prismatic joints, in the description's order.
-RobotModel = namedtuple("RobotModel", "bodies joints link_frames description self_collide link_parents joint_names")
+RobotModel = namedtuple("RobotModel", "bodies joints link_frames description self_collide link_parents joint_names "
+                                       "visuals")
+# A link's visual element as it is drawn: `kind` box, sphere, cylinder or mesh; `pose` xyz + xyzw
+# in the link's frame; `size` the box's edges, (diameter, diameter, length) of a cylinder along
+# its z, a sphere's diameter thrice; a mesh's `triangles` (T, 3, 3) in the pose's frame; rgba.
+Visual = namedtuple("Visual", "link kind pose size triangles rgba")
+DEFAULT_RGBA = (0.7, 0.7, 0.72, 1.0)  # a visual without a colour (URDF says nothing of one)
+MAX_VISUAL_TRIANGLES = 400_000  # over a whole robot: beyond it meshes are left undrawn, with a warning
 
 JOINT_TYPES = {"revolute": "revolute", "continuous": "continuous", "prismatic": "prismatic"}
 MAX_LINKS = 256
+log = logging.getLogger(__name__)
 
 
 class UrdfError(ValueError):
@@ -314,9 +323,50 @@ def robot_model(source, name, position=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), fix
         except specs.SpecError as error:
             raise UrdfError(f"{label}: {error}") from None
         joint_names[joint.name] = spec["name"]
+    visuals = link_visuals(robot, folder, label)
     link_parents = {link: parent_joint[link].parent for link in order[1:]}
     joint_names = {joint.name: joint_names[joint.name] for joint in robot.joints if joint.name in joint_names}
-    return RobotModel(body_specs, joint_specs, link_frames, text, bool(self_collide), link_parents, joint_names)
+    return RobotModel(body_specs, joint_specs, link_frames, text, bool(self_collide), link_parents, joint_names,
+                      visuals)
+
+
+def link_visuals(robot, folder, label):
+    """Every link's <visual> elements as Visuals (what the node draws for the robot; collisions
+    are the bodies'). A visual is only a picture: one whose mesh is missing or unreadable is
+    left out with a warning, not refused."""
+    palette = {m.name: m.color.rgba for m in robot.materials if m.color is not None}
+    out, triangles = [], 0
+    for link in robot.links:
+        for visual in link.visuals:
+            geometry, pose = visual.geometry, origin(visual)
+            material = visual.material
+            rgba = (material.color.rgba if material is not None and material.color is not None
+                    else palette.get(material.name) if material is not None else None)
+            rgba = tuple(float(v) for v in (rgba if rgba is not None else DEFAULT_RGBA))
+            placed = [*pose[:3, 3].tolist(), *matrix_to_quaternion(pose[:3, :3]).tolist()]
+            if geometry.box is not None:
+                out.append(Visual(link.name, "box", placed, [float(v) for v in geometry.box.size], None, rgba))
+            elif geometry.sphere is not None:
+                out.append(Visual(link.name, "sphere", placed, [2.0 * float(geometry.sphere.radius)] * 3, None, rgba))
+            elif geometry.cylinder is not None:
+                d = 2.0 * float(geometry.cylinder.radius)
+                out.append(Visual(link.name, "cylinder", placed, [d, d, float(geometry.cylinder.length)], None, rgba))
+            elif geometry.mesh is not None:
+                try:
+                    path = resolve_mesh_file(geometry.mesh.filename, folder, label, link.name)
+                    vertices, faces = read_mesh(path, f"link {link.name!r} visual mesh")
+                except (UrdfError, ValueError) as error:
+                    log.warning("%s (the link is drawn without it)", error)
+                    continue
+                scale = geometry.mesh.scale if geometry.mesh.scale is not None else 1.0
+                mesh = np.asarray(vertices, dtype=np.float64)[np.asarray(faces)] * scale
+                triangles += len(mesh)
+                if triangles > MAX_VISUAL_TRIANGLES:
+                    log.warning("%s: more than %d visual triangles: link %r and the rest drawn without meshes",
+                                label, MAX_VISUAL_TRIANGLES, link.name)
+                    continue
+                out.append(Visual(link.name, "mesh", placed, [1.0, 1.0, 1.0], mesh, rgba))
+    return out
 
 
 def joint_motion(joint, value, label):
