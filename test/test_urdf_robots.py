@@ -17,7 +17,7 @@ from vplayground_ros.interfaces import decoder
 from vplayground_ros.runtime import Runtime
 from vplayground_ros.scene import SceneError, load_world, world_to_scene
 from vplayground_ros.simulation import Simulation
-from vplayground_ros.urdf_robots import RobotControl
+from vplayground_ros.urdf_robots import RobotControl, WheelOdometry, drive_joints
 from helpers import wait_for
 from test_broadcast import Collector
 from test_robots import chain, tree
@@ -33,6 +33,28 @@ ARM_JOINTS = [f"lbr_iiwa_joint_{k}" for k in range(1, 8)]
 HUSKY_DRIVE = {"left_wheel_names": ["front_left_wheel", "rear_left_wheel"],
                "right_wheel_names": ["front_right_wheel", "rear_right_wheel"],
                "wheel_separation": 0.555, "wheel_radius": 0.17775, "wheel_separation_multiplier": 1.875}
+# A small car with Ackermann steering, written here: steering hinges (revolute about z, each
+# with a small collision sphere inside its wheel) carry the front wheels; the rear ones drive.
+CAR_WHEEL = """
+  <link name="{name}"><inertial><mass value="0.5"/><inertia ixx="0.0013" iyy="0.0025" izz="0.0013" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><origin rpy="1.5707963 0 0"/><geometry><cylinder radius="0.1" length="0.05"/></geometry></collision></link>"""
+ACKERMANN_CAR = """<robot name="rc">
+  <link name="base_link"><inertial><mass value="10"/><inertia ixx="0.24" iyy="0.87" izz="1.04" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><geometry><box size="1.0 0.5 0.2"/></geometry></collision></link>""" + "".join(
+    CAR_WHEEL.format(name=f"{side}_{end}_wheel") for side in ("left", "right") for end in ("front", "rear")) + "".join(f"""
+  <link name="{side}_hinge"><inertial><mass value="0.1"/><inertia ixx="1e-4" iyy="1e-4" izz="1e-4" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><geometry><sphere radius="0.02"/></geometry></collision></link>
+  <joint name="{side}_steering" type="revolute"><parent link="base_link"/><child link="{side}_hinge"/>
+    <origin xyz="0.35 {y} -0.05"/><axis xyz="0 0 1"/><limit lower="-0.7" upper="0.7" effort="50" velocity="4"/></joint>
+  <joint name="{side}_front_axle" type="continuous"><parent link="{side}_hinge"/><child link="{side}_front_wheel"/>
+    <axis xyz="0 1 0"/></joint>
+  <joint name="{side}_rear_axle" type="continuous"><parent link="base_link"/><child link="{side}_rear_wheel"/>
+    <origin xyz="-0.35 {y} -0.05"/><axis xyz="0 1 0"/><limit effort="20" velocity="50"/></joint>""" for side, y in (
+    ("left", 0.3), ("right", -0.3))) + "\n</robot>"
+# ackermann_steering_controller's keys for it.
+ACKERMANN = {"type": "ackermann", "front_wheels_names": ["left_steering", "right_steering"],
+             "rear_wheels_names": ["left_rear_axle", "right_rear_axle"], "wheelbase": 0.7, "front_wheel_track": 0.6,
+             "rear_wheel_track": 0.6, "rear_wheels_radius": 0.1}
 SCENE = {"version": 1, "robots": [{"name": "kuka", "urdf": KUKA},
                                   {"name": "husky", "urdf": HUSKY, "position": [4, 0, 0.02], "drive": HUSKY_DRIVE}]}
 JOINT_STATE = decoder("sensor_msgs/msg/JointState")
@@ -226,6 +248,35 @@ def test_the_husky_drives_a_commanded_circle_and_its_wheel_odometry_follows(run)
     assert math.hypot(pose.x - truth[0], pose.y - truth[1]) < 0.1 * 2 * math.pi * 2.5  # within 10 % of the way
 
 
+def test_an_ackermann_car_drives_a_commanded_circle_and_its_odometry_follows():
+    """cmd_vel as ackermann_steering_controller maps it: 1 m/s at 0.25 rad/s is a 4 m circle,
+    the inner front wheel steered more than the outer; odometry from the rear wheels and the
+    steering joints follows the truth."""
+    world = load_world({"version": 1, "robots": [{"name": "rc", "urdf": ACKERMANN_CAR, "position": [0, 0, 0.16],
+                                                  "drive": ACKERMANN}]})
+    control = RobotControl()
+    joints = ["rc." + joint for joint in drive_joints(ACKERMANN)]
+    world.step(64)
+    odometry = WheelOdometry(ACKERMANN, (0.0, 0.0, 0.0), world.joint_states(joints)[0], world.time)
+    control.drive(world, "rc", 1.0, 0.25, 0.0)
+    track = []
+    for k in range(int(30 * 128 / 8)):  # 30 m, past a whole circle
+        world.step(8)
+        odometry.update(world.joint_states(joints)[0], world.time)
+        if k > 40:
+            track.append(world.body("rc.base_link")["position"][:2])
+    points = np.array(track)
+    a = np.c_[2 * points, np.ones(len(points))]
+    cx, cy, k = np.linalg.lstsq(a, (points ** 2).sum(axis=1), rcond=None)[0]
+    assert math.sqrt(k + cx * cx + cy * cy) == pytest.approx(4.0, rel=0.02)
+    left, right = world.joint_states(joints)[0][:2]
+    assert left == pytest.approx(math.atan(0.7 / (4.0 - 0.3)), abs=2e-3)  # inner
+    assert right == pytest.approx(math.atan(0.7 / (4.0 + 0.3)), abs=2e-3)  # outer
+    truth = world.body("rc.base_link")["position"]
+    assert math.hypot(odometry.x - truth[0], odometry.y - truth[1]) < 0.03 * 30.0
+    assert odometry.linear == pytest.approx(1.0, rel=0.02) and odometry.angular == pytest.approx(0.25, rel=0.03)
+
+
 def test_robots_spawn_and_go_whole(run, tmp_path):
     runtime, sink = run({"version": 1, "bodies": [{"name": "crate", "position": [5, 5, 0.5]}]})
     requests = runtime.requests
@@ -261,6 +312,10 @@ def test_robots_spawn_and_go_whole(run, tmp_path):
     ({"drive": {"left_wheel_names": ["a"], "right_wheel_names": ["b"], "wheel_radius": 0.1}},
      "robots[0].drive.wheel_separation: missing"),
     ({"namespace": "a b"}, "robots[0].namespace: 'a b' is not a relative ROS namespace"),
+    ({"drive": {**ACKERMANN, "front_wheels_names": ["lbr_iiwa_joint_1"]}},
+     "robots[0].drive.front_wheels_names: expected two joints: left, right"),
+    ({"drive": {**ACKERMANN, "wheel_radius": 0.1}}, "robots[0].drive.wheel_radius: unknown key (allowed: front_wheel_track"),
+    ({"drive": {"type": "tank"}}, "robots[0].drive.type: 'tank': expected one of diff_drive, ackermann"),
 ])
 def test_bad_robot_entries_are_refused_naming_the_key(robot, message):
     with pytest.raises(SceneError, match=re.escape(message)):

@@ -24,7 +24,7 @@ from .physics.math3d import quaternions_to_matrices
 from .robot_description import robot_description
 from .robots import as_pose, compose, footprint_pose, inverse, robot, robot_transforms
 from .urdf_robots import (WHEEL_ODOMETRY_COVARIANCE, WheelOdometry, fixed_edges, link_edges, publishing_view,
-                          root_pose, wheel_joints)
+                          root_pose, drive_joints)
 
 Topic = namedtuple("Topic", "key name type qos")
 # qos: "reliable_1", "reliable_10", "reliable_100", "latched" (reliable, transient local, depth 1)
@@ -648,7 +648,7 @@ class Broadcaster:
     def _drive_odometry(self, r, snap, root, positions):
         """A drive's odometry from its wheel joints (odom -> root, the message), and the true
         pose over it (<world_frame> -> odom) with ground_truth localization."""
-        wheels = [positions[r.joint_names.index(joint)] for joint in wheel_joints(r.drive)]
+        wheels = [positions[r.joint_names.index(joint)] for joint in drive_joints(r.drive)]
         odometry = self._wheel_odometry.get(r.name)
         if odometry is None or odometry.drive is not r.drive or snap.time < odometry.time:
             level = footprint_pose(root[:3], root[3:], 0.0)[1]  # the heading alone

@@ -336,12 +336,13 @@ def validate_robots(scene, base, directories, owners):
     for k, raw in enumerate(validate_list(scene, "robots")):
         path = f"robots[{k}]"
         entry, fields = validate_entry(raw, path)
-        file = resolve_mesh(raw["urdf"], base, directories, f"{path}.urdf")
+        text = raw["urdf"].lstrip().startswith("<")  # the description itself, not a file
+        file = raw["urdf"] if text else resolve_mesh(raw["urdf"], base, directories, f"{path}.urdf")
         try:
             model = robot_model(file, entry["name"], fields.get("position", [0.0, 0.0, 0.0]),
                                 fields.get("rpy", [0.0, 0.0, 0.0]), entry.get("fixed_base"),
                                 entry.get("self_collide", False), entry["joint_positions"],
-                                label=f"{path}.urdf: {file}", quaternion=fields.get("quaternion"))
+                                label=f"{path}.urdf" + ("" if text else f": {file}"), quaternion=fields.get("quaternion"))
         except UrdfError as error:
             raise specs.SpecError("", str(error)) from None
         check_against_model(entry, model, path)

@@ -32,9 +32,15 @@ from .physics.math3d import quaternions_to_matrices
 
 ENTRY_KEYS = {"name", "urdf", "position", "rpy", "quaternion", "fixed_base", "self_collide",
               "joint_positions", "namespace", "joints", "drive", "localization", "publish_odom_tf"}
-DRIVE_KEYS = {"type", "left_wheel_names", "right_wheel_names", "wheel_separation", "wheel_radius",
-              "wheel_separation_multiplier"}
-DRIVE_TYPES = ("diff_drive",)
+# A drive's keys, in the words of the ros2_controllers that do the same on a real robot:
+# diff_drive_controller's and ackermann_steering_controller's.
+DRIVE_KEYS = {
+    "diff_drive": {"type", "left_wheel_names", "right_wheel_names", "wheel_separation", "wheel_radius",
+                   "wheel_separation_multiplier"},
+    "ackermann": {"type", "front_wheels_names", "rear_wheels_names", "wheelbase", "front_wheel_track",
+                  "rear_wheel_track", "rear_wheels_radius"},
+}
+DRIVE_TYPES = tuple(DRIVE_KEYS)
 LOCALIZATIONS = ("ground_truth", "none")
 COMMAND_KINDS = ("position", "velocity", "effort")
 # diff_drive_controller's default pose and twist covariance diagonals (x y z roll pitch yaw):
@@ -94,28 +100,42 @@ def names_list(value, path):
 
 
 def validate_drive(raw, path):
-    """A differential drive, in diff_drive_controller's words: left_wheel_names,
-    right_wheel_names (joints), wheel_separation and wheel_radius (m, required, as there), and
-    wheel_separation_multiplier (1.0): a skid-steer's wheels slip sideways in a turn, so it
-    turns as if its wheels stood that much farther apart."""
-    specs.mapping(raw, path, DRIVE_KEYS)
+    """A drive: `type` diff_drive (the default) with diff_drive_controller's keys
+    left_wheel_names, right_wheel_names (joints), wheel_separation and wheel_radius (m,
+    required, as there) and wheel_separation_multiplier (1.0: a skid-steer's wheels slip
+    sideways in a turn, so it turns as if they stood that much farther apart); or ackermann
+    with ackermann_steering_controller's front_wheels_names (the two steering joints, left then
+    right), rear_wheels_names (the two driven wheel joints, left then right), wheelbase,
+    front_wheel_track (between the steering joints), rear_wheel_track and rear_wheels_radius."""
+    if not isinstance(raw, dict):
+        raise specs.SpecError(path, "expected a mapping")
     kind = raw.get("type", "diff_drive")
     if kind not in DRIVE_TYPES:
         raise specs.SpecError(f"{path}.type", f"{specs.quote(kind)}: expected one of {', '.join(DRIVE_TYPES)}")
+    specs.mapping(raw, path, DRIVE_KEYS[kind])
     drive = {"type": kind}
-    for key in ("left_wheel_names", "right_wheel_names"):
+    names = (("left_wheel_names", "right_wheel_names") if kind == "diff_drive" else
+             ("front_wheels_names", "rear_wheels_names"))
+    lengths = (("wheel_separation", "wheel_radius") if kind == "diff_drive" else
+               ("wheelbase", "front_wheel_track", "rear_wheel_track", "rear_wheels_radius"))
+    for key in names:
         if key not in raw:
-            raise specs.SpecError(f"{path}.{key}", "missing (the wheel joints of that side)")
+            raise specs.SpecError(f"{path}.{key}", "missing (the joints of that side)" if kind == "diff_drive"
+                                  else "missing (two joints: left, right)")
         drive[key] = names_list(raw[key], f"{path}.{key}")
-    for key in ("wheel_separation", "wheel_radius"):
+        if kind == "ackermann" and len(drive[key]) != 2:
+            raise specs.SpecError(f"{path}.{key}", "expected two joints: left, right")
+    for key in lengths:
         if key not in raw:
             raise specs.SpecError(f"{path}.{key}", "missing (m)")
         drive[key] = specs.number(raw[key], f"{path}.{key}", 0.0, specs.MAX_COORDINATE, low_open=True)
-    drive["wheel_separation_multiplier"] = specs.number(raw.get("wheel_separation_multiplier", 1.0),
-                                                        f"{path}.wheel_separation_multiplier", 0.0, 100.0, low_open=True)
-    shared = set(drive["left_wheel_names"]) & set(drive["right_wheel_names"])
+    if kind == "diff_drive":
+        drive["wheel_separation_multiplier"] = specs.number(raw.get("wheel_separation_multiplier", 1.0),
+                                                            f"{path}.wheel_separation_multiplier", 0.0, 100.0,
+                                                            low_open=True)
+    shared = set(drive[names[0]]) & set(drive[names[1]])
     if shared:
-        raise specs.SpecError(f"{path}.right_wheel_names", f"{sorted(shared)[0]!r} is a left wheel too")
+        raise specs.SpecError(f"{path}.{names[1]}", f"{sorted(shared)[0]!r} is in {names[0]} too")
     return drive
 
 
@@ -131,8 +151,8 @@ def check_against_model(entry, model, path):
     drive = entry.get("drive")
     if drive is not None:
         kinds = {spec["name"]: spec["type"] for spec in model.joints}
-        for key in ("left_wheel_names", "right_wheel_names"):
-            for joint in drive[key]:
+        for key in ("left_wheel_names", "right_wheel_names", "front_wheels_names", "rear_wheels_names"):
+            for joint in drive.get(key, ()):
                 if joint not in movable or kinds[movable[joint]] == "prismatic":
                     raise specs.SpecError(f"{path}.drive.{key}", f"{joint!r} is no revolute or continuous joint "
                                                                  "of the description")
@@ -228,30 +248,36 @@ def matrix_pose(matrix):
 
 # ---------------------------------------------------------------------- odometry from the wheels
 class WheelOdometry:
-    """diff_drive_controller's odometry: each interval the wheels' travel (angle change x
-    radius, averaged per side) moves the base along its heading by the mean and turns it by the
-    difference over the effective separation (exact arc)."""
+    """A drive's odometry, as its ros2_controller integrates it: each interval the base moves
+    along its heading by the driven wheels' mean travel (angle change x radius) and turns by
+    it over the turning radius (a differential drive: the sides' difference over the effective
+    separation; an Ackermann drive: the curvature its steering joints stand at), an exact arc."""
 
-    def __init__(self, drive, pose, wheel_angles, seconds):
+    def __init__(self, drive, pose, joints, seconds):
+        """`joints`: the positions of drive_joints(drive) now."""
         self.drive = drive
-        self.reset(pose, wheel_angles, seconds)
+        self.reset(pose, joints, seconds)
 
-    def reset(self, pose, wheel_angles, seconds):
-        """Starts at `pose` (x, y, yaw) with the wheels at `wheel_angles` (left..., right...)."""
+    def reset(self, pose, joints, seconds):
+        """Starts at `pose` (x, y, yaw) with the drive's joints at `joints`."""
         self.x, self.y, self.yaw = pose
-        self.angles = np.array(wheel_angles, float)
+        self.angles = np.array(joints, float)
         self.time = seconds
         self.linear = self.angular = 0.0
 
-    def update(self, wheel_angles, seconds):
+    def update(self, joints, seconds):
         d = self.drive
-        wheel_angles = np.array(wheel_angles, float)
-        travel = (wheel_angles - self.angles) * d["wheel_radius"]
-        self.angles = wheel_angles
-        left_count = len(d["left_wheel_names"])
-        left, right = float(np.mean(travel[:left_count])), float(np.mean(travel[left_count:]))
-        distance = 0.5 * (left + right)
-        turn = (right - left) / (d["wheel_separation"] * d["wheel_separation_multiplier"])
+        joints = np.array(joints, float)
+        if d["type"] == "diff_drive":
+            travel = (joints - self.angles) * d["wheel_radius"]
+            left_count = len(d["left_wheel_names"])
+            left, right = float(np.mean(travel[:left_count])), float(np.mean(travel[left_count:]))
+            distance = 0.5 * (left + right)
+            turn = (right - left) / (d["wheel_separation"] * d["wheel_separation_multiplier"])
+        else:  # the steering joints (where they stand), then the driven wheels (how far they turned)
+            distance = float(np.mean(joints[2:] - self.angles[2:])) * d["rear_wheels_radius"]
+            turn = distance * steering_curvature(d, joints[0], joints[1])
+        self.angles = joints
         if abs(turn) < 1e-9:
             heading = self.yaw + 0.5 * turn
             self.x += distance * math.cos(heading)
@@ -271,15 +297,40 @@ class WheelOdometry:
         return [self.x, self.y, 0.0, 0.0, 0.0, math.sin(0.5 * self.yaw), math.cos(0.5 * self.yaw)]
 
 
-def wheel_speeds(drive, speed, yaw_rate):
-    """Left and right wheel rates (rad/s) for a base speed (m/s) and yaw rate (rad/s)."""
-    half = 0.5 * drive["wheel_separation"] * drive["wheel_separation_multiplier"]
-    radius = drive["wheel_radius"]
-    return (speed - yaw_rate * half) / radius, (speed + yaw_rate * half) / radius
+def drive_joints(drive):
+    """The joints a drive's odometry reads: the wheels (diff_drive), or the two steering joints
+    and then the two driven wheels (ackermann)."""
+    if drive["type"] == "diff_drive":
+        return [*drive["left_wheel_names"], *drive["right_wheel_names"]]
+    return [*drive["front_wheels_names"], *drive["rear_wheels_names"]]
 
 
-def wheel_joints(drive):
-    return [*drive["left_wheel_names"], *drive["right_wheel_names"]]
+def drive_commands(drive, speed, yaw_rate):
+    """[(kind, joints, values)] that drive the base at `speed` (m/s) and `yaw_rate` (rad/s):
+    wheel rates (rad/s) of a differential drive; an Ackermann drive's steering angles (each
+    front wheel on its own circle about the turn's one centre, the inner one turned more) and
+    rear wheel rates (each its own circle's speed). With no speed the steering stays."""
+    if drive["type"] == "diff_drive":
+        half = 0.5 * drive["wheel_separation"] * drive["wheel_separation_multiplier"]
+        left, right = (speed - yaw_rate * half) / drive["wheel_radius"], (speed + yaw_rate * half) / drive["wheel_radius"]
+        return [("velocity", drive_joints(drive),
+                 [left] * len(drive["left_wheel_names"]) + [right] * len(drive["right_wheel_names"]))]
+    half_rear, radius = 0.5 * drive["rear_wheel_track"], drive["rear_wheels_radius"]
+    wheels = ("velocity", drive["rear_wheels_names"],
+              [(speed - yaw_rate * half_rear) / radius, (speed + yaw_rate * half_rear) / radius])
+    if speed == 0.0:
+        return [wheels]
+    curvature, base, half = yaw_rate / speed, drive["wheelbase"], 0.5 * drive["front_wheel_track"]
+    steer = [math.atan2(base * curvature, 1.0 - curvature * half), math.atan2(base * curvature, 1.0 + curvature * half)]
+    return [("position", drive["front_wheels_names"], steer), wheels]
+
+
+def steering_curvature(drive, left, right):
+    """The curvature (1/m) of the turn an Ackermann drive's steering joints at `left` and
+    `right` (rad) steer: drive_commands' steering undone, the two averaged."""
+    base, half = drive["wheelbase"], 0.5 * drive["front_wheel_track"]
+    tl, tr = math.tan(left), math.tan(right)
+    return 0.5 * (tl / (base + tl * half) + tr / (base - tr * half))
 
 
 # ---------------------------------------------------------------------- commands
@@ -394,9 +445,8 @@ class RobotControl:
         drive = spec.get("drive")
         if drive is None:
             raise ValueError(f"{name} has no drive")
-        left, right = wheel_speeds(drive, speed, yaw_rate)
-        rates = [left] * len(drive["left_wheel_names"]) + [right] * len(drive["right_wheel_names"])
-        self.command(world, name, "velocity", wheel_joints(drive), rates)
+        for kind, joints, values in drive_commands(drive, speed, yaw_rate):
+            self.command(world, name, kind, joints, values)
         self.drive_deadlines[name] = world.time + timeout if timeout > 0.0 else math.inf
 
     def before_batch(self, world):
@@ -413,8 +463,8 @@ class RobotControl:
                 del self.drive_deadlines[name]
             elif now >= deadline:
                 del self.drive_deadlines[name]
-                wheels = wheel_joints(self.robot(world, name)["drive"])
-                self.command(world, name, "velocity", wheels, [0.0] * len(wheels))
+                for kind, joints, values in drive_commands(self.robot(world, name)["drive"], 0.0, 0.0):
+                    self.command(world, name, kind, joints, values)
                 stopped = True
         if not self.trajectories:
             return stopped
