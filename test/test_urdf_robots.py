@@ -277,6 +277,41 @@ def test_an_ackermann_car_drives_a_commanded_circle_and_its_odometry_follows():
     assert odometry.linear == pytest.approx(1.0, rel=0.02) and odometry.angular == pytest.approx(0.25, rel=0.03)
 
 
+# Two arms on a fixed base turning about z (gravity does not turn them): `follower` mimics
+# `leader` as a steering linkage would, -0.5 x it + 0.1 rad.
+ARM_LINK = """<link name="{name}"><inertial><origin xyz="0.25 0 0"/><mass value="1"/>
+  <inertia ixx="0.001" iyy="0.02" izz="0.02" ixy="0" ixz="0" iyz="0"/></inertial>
+  <collision><origin xyz="0.25 0 0"/><geometry><box size="0.5 0.05 0.05"/></geometry></collision></link>"""
+MIMIC = ("""<robot name="linkage"><link name="base"><collision><geometry><box size="0.1 0.1 0.1"/></geometry>
+  </collision></link>""" + ARM_LINK.format(name="a") + ARM_LINK.format(name="b") + """
+  <joint name="leader" type="revolute"><parent link="base"/><child link="a"/><origin xyz="0 0 1"/>
+    <axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="50" velocity="2"/></joint>
+  <joint name="follower" type="revolute"><parent link="base"/><child link="b"/><origin xyz="0 0 1.2"/>
+    <axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="50" velocity="2"/>
+    <mimic joint="leader" multiplier="-0.5" offset="0.1"/></joint></robot>""")
+
+
+def test_a_mimic_joint_follows_its_leader():
+    world = load_world({"version": 1, "robots": [{"name": "linkage", "urdf": MIMIC}]})
+    control = RobotControl()
+    control.command(world, "linkage", "position", ["leader"], [0.6])
+    with pytest.raises(ValueError, match="'follower' mimics 'leader': command that one"):
+        control.command(world, "linkage", "position", ["follower"], [0.3])
+    gaps = []
+    for _ in range(64):  # the node's batches: the mimic servo is set before each
+        control.before_batch(world)
+        world.step(4)
+        leader, follower = world.joint_states(["linkage.leader", "linkage.follower"])[0]
+        gaps.append(abs(follower - (-0.5 * leader + 0.1)))
+    assert leader == pytest.approx(0.6, abs=1e-3)
+    assert follower == pytest.approx(-0.2, abs=1e-3)
+    assert max(gaps) < 0.02  # in step while the leader swings there
+    for _ in range(8 * 128 // 4):  # at rest it sleeps: the servo wakes nothing
+        control.before_batch(world)
+        world.step(4)
+    assert all(world.body(name)["frozen"] for name in ("linkage.a", "linkage.b"))
+
+
 def test_robots_spawn_and_go_whole(run, tmp_path):
     runtime, sink = run({"version": 1, "bodies": [{"name": "crate", "position": [5, 5, 0.5]}]})
     requests = runtime.requests

@@ -32,7 +32,8 @@ from .scene import read_mesh
 # link} (the root has none; parents before children); `joint_names`: {URDF name: the World's
 # joint} of the revolute, continuous and prismatic joints, in the description's order.
 RobotModel = namedtuple("RobotModel", "bodies joints link_frames description self_collide link_parents joint_names "
-                                       "visuals")
+                                       "visuals mimics")
+# `mimics`: {joint: (the joint it follows, multiplier, offset)} of <mimic> joints (URDF names).
 # A link's visual element as it is drawn: `kind` box, sphere, cylinder or mesh; `pose` xyz + xyzw
 # in the link's frame; `size` the box's edges, (diameter, diameter, length) of a cylinder along
 # its z, a sphere's diameter thrice; a mesh's `triangles` (T, 3, 3) in the pose's frame; rgba.
@@ -326,8 +327,21 @@ def robot_model(source, name, position=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), fix
     visuals = link_visuals(robot, folder, label)
     link_parents = {link: parent_joint[link].parent for link in order[1:]}
     joint_names = {joint.name: joint_names[joint.name] for joint in robot.joints if joint.name in joint_names}
+    mimics = {}
+    for joint in robot.joints:
+        if joint.mimic is None:
+            continue
+        if joint.name not in joint_names or joint.mimic.joint not in joint_names:
+            raise UrdfError(f"{label}: joint {joint.name!r}: mimics {joint.mimic.joint!r}; both must be revolute, "
+                            "continuous or prismatic joints of the description")
+        multiplier = 1.0 if joint.mimic.multiplier is None else float(joint.mimic.multiplier)
+        offset = 0.0 if joint.mimic.offset is None else float(joint.mimic.offset)
+        mimics[joint.name] = (joint.mimic.joint, multiplier, offset)
+    for joint, (leader, _, _) in mimics.items():
+        if leader in mimics:
+            raise UrdfError(f"{label}: joint {joint!r} mimics {leader!r}, which mimics another joint itself")
     return RobotModel(body_specs, joint_specs, link_frames, text, bool(self_collide), link_parents, joint_names,
-                      visuals)
+                      visuals, mimics)
 
 
 def link_visuals(robot, folder, label):

@@ -380,11 +380,12 @@ class RobotControl:
         self.world = None          # the World the commands below were given in
         self.trajectories = {}     # (robot, joint) -> the Trajectory that moves it
         self.drive_deadlines = {}  # robot -> simulated s its last cmd_vel lapses at
+        self.mimic_targets = {}    # robot -> (targets, velocities) its <mimic> joints were last given
 
     def _attend(self, world):
         """Commands given in another World (a scene loaded, a reset) are forgotten."""
         if world is not self.world:
-            self.world, self.trajectories, self.drive_deadlines = world, {}, {}
+            self.world, self.trajectories, self.drive_deadlines, self.mimic_targets = world, {}, {}, {}
 
     @staticmethod
     def robot(world, name):
@@ -393,18 +394,20 @@ class RobotControl:
             raise KeyError(f"no robot named {name!r}")
         return spec
 
-    def command(self, world, name, kind, joints, values, velocities=None):
+    def command(self, world, name, kind, joints, values, velocities=None, mimicking=False):
         """Motors of `joints` (URDF names) to `values`: position targets (with `velocities` as
         their feed-forward), velocities or efforts. A command for a joint ends the trajectory
-        that moved it."""
+        that moved it; a joint that mimics another takes none (`mimicking`: before_batch's)."""
         self._attend(world)
         spec = self.robot(world, name)
-        entities = spec["model"].joint_names
+        entities, mimics = spec["model"].joint_names, spec["model"].mimics
         motors = {}
         for k, joint in enumerate(joints):
             entity = entities.get(joint)
             if entity is None:
                 raise ValueError(f"{name} has no revolute, continuous or prismatic joint {joint!r}")
+            if joint in mimics and not mimicking:
+                raise ValueError(f"{name}'s joint {joint!r} mimics {mimics[joint][0]!r}: command that one")
             value = float(values[k])
             if not math.isfinite(value):
                 raise ValueError(f"{joint}: {value} is not finite")
@@ -439,6 +442,29 @@ class RobotControl:
             self.trajectories[(name, joint)] = trajectory
         self.before_batch(world)
 
+    def mimic(self, world):
+        """Each <mimic> joint's position motor aimed at multiplier x its leader + offset, moving
+        at multiplier x the leader's rate through the batch (a servo, as Gazebo's mimic plugins
+        do; bounded by its own effort and velocity limits). True if it moved a target."""
+        moved = False
+        for spec in world.robot_specs:
+            mimics = spec["model"].mimics
+            if not mimics:
+                continue
+            entities = spec["model"].joint_names
+            leaders = [entities[leader] for leader, _, _ in mimics.values()]
+            positions, velocities, _ = world.joint_states(leaders)
+            scale = np.array([multiplier for _, multiplier, _ in mimics.values()])
+            offset = np.array([offset for _, _, offset in mimics.values()])
+            targets = (scale * positions + offset, scale * velocities)
+            last = self.mimic_targets.get(spec["name"])
+            if last is not None and not np.any(targets[1]) and np.array_equal(targets[0], last[0]):
+                continue  # at rest where it was: a command would wake the robot every batch
+            self.mimic_targets[spec["name"]] = targets
+            self.command(world, spec["name"], "position", list(mimics), *targets, mimicking=True)
+            moved = True
+        return moved
+
     def drive(self, world, name, speed, yaw_rate, timeout):
         """A drive's cmd_vel: its wheels' velocity motors, until `timeout` s without another."""
         spec = self.robot(world, name)
@@ -453,8 +479,9 @@ class RobotControl:
         """Trajectories sampled at the batch's start (their motors' targets move on at the
         sampled velocity through it); lapsed drives stopped; robots gone forgotten."""
         self._attend(world)
+        mimicked = self.mimic(world)
         if not (self.drive_deadlines or self.trajectories):
-            return False
+            return mimicked
         present = {r["name"] for r in world.robot_specs}
         now = world.time
         stopped = False
@@ -467,7 +494,7 @@ class RobotControl:
                     self.command(world, name, kind, joints, values)
                 stopped = True
         if not self.trajectories:
-            return stopped
+            return stopped or mimicked
         by_trajectory = {}
         for (name, joint), trajectory in list(self.trajectories.items()):
             if name not in present:
