@@ -37,7 +37,7 @@ from .constants import (LINEAR_SLOP, MAX_CORRECTION_SPEED, POSITION_CORRECTION,
                         RESTITUTION_THRESHOLD, SHOCK_SWEEPS, SHOCK_TOLERANCE,
                         STICKING_SPEED)
 from .contact import ARM_A, ARM_B, DIRECTION, TURN_A, TURN_B
-from .joints import (COLLISION_IMPULSE, COLLISION_TARGET, CONTACT_TARGET, IMPULSE, islands_touched,
+from .joints import (COLLISION_IMPULSE, COLLISION_TARGET, CONTACT_TARGET, IMPULSE, SETTLED_IMPULSE, islands_touched,
                      settle_island_impulses, solve_joint_sweep)
 from .math3d import cross
 from .solve_schedule import shock_levels, split_chains, support_groups
@@ -549,8 +549,9 @@ def solve_with_joints(velocity, contacts, joints, sweeps, target, normal_impulse
                           touched, True)
     if with_motors:
         for sweep in range(sweeps):
-            solve_joint_sweep(velocity, joints, joint_target, joint_impulse, sweep % 2 == 1, True,
-                              touched, False)
+            if solve_joint_sweep(velocity, joints, joint_target, joint_impulse, sweep % 2 == 1, True,
+                                 touched, False) <= SETTLED_IMPULSE:
+                break  # settled: the rest would change nothing
     settle_island_impulses(joints, joint_impulse)
 
 

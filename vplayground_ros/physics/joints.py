@@ -59,6 +59,9 @@ MAX_DIRECT_JOINTS = 32
 
 # A pivot of K's factor this small against its diagonal is a redundant row's.
 REDUNDANT_PIVOT = 1.0e-9
+# N s (N m s): a sweep of the islands no contact touches in which no motor or limit row's impulse
+# changed more than this has left their equalities solved exactly: another would change nothing.
+SETTLED_IMPULSE = 1.0e-12
 # An island of m joints keeps (6m)^2 floats of K's factor, 3m x 6m of its bounded rows'
 # responses and 3m x 2m x 6 of their velocity changes: at most this many a joint.
 ISLAND_FLOATS = 36 + 18 + 36
@@ -503,26 +506,37 @@ def shared_response(joints, j, row, k, col):
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def factor_island(joints, island):
     """The island's K (a row a joint does not use gets a unit diagonal, so its impulse stays 0)
-    factored as L L^T (Cholesky: K is symmetric positive definite) into island_solver."""
+    factored as L L^T (Cholesky: K is symmetric positive definite) into island_solver.
+    Joints that share no body have a zero block in K: row by row, L is only made from the first
+    joint that shares one (the row's envelope, which Cholesky fills no further), so a chain's
+    factor and solves cost as its neighbours' blocks, not the whole island's. Each row's
+    envelope start is kept in the factor's unused upper triangle, row 0's (envelope_start)."""
     first, last = joints.islands[ISLAND_START, island], joints.islands[ISLAND_START, island + 1]
     n = EQUALITY_ROWS * (last - first)
     factor = joints.island_solver[joints.islands[ISLAND_OFFSET, island]:]
     for p in range(last - first):
         j = joints.islands[ISLAND_JOINTS, first + p]
+        start = p
         for q in range(p + 1):
             k = joints.islands[ISLAND_JOINTS, first + q]
             linked = p == q or share_a_body(joints, j, k)  # else their block of K is zero
+            if linked and q < start:
+                start = q
             for r in range(EQUALITY_ROWS):
-                for c in range(EQUALITY_ROWS):
+                for c in range(EQUALITY_ROWS if q < p else r + 1):  # the lower triangle is what is read
                     if not linked or joints.row_values[j, r, ROW_MASS] == 0.0 or joints.row_values[k, c, ROW_MASS] == 0.0:
                         value = 1.0 if (p == q and r == c) else 0.0
                     else:
                         value = shared_response(joints, j, r, k, c)
                     factor[(EQUALITY_ROWS * p + r) * n + EQUALITY_ROWS * q + c] = value
+        for r in range(EQUALITY_ROWS):
+            if EQUALITY_ROWS * p + r > 0:
+                factor[EQUALITY_ROWS * p + r] = EQUALITY_ROWS * start  # row 0's upper triangle
     for col in range(n):
+        begin_col = envelope_start(factor, col)
         original = factor[col * n + col]
         diagonal = original
-        for k in range(col):
+        for k in range(begin_col, col):
             diagonal -= factor[col * n + k] * factor[col * n + k]
         if diagonal <= REDUNDANT_PIVOT * original:
             # A redundant row (two hinges of one door on one axis, two fixed joints between the
@@ -530,30 +544,41 @@ def factor_island(joints, island):
             # solve give it no impulse; the rest factor as without it.
             factor[col * n + col] = np.inf
             for row in range(col + 1, n):
-                factor[row * n + col] = 0.0
+                if envelope_start(factor, row) <= col:
+                    factor[row * n + col] = 0.0
             continue
         diagonal = np.sqrt(diagonal)
         factor[col * n + col] = diagonal
         for row in range(col + 1, n):
+            begin_row = envelope_start(factor, row)
+            if begin_row > col:
+                continue  # outside the row's envelope: zero, and it stays so
             value = factor[row * n + col]
-            for k in range(col):
+            for k in range(max(begin_row, begin_col), col):
                 value -= factor[row * n + k] * factor[col * n + k]
             factor[row * n + col] = value / diagonal
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
+def envelope_start(factor, row):
+    """The first column of the factor's row that is not zero (factor_island keeps it)."""
+    return 0 if row == 0 else int(factor[row])
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
 def cholesky_solve(factor, n, x):
-    """x = K^-1 x in place, K = L L^T with L in factor's lower triangle (n x n, row-major)."""
+    """x = K^-1 x in place, K = L L^T with L in factor's lower triangle (n x n, row-major),
+    each row from its envelope start: L y = x row by row, then L^T x = y column by column."""
     for row in range(n):
         value = x[row]
-        for k in range(row):
+        for k in range(envelope_start(factor, row), row):
             value -= factor[row * n + k] * x[k]
         x[row] = value / factor[row * n + row]
     for row in range(n - 1, -1, -1):
+        x[row] /= factor[row * n + row]
         value = x[row]
-        for k in range(row + 1, n):
-            value -= factor[k * n + row] * x[k]
-        x[row] = value / factor[row * n + row]
+        for k in range(envelope_start(factor, row), row):
+            x[k] -= factor[row * n + k] * value
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
@@ -763,11 +788,13 @@ def solve_island(velocity, joints, target, impulse, island, with_motors):
     """One sweep over an island solved whole: each motor and limit row, its change carried
     through the equalities by its precomputed velocity changes (so the equalities hold as before
     it; the equality impulses that takes are booked at the pass's end, settle_island_impulses);
-    then the equalities, K^-1 times what they lack (what the contacts changed since)."""
+    then the equalities, K^-1 times what they lack (what the contacts changed since). Returns
+    the largest impulse a bounded row changed by."""
     first, last = joints.islands[ISLAND_START, island], joints.islands[ISLAND_START, island + 1]
     size = last - first
     n = EQUALITY_ROWS * size
     offset = joints.islands[ISLAND_OFFSET, island]
+    largest = 0.0
     for p in range(size):
         j = joints.islands[ISLAND_JOINTS, first + p]
         for which in range(3):
@@ -775,6 +802,7 @@ def solve_island(velocity, joints, target, impulse, island, with_motors):
             if row == MOTOR_ROW and not with_motors:
                 continue
             change = bounded_row_change(velocity, joints, target, impulse, j, row)
+            largest = max(largest, abs(change))
             if change != 0.0:
                 joints.row_values[j, row, PASS_CHANGE] += change
                 moved = body_changes(joints, island, p, which)
@@ -791,6 +819,7 @@ def solve_island(velocity, joints, target, impulse, island, with_motors):
             residual[EQUALITY_ROWS * p + row] = target[j, row] - row_speed(velocity, rows, j, row, a, b)
     cholesky_solve(joints.island_solver[offset:], n, residual)
     apply_island_impulses(velocity, joints, impulse, first, size, residual, 1.0)
+    return largest
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
@@ -842,22 +871,26 @@ def solve_joint_sweep(velocity, joints, target, impulse, backwards, with_motors,
     island (backwards: the last first); the motors only `with_motors` (the contact pass: in the
     collision pass too, a motor would apply its effort twice a step). An island solved whole:
     solve_island. A larger one: joint by joint, the motor and limits, then the joint's equality
-    block (what matters most last)."""
+    block (what matters most last). Returns the largest impulse a bounded row of an island solved
+    whole changed by (infinite if it solved one joint by joint: that never settles exactly)."""
     islands = joints.count[1]
+    largest = 0.0
     for step in range(islands):
         island = islands - 1 - step if backwards else step
         if touched[island] != which:
             continue
         first, last = joints.islands[ISLAND_START, island], joints.islands[ISLAND_START, island + 1]
         if joints.islands[ISLAND_OFFSET, island] >= 0:
-            solve_island(velocity, joints, target, impulse, island, with_motors)
+            largest = max(largest, solve_island(velocity, joints, target, impulse, island, with_motors))
         else:
+            largest = np.inf
             for p in range(first, last):
                 j = joints.islands[ISLAND_JOINTS, last - 1 - (p - first) if backwards else p]
                 for row in (MOTOR_ROW, LOWER_ROW, UPPER_ROW):
                     if row != MOTOR_ROW or with_motors:
                         solve_bounded_row(velocity, joints, target, impulse, j, row)
                 solve_joint_block(velocity, joints, target, impulse, j)
+    return largest
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
