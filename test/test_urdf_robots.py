@@ -340,6 +340,18 @@ def test_robots_spawn_and_go_whole(run, tmp_path):
     assert [r["name"] for r in saved["robots"]] == ["arm"]
 
 
+def test_a_robot_that_loses_a_link_or_a_joint_is_no_longer_one():
+    world = load_world({"version": 1, "robots": [{"name": "a", "urdf": KUKA},
+                                                 {"name": "b", "urdf": KUKA, "position": [2, 0, 0]}]})
+    world.remove_joint("a.lbr_iiwa_joint_3")
+    assert [r["name"] for r in world.robot_specs] == ["b"]
+    world.remove_bodies(["b.lbr_iiwa_link_7"])
+    assert world.robot_specs == []
+    assert "a.lbr_iiwa_link_7" in world.body_names() and "a.lbr_iiwa_joint_4" in world.joint_names()
+    saved = world_to_scene(world)
+    assert "robots" not in saved and "a.lbr_iiwa_link_1" in [b["name"] for b in saved["bodies"]]
+
+
 @pytest.mark.parametrize("robot, message", [
     ({"joints": ["lbr_iiwa_joint_1", "elbow"]}, "robots[0].joints: 'elbow' is no revolute"),
     ({"drive": {**HUSKY_DRIVE, "left_wheel_names": ["lbr_iiwa_joint_1"], "right_wheel_names": ["x"]}},

@@ -171,7 +171,8 @@ def add_robot_entry(world, entry, model, path="robot"):
     limits = {spec["name"]: (spec["motor"]["max_effort"], spec["motor"]["max_speed"]) for spec in model.joints}
     world.robot_specs = [*world.robot_specs, {
         **entry, "namespace": namespace, "joints": entry.get("joints", list(model.joint_names)),
-        "bodies": [b["name"] for b in model.bodies], "model": model, "limits": limits}]
+        "bodies": [b["name"] for b in model.bodies], "joints_held": list(model.joint_names.values()),
+        "model": model, "limits": limits}]
     return added
 
 

@@ -83,7 +83,7 @@ def describe_robot(world, spec):
         "twist": {"linear": root["linear_velocity"], "angular": root["angular_velocity"]},
         "mass": mass,
         "frozen": frozen,
-        "properties": {key: value for key, value in spec.items() if key not in ("model", "limits")},
+        "properties": {key: value for key, value in spec.items() if key not in ("model", "limits", "joints_held")},
         "shape": "urdf",
         "bounds": {"size": (2.0 * half).tolist()},
     }

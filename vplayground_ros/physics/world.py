@@ -129,8 +129,9 @@ class World(WorldQueries):
         # them through cast_rays), but part of the scene, kept and saved with it.
         self.sensor_specs = []
         # The URDF robots (vplayground_ros.urdf_robots), likewise: each entry as validated, with
-        # its namespace and the bodies it made; replaced, never changed in place, so that whoever
-        # follows it sees it change. A robot losing a body leaves it (remove_bodies).
+        # its namespace and the bodies and joints it made ("bodies", "joints_held"); replaced,
+        # never changed in place, so that whoever follows it sees it change. A robot losing a
+        # body or a joint leaves it.
         self.robot_specs = []
         self._centre = np.zeros(3)  # world_centre(), kept with the playground
         self.stats = {"woken": 0, "frozen": 0, "pairs": 0, "points": 0, "triangles": 0}
@@ -335,10 +336,16 @@ class World(WorldQueries):
         self._forget_contacts(slots)
         for name, slot in zip(names, slots):
             self._release(name, int(slot))
-        gone = set(names)
-        if any(gone.intersection(robot["bodies"]) for robot in self.robot_specs):
-            # A robot missing a link is no longer one: what is left stays as bodies and joints.
-            self.robot_specs = [robot for robot in self.robot_specs if not gone.intersection(robot["bodies"])]
+        self._forget_robots_without(names)
+
+    def _forget_robots_without(self, removed):
+        """A robot missing a link or a joint (`removed`: body or joint names) is no longer one:
+        what is left of it stays as bodies and joints."""
+        gone = set(removed)
+        if any(gone.intersection(robot["bodies"]) or gone.intersection(robot["joints_held"])
+               for robot in self.robot_specs):
+            self.robot_specs = [robot for robot in self.robot_specs
+                                if not (gone.intersection(robot["bodies"]) or gone.intersection(robot["joints_held"]))]
 
     def _release(self, name, slot):
         """Frees a body's slot and name (what it touched already woken)."""
@@ -483,6 +490,7 @@ class World(WorldQueries):
             return
         held = {slot for name in names for slot in self._joints.slots(name) if slot != WORLD_SIDE}
         self._joints.remove(names)
+        self._forget_robots_without(names)
         self._joints.update_bodies(self._bodies.jointed)
         for slot in held:
             if self._bodies.active[slot]:
