@@ -565,3 +565,29 @@ def test_the_server_listens_on_an_ipv6_address():
     finally:
         process.terminate()
         process.wait(30)
+
+
+def test_a_urdf_robot_spawned_over_the_socket_takes_joint_commands_from_a_client(client):
+    """A robot spawned from URDF text over the socket: its joint_states channel comes, and a
+    client's JSON JointState on its joint_commands (name and position only) moves its joints."""
+    pybullet_data = pytest.importorskip("pybullet_data")
+    folder = f"{pybullet_data.getDataPath()}/kuka_iiwa"
+    text = open(f"{folder}/model.urdf").read().replace('filename="meshes/', f'filename="{folder}/meshes/')
+    response = client.call(f"{NS}/spawn", {"load_namespace": json.dumps({"name": "sock_arm", "urdf": text,
+                                                                          "position": [-12.0, -12.0, 0.0]})})
+    assert response.success, response.message
+    try:
+        assert client.wait(lambda: "/sock_arm/joint_states" in client.channels)
+        client.subscribe("/sock_arm/joint_states")
+        channel = client.advertise("/sock_arm/joint_commands", "json", "sensor_msgs/msg/JointState")
+        target = [0.2, 0.4, 0.0, -0.6, 0.0, 0.3, 0.0]
+        names = [f"lbr_iiwa_joint_{k}" for k in range(1, 8)]
+
+        end, error = time.monotonic() + 30.0, math.inf
+        while time.monotonic() < end and error > 2e-3:
+            client.publish(channel, json.dumps({"name": names, "position": target}).encode())
+            time.sleep(0.2)
+            error = max(abs(a - b) for a, b in zip(client.latest("/sock_arm/joint_states")[1].position, target))
+        assert error < 2e-3
+    finally:
+        assert client.call(f"{NS}/remove", {"load_namespace": "{entity: sock_arm}"}).success

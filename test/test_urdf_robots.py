@@ -380,6 +380,9 @@ def test_a_sensor_may_not_publish_on_a_urdf_robots_topic():
     with pytest.raises(SceneError, match="/joint_states is kuka's joint_states already"):
         load_world({"version": 1, "robots": [{"name": "kuka", "urdf": KUKA}], "sensors": [imu]})
     load_world({"version": 1, "robots": [{"name": "kuka", "urdf": KUKA}], "sensors": [{**imu, "topic": "arm_imu"}]})
+    with pytest.raises(SceneError, match="the frame 'lbr_iiwa_link_7' is a link of the robot kuka"):
+        load_world({"version": 1, "robots": [{"name": "kuka", "urdf": KUKA}],
+                    "sensors": [{**imu, "topic": "arm_imu", "frame_id": "lbr_iiwa_link_7"}]})
 
 
 def test_robots_are_drawn_by_their_visual_elements_locked_to_their_links(run):

@@ -862,7 +862,7 @@ def check_sensors(sensor_specs, robots, robot_specs=()):
     """The sensors' topics and frames against each other's, the robots' (vehicles; URDF robots
     in `robot_specs`, World.robot_specs) and the node's (SpecError naming the sensor's key)."""
     check_sensor_topics(sensor_specs, robots, robot_specs)
-    check_sensor_frames(sensor_specs, robots)
+    check_sensor_frames(sensor_specs, robots, robot_specs)
 
 
 def check_sensor_topics(sensor_specs, robots, robot_specs=()):

@@ -32,12 +32,16 @@ def sensor_frames(spec):
     return [frame] + ([optical_frame(frame)] if spec["type"] in CAMERAS else [])
 
 
-def check_sensor_frames(sensor_specs, robots):
+def check_sensor_frames(sensor_specs, robots, robot_specs=()):
     """Refuses a sensor whose frame (or optical frame) is a robot's (`car_b/base_link` as a
-    frame_id, or a robot spawned onto a sensor's `car_c/odom`): that frame would have two
-    parents. Names the sensor's frame_id."""
+    frame_id, or a robot spawned onto a sensor's `car_c/odom`; a URDF robot's link frames and,
+    with a drive, its odom, of `robot_specs`): that frame would have two parents. Names the
+    sensor's frame_id."""
     from .physics.specs import SpecError
     taken = frames_of(robots)
+    for spec in robot_specs:
+        prefix = f"{spec['namespace']}/" if spec["namespace"] else ""
+        taken.update({prefix + link: f"a link of the robot {spec['name']}" for link in spec["model"].link_frames})
     frame_of = sensor_frame(robots)
     for spec in sensor_specs:
         frame = frame_of(spec)

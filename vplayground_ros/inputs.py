@@ -236,7 +236,8 @@ class Inputs:
 def joint_state_command(msg, count):
     """(kind, values, feed-forward velocities or None) of a JointState command: its positions
     (with its velocities, if as many), else its velocities, else its efforts."""
-    positions, velocities, efforts = ([float(v) for v in values] for values in (msg.position, msg.velocity, msg.effort))
+    # A JSON message (a Foxglove client's) may leave out the arrays it does not use.
+    positions, velocities, efforts = ([float(v) for v in getattr(msg, key, ())] for key in ("position", "velocity", "effort"))
     if count == 0:
         raise ValueError("no joint named")
     for kind, values in (("position", positions), ("velocity", velocities), ("effort", efforts)):
@@ -266,7 +267,7 @@ def trajectory_command(msg):
         t = float(point.time_from_start.sec) + 1e-9 * float(point.time_from_start.nanosec)
         if times and t <= times[-1] or t < 0.0:
             raise ValueError(f"points[{k}].time_from_start {t:g} s: times must increase")
-        p, v = [float(x) for x in point.positions], [float(x) for x in point.velocities]
+        p, v = [float(x) for x in point.positions], [float(x) for x in getattr(point, "velocities", ())]
         if len(p) != len(names) or (v and len(v) != len(names)):
             raise ValueError(f"points[{k}]: {len(p)} positions, {len(v)} velocities for {len(names)} joints")
         if not all(math.isfinite(x) for x in p + v):
@@ -274,7 +275,8 @@ def trajectory_command(msg):
         times.append(t)
         positions.append(p)
         velocities.append(v)
-    stamp = float(msg.header.stamp.sec) + 1e-9 * float(msg.header.stamp.nanosec)
+    header = getattr(msg, "header", None)
+    stamp = 0.0 if header is None else float(header.stamp.sec) + 1e-9 * float(header.stamp.nanosec)
     given = all(velocities)
     return (names, stamp if stamp > 0.0 else None, times, np.array(positions),
             np.array(velocities) if given else None)
