@@ -94,7 +94,8 @@ def test_spawn_entity_and_its_result_codes(ros):
     assert spawn(ros, "", allow_renaming=True).result.result == OK
     assert spawn(ros, "nothing", resource="").result.result == SpawnEntity.Response.NO_RESOURCE
     assert spawn(ros, "broken", resource="{shape: [").result.result == SpawnEntity.Response.RESOURCE_PARSE_ERROR
-    urdf = spawn(ros, "robot", resource="<robot name='r'><link name='a'/></robot>")  # a body needs a shape
+    urdf = spawn(ros, "robot", resource="<robot name='r'><link name='a'><inertial><mass value='1'/><inertia ixx='0' "
+                                        "iyy='0' izz='0' ixy='0' ixz='0' iyz='0'/></inertial></link></robot>")
     assert urdf.result.result == SpawnEntity.Response.UNSUPPORTED_ASSETS and "link 'a'" in urdf.result.error_message
     unreadable = spawn(ros, "robot", resource="<robot name='r'><link name='a'></robot>")
     assert unreadable.result.result == SpawnEntity.Response.RESOURCE_PARSE_ERROR

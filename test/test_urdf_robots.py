@@ -312,6 +312,37 @@ def test_a_mimic_joint_follows_its_leader():
     assert all(world.body(name)["frozen"] for name in ("linkage.a", "linkage.b"))
 
 
+RACECAR = os.path.join(pybullet_data.getDataPath(), "racecar", "racecar.urdf")
+# Its description's geometry: steering hinges 0.325 m ahead of the rear axle, 0.2 m apart, wheels
+# of 0.05 m radius, in ackermann_steering_controller's keys.
+RACECAR_DRIVE = {"type": "ackermann", "front_wheels_names": ["left_steering_hinge_joint", "right_steering_hinge_joint"],
+                 "rear_wheels_names": ["left_rear_wheel_joint", "right_rear_wheel_joint"], "wheelbase": 0.325,
+                 "front_wheel_track": 0.2, "rear_wheel_track": 0.2, "rear_wheels_radius": 0.05}
+
+
+def test_the_racecar_with_links_without_collision_geometry_drives_a_commanded_circle():
+    """pybullet_data's racecar: its chassis and steering hinges have no collision geometry (each a
+    body on a point-like sphere, with its inertial's mass); on its wheels it drives 1 m/s at
+    0.5 rad/s round a 2 m circle."""
+    world = load_world({"version": 1, "robots": [{"name": "rc", "urdf": RACECAR, "drive": RACECAR_DRIVE}]})
+    assert world.body("rc.left_steering_hinge")["mass"] == pytest.approx(0.1)
+    hinge = world.body("rc.left_steering_hinge")["parts"]
+    assert len(hinge) == 1 and hinge[0]["shape"] == "sphere" and hinge[0]["radius"] <= 1e-3
+    world.step(128)
+    assert abs(world.body("rc.base_link")["position"][2]) < 1e-3  # on its wheels, base_link on the ground
+    control = RobotControl()
+    control.drive(world, "rc", 1.0, 0.5, 0.0)
+    track = []
+    for k in range(20 * 128 // 8):
+        world.step(8)
+        if k > 40:
+            track.append(world.body("rc.base_link")["position"][:2])
+    points = np.array(track)
+    a = np.c_[2 * points, np.ones(len(points))]
+    cx, cy, k = np.linalg.lstsq(a, (points ** 2).sum(axis=1), rcond=None)[0]
+    assert math.sqrt(k + cx * cx + cy * cy) == pytest.approx(2.0, rel=0.02)
+
+
 def test_robots_spawn_and_go_whole(run, tmp_path):
     runtime, sink = run({"version": 1, "bodies": [{"name": "crate", "position": [5, 5, 0.5]}]})
     requests = runtime.requests

@@ -43,6 +43,7 @@ MAX_VISUAL_TRIANGLES = 400_000  # over a whole robot: beyond it meshes are left 
 
 JOINT_TYPES = {"revolute": "revolute", "continuous": "continuous", "prismatic": "prismatic"}
 MAX_LINKS = 256
+POINT_RADIUS = 1.0e-3  # m: the sphere that stands for a link without collision geometry
 log = logging.getLogger(__name__)
 
 
@@ -276,8 +277,13 @@ def robot_model(source, name, position=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), fix
     body_specs = []
     for owner, entry in bodies.items():
         if not entry["parts"]:
-            raise UrdfError(f"{label}: link {owner!r}: no collision geometry (a body needs a shape; "
-                            "links without one are only lumped through fixed joints)")
+            # No collision geometry (a steering hinge between a chassis and its wheel, a chassis
+            # that only its wheels carry): the engine needs a shape, so a point-like sphere at
+            # its centre of mass (or its origin) stands for one. Inside the link's neighbours,
+            # it touches nothing in practice; its mass and inertia are the inertial's.
+            centre = combine_inertials(entry["inertials"])[1] if entry["inertials"] else np.zeros(3)
+            entry["parts"] = [{"shape": "sphere", "radius": POINT_RADIUS, "position": centre.tolist(),
+                               "quaternion": [0.0, 0.0, 0.0, 1.0]}]
         spec = {"name": body_name(name, owner, label), "shape": "compound", "parts": entry["parts"],
                 "position": world_pose[owner][:3, 3].tolist(),
                 "quaternion": matrix_to_quaternion(world_pose[owner][:3, :3]).tolist()}
