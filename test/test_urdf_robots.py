@@ -369,6 +369,11 @@ def test_robots_spawn_and_go_whole(run, tmp_path):
     assert wait_for(lambda: "/arm_2/joint_commands" not in runtime.inputs.robot_inputs())
     saved = world_to_scene(runtime.sim.world)
     assert [r["name"] for r in saved["robots"]] == ["arm"]
+    count = len(runtime.sim.world.body_names())
+    assert runtime.parameters.set({"max_bodies": count + 4})[0]  # room for 4 bodies: not for 8 links
+    ok, message = requests.spawn(yaml.safe_dump({"name": "third", "urdf": text}))
+    assert not ok and "(8 bodies)" in message and "max_bodies" in message
+    assert len(runtime.sim.world.body_names()) == count
 
 
 def test_a_robot_that_loses_a_link_or_a_joint_is_no_longer_one():

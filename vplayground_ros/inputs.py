@@ -27,6 +27,8 @@ SUBSCRIPTIONS = [
 ]
 
 
+MAX_TRAJECTORY_POINTS = 100_000  # a trajectory's points: 20 minutes at 100 Hz
+
 # What a URDF robot takes under its namespace (urdf_robots), keyed as Inputs.handle knows them;
 # cmd_vel only with a drive.
 JOINT_STATE, FLOAT64_ARRAY = "sensor_msgs/msg/JointState", "std_msgs/msg/Float64MultiArray"
@@ -257,11 +259,11 @@ def trajectory_command(msg):
     velocities (P, J) or None) of a JointTrajectory, checked: every point with a position per
     joint, times increasing."""
     names = [str(n) for n in msg.joint_names]
-    if not names:
-        raise ValueError("no joint_names")
+    if not names or len(set(names)) != len(names):
+        raise ValueError("joint_names: none, or a joint named twice")
     points = list(msg.points)
-    if not points:
-        raise ValueError("no points")
+    if not 0 < len(points) <= MAX_TRAJECTORY_POINTS:
+        raise ValueError(f"{len(points)} points: expected 1 to {MAX_TRAJECTORY_POINTS}")
     times, positions, velocities = [], [], []
     for k, point in enumerate(points):
         t = float(point.time_from_start.sec) + 1e-9 * float(point.time_from_start.nanosec)

@@ -147,9 +147,10 @@ class EntityRequests:
     def _spawn(self, world, prepared, cap, frames):
         self._check_world("spawning")
         existing = world.body_names()
-        if len(existing) + len(prepared) > cap:
-            raise RequestError(FAILED, f"spawn of {len(prepared)} entities: the world has {len(existing)} "
-                                       f"bodies and max_bodies is {cap}")
+        adding = sum(len(spec[1].bodies) if kind == "robot" else 1 for _, kind, spec, _, _ in prepared)  # a robot: its links
+        if len(existing) + adding > cap:
+            raise RequestError(FAILED, f"spawn of {len(prepared)} entities ({adding} bodies): the world has "
+                                       f"{len(existing)} bodies and max_bodies is {cap}")
         # Names are frames (a body's on /tf, a sensor's), so the node's own frames are taken too.
         frames_taken = {**node_frames(frames), **sensor_frames_taken(world.sensor_specs)}
         names, suffixes = set(existing) | {s["name"] for s in world.sensor_specs} | set(frames_taken), {}
