@@ -448,3 +448,25 @@ def test_robots_are_drawn_by_their_visual_elements_locked_to_their_links(run):
 def robot_marker_ids(runtime):
     names = [body for spec in runtime.sim.world.robot_specs for body in spec["bodies"]]
     return {runtime.broadcaster.marker_ids[name] for name in names if name in runtime.broadcaster.marker_ids}
+
+
+def test_a_sensor_on_a_robots_link_hangs_from_that_link_in_its_namespace(run):
+    """An IMU on the Husky's body: its frame is husky/<name> under husky/base_footprint (the
+    body's link), it publishes on the robot's imu/data, and a request may name the link frame."""
+    imu = {"name": "chassis_imu", "type": "imu", "parent": "husky.base_footprint", "pose": [0, 0, 0.3, 0, 0, 0],
+           "rate": 50}
+    held = [{**SCENE["robots"][0], "hold": True}, SCENE["robots"][1]]  # the arm holds still: a frame to spawn in
+    runtime, sink = run({**SCENE, "robots": held, "sensors": [imu]})
+    advance(runtime, 0.5)
+    parent_of = tree(sink)
+    assert chain(parent_of, "husky/chassis_imu")[:4] == ["husky/chassis_imu", "husky/base_footprint", "husky/odom",
+                                                          "world"]
+    readings = sink.of("sensor:husky/imu/data:sensor_msgs/msg/Imu", decoder("sensor_msgs/msg/Imu"))
+    assert readings and readings[-1][1].header.frame_id == "husky/chassis_imu"
+    ok, message = runtime.requests.spawn(yaml.safe_dump({
+        "name": "on_the_arm", "size": [0.1, 0.1, 0.1], "immovable": True,
+        "initial_pose": {"header": {"frame_id": "lbr_iiwa_link_7"}, "pose": {"position": {"x": 0, "y": 0, "z": 0.5}}}}))
+    assert ok, message
+    tip = runtime.sim.call(lambda world: world.body("kuka.lbr_iiwa_link_7"))
+    placed = runtime.sim.call(lambda world: world.body("on_the_arm"))
+    assert np.linalg.norm(np.subtract(placed["position"], tip["position"])) == pytest.approx(0.5, abs=0.01)

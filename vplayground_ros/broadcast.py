@@ -23,8 +23,8 @@ from .odometry import OdometryTracker
 from .physics.math3d import quaternions_to_matrices
 from .robot_description import robot_description
 from .robots import as_pose, compose, footprint_pose, inverse, robot, robot_transforms
-from .urdf_robots import (WHEEL_ODOMETRY_COVARIANCE, WheelOdometry, fixed_edges, link_edges, publishing_view,
-                          root_pose, drive_joints)
+from .urdf_robots import (WHEEL_ODOMETRY_COVARIANCE, WheelOdometry, drive_joints, fixed_edges, link_carriers,
+                          link_edges, publishing_view, root_pose)
 
 Topic = namedtuple("Topic", "key name type qos")
 # qos: "reliable_1", "reliable_10", "reliable_100", "latched" (reliable, transient local, depth 1)
@@ -390,13 +390,15 @@ class Broadcaster:
         if self._static_key is not None and all(a is b for a, b in zip(key, self._static_key)):
             return False
         self._static_key = key
-        frames = sensor_messages.static_frames(world.sensor_specs, mount_frame(self.frames, robots),
-                                               sensor_frame(robots))
+        carriers = link_carriers(snapshot.robot_specs)
+        frames = sensor_messages.static_frames(world.sensor_specs, mount_frame(self.frames, robots, carriers),
+                                               sensor_frame(robots, carriers))
         frames += [edge for r in urdf_robots for edge in fixed_edges(r)]
         changed = frames != self._sensor_frames
         # The bodies that carry a sensor, whose frames /tf must have: for the publisher thread,
         # which reads no World.
-        self._carriers = frozenset(spec["parent"] for spec in world.sensor_specs) - set(snapshot.vehicle_specs)
+        # (a URDF robot's links are on /tf already)
+        self._carriers = frozenset(spec["parent"] for spec in world.sensor_specs) - set(snapshot.vehicle_specs) - set(carriers)
         self._sensor_frames = frames
         self._describe_robots(snapshot, robots, urdf_robots, world.sensor_specs)
         return changed
@@ -834,7 +836,8 @@ class Broadcaster:
         """The sensors read after this snapshot's step: each reading's messages, built when
         some sink wants one of its topics (the bag always does)."""
         robots = self.robots(snap)
-        carriers, frame_of = {r.name: r for r in robots}, sensor_frame(robots)
+        links = link_carriers(snap.robot_specs)
+        carriers, frame_of = {**links, **{r.name: r for r in robots}}, sensor_frame(robots, links)
         for sensor, reading in snap.readings:
             try:  # one sensor's failure (a sink refusing its topic) leaves the others publishing
                 self._publish_reading(sensor.spec, reading, carriers.get(sensor.spec["parent"]), frame_of)
@@ -883,7 +886,7 @@ def check_sensor_topics(sensor_specs, robots, robot_specs=()):
         suffixes = ["joint_states", "robot_description", *(s.name for s in URDF_ROBOT_INPUTS)]
         suffixes += ["cmd_vel", "odom"] if spec.get("drive") else []
         taken.update({resolve(prefix + suffix): f"{spec['name']}'s {suffix}" for suffix in suffixes})
-    carriers = {robot.name: robot for robot in robots}
+    carriers = {**link_carriers(robot_specs), **{robot.name: robot for robot in robots}}
     for spec in sensor_specs:
         for topic in sensor_messages.topics(spec, carriers.get(spec["parent"])):
             name = resolve(topic.name)

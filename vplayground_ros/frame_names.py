@@ -7,6 +7,7 @@ from .parameters import FRAMES, Frames
 from .robots import STACK_FRAMES, frames_of, robot_frames
 from .sensor_messages import optical_frame
 from .sensors import CAMERAS, WORLD
+from .urdf_robots import link_carriers
 
 DEFAULT_FRAMES = Frames(*FRAMES.values())  # as the parameters have them by default
 
@@ -42,7 +43,7 @@ def check_sensor_frames(sensor_specs, robots, robot_specs=()):
     for spec in robot_specs:
         prefix = f"{spec['namespace']}/" if spec["namespace"] else ""
         taken.update({prefix + link: f"a link of the robot {spec['name']}" for link in spec["model"].link_frames})
-    frame_of = sensor_frame(robots)
+    frame_of = sensor_frame(robots, link_carriers(robot_specs))
     for spec in sensor_specs:
         frame = frame_of(spec)
         for name in (frame, optical_frame(frame)) if spec["type"] in CAMERAS else (frame,):
@@ -50,10 +51,12 @@ def check_sensor_frames(sensor_specs, robots, robot_specs=()):
                 raise SpecError(f"{spec['name']}.frame_id", f"the frame {name!r} is {taken[name]}")
 
 
-def sensor_frame(robots):
+def sensor_frame(robots, carriers=None):
     """A sensor's frame as a function of its spec: its frame_id, else its name, after the
-    namespace of the robot that carries it."""
+    namespace of the robot that carries it (a vehicle, or a URDF robot's body: `carriers`,
+    urdf_robots.link_carriers)."""
     prefixes = {robot.name: robot.prefix for robot in robots}
+    prefixes.update({body: carrier.prefix for body, carrier in (carriers or {}).items()})
     return lambda spec: prefixes.get(spec["parent"], "") + spec.get("frame_id", spec["name"])
 
 
@@ -69,8 +72,10 @@ def sensor_frames_taken(sensor_specs):
     return out
 
 
-def mount_frame(frames, robots):
+def mount_frame(frames, robots, carriers=None):
     """The frame a sensor's `parent` names, as a function of it: `world` the world frame, a
-    robot (robots.Robot, by its vehicle's name) its base_link, a body its own frame (its name)."""
+    robot (robots.Robot, by its vehicle's name) its base_link, a URDF robot's body its link's
+    frame (`carriers`, urdf_robots.link_carriers), another body its own frame (its name)."""
     bases = {robot.name: robot.frames.base for robot in robots}
+    bases.update({body: carrier.base for body, carrier in (carriers or {}).items()})
     return lambda parent: frames.world if parent == WORLD else bases.get(parent, parent)

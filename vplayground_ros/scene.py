@@ -439,7 +439,7 @@ def saved_robots(world):
     for spec in world.robot_specs:
         root = world.body(spec["bodies"][0])
         joints = spec["model"].joint_names
-        entry = {key: spec[key] for key in ("name", "urdf", "fixed_base", "self_collide", "namespace", "joints",
+        entry = {key: spec[key] for key in ("name", "urdf", "fixed_base", "self_collide", "hold", "namespace", "joints",
                                             "drive", "localization", "publish_odom_tf") if key in spec}
         if entry["joints"] == list(joints):  # the default order
             del entry["joints"]

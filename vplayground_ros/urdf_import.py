@@ -32,8 +32,9 @@ from .scene import read_mesh
 # link} (the root has none; parents before children); `joint_names`: {URDF name: the World's
 # joint} of the revolute, continuous and prismatic joints, in the description's order.
 RobotModel = namedtuple("RobotModel", "bodies joints link_frames description self_collide link_parents joint_names "
-                                       "visuals mimics")
-# `mimics`: {joint: (the joint it follows, multiplier, offset)} of <mimic> joints (URDF names).
+                                       "visuals mimics body_links")
+# `mimics`: {joint: (the joint it follows, multiplier, offset)} of <mimic> joints (URDF names);
+# `body_links`: {body: the link whose frame is its frame (the others are lumped into it)}.
 # A link's visual element as it is drawn: `kind` box, sphere, cylinder or mesh; `pose` xyz + xyzw
 # in the link's frame; `size` the box's edges, (diameter, diameter, length) of a cylinder along
 # its z, a sphere's diameter thrice; a mesh's `triangles` (T, 3, 3) in the pose's frame; rgba.
@@ -346,8 +347,9 @@ def robot_model(source, name, position=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), fix
     for joint, (leader, _, _) in mimics.items():
         if leader in mimics:
             raise UrdfError(f"{label}: joint {joint!r} mimics {leader!r}, which mimics another joint itself")
+    body_links = {body_name(name, owner, label): owner for owner in bodies}
     return RobotModel(body_specs, joint_specs, link_frames, text, bool(self_collide), link_parents, joint_names,
-                      visuals, mimics)
+                      visuals, mimics, body_links)
 
 
 def link_visuals(robot, folder, label):
@@ -419,7 +421,8 @@ def renamed(model, old, new):
             raise UrdfError(f"the name {spec['name']!r} is longer than 64 characters (give the robot a shorter name)")
     return model._replace(bodies=bodies, joints=joints,
                           link_frames={link: (rename(body), pose) for link, (body, pose) in model.link_frames.items()},
-                          joint_names={joint: rename(entity) for joint, entity in model.joint_names.items()})
+                          joint_names={joint: rename(entity) for joint, entity in model.joint_names.items()},
+                          body_links={rename(body): link for body, link in model.body_links.items()})
 
 
 def body_name(robot, link, label):

@@ -31,7 +31,7 @@ from .physics import specs
 from .physics.math3d import quaternions_to_matrices
 
 ENTRY_KEYS = {"name", "urdf", "position", "rpy", "quaternion", "fixed_base", "self_collide",
-              "joint_positions", "namespace", "joints", "drive", "localization", "publish_odom_tf"}
+              "joint_positions", "hold", "namespace", "joints", "drive", "localization", "publish_odom_tf"}
 # A drive's keys, in the words of the ros2_controllers that do the same on a real robot:
 # diff_drive_controller's and ackermann_steering_controller's.
 DRIVE_KEYS = {
@@ -54,8 +54,9 @@ EFFORT_SPEED = 1.0e3
 
 def validate_entry(raw, path):
     """The keys of a robot entry that need no description, checked: name, urdf, placement,
-    fixed_base, self_collide, joint_positions, namespace, joints, drive, localization,
-    publish_odom_tf. Returns (entry, placement fields)."""
+    fixed_base, self_collide, joint_positions, hold (its joints' position motors hold
+    joint_positions from the start), namespace, joints, drive, localization, publish_odom_tf.
+    Returns (entry, placement fields)."""
     specs.mapping(raw, path, ENTRY_KEYS)
     for key in ("name", "urdf"):
         if key not in raw:
@@ -65,7 +66,7 @@ def validate_entry(raw, path):
     if not isinstance(raw["urdf"], str) or not raw["urdf"]:
         raise specs.SpecError(f"{path}.urdf", "expected a file name")
     entry = {"name": fields["name"], "urdf": raw["urdf"]}
-    for key in ("fixed_base", "self_collide", "publish_odom_tf"):
+    for key in ("fixed_base", "self_collide", "hold", "publish_odom_tf"):
         if raw.get(key) is not None:
             entry[key] = specs.boolean(raw[key], f"{path}.{key}")
     positions = raw.get("joint_positions") or {}
@@ -169,11 +170,39 @@ def add_robot_entry(world, entry, model, path="robot"):
         raise specs.SpecError(f"{path}.namespace", f"{namespace!r} is the namespace of {taken[namespace]} already")
     added = add_robot(world, model)
     limits = {spec["name"]: (spec["motor"]["max_effort"], spec["motor"]["max_speed"]) for spec in model.joints}
+    if entry.get("hold"):  # powered on: position motors hold joint_positions (a mimic follows its own)
+        world.drive_joints({entity: {"mode": "position", "target": entry["joint_positions"].get(joint, 0.0),
+                                     "velocity": 0.0, "max_effort": limits[entity][0], "max_speed": limits[entity][1]}
+                            for joint, entity in model.joint_names.items() if joint not in model.mimics})
     world.robot_specs = [*world.robot_specs, {
         **entry, "namespace": namespace, "joints": entry.get("joints", list(model.joint_names)),
         "bodies": [b["name"] for b in model.bodies], "joints_held": list(model.joint_names.values()),
         "model": model, "limits": limits}]
     return added
+
+
+# ---------------------------------------------------------------------- sensors on their links
+class LinkCarrier(namedtuple("LinkCarrier", "name namespace link")):
+    """A URDF robot's body as a sensor's parent: the sensor hangs from the body's link frame
+    (prefix + link), its own frame takes the robot's prefix and its topics the robot's namespace,
+    as on a vehicle."""
+
+    @property
+    def prefix(self):
+        return f"{self.namespace}/" if self.namespace else ""
+
+    def topic(self, name):
+        return self.prefix + name
+
+    @property
+    def base(self):
+        return self.prefix + self.link
+
+
+def link_carriers(robot_specs):
+    """{body name: LinkCarrier} of the URDF robots' bodies (World.robot_specs)."""
+    return {body: LinkCarrier(body, spec["namespace"], link)
+            for spec in robot_specs for body, link in spec["model"].body_links.items()}
 
 
 # ---------------------------------------------------------------------- as the publisher sees it

@@ -12,14 +12,15 @@ from ..physics.math3d import matrix_to_quaternion, rpy_to_quat
 from ..robots import robot_transforms, world_robots
 from ..sensor_messages import static_frames
 from ..sensors import WORLD, pose_matrix
+from ..urdf_robots import link_carriers
 
 
 def frame_pose(world, frame, frames):
     """The pose (4x4) in the world frame of `frame`, a frame the node publishes, or None:
     '' is the world frame; a robot's frames are where /tf puts them (its odom is the world's
     origin: the odometry's drift is not the World's to know); a sensor's frame is its mount on
-    its parent, a camera's optical frame under it; a body's name is its frame (/tf with
-    publish_body_frames, or when it carries a sensor)."""
+    its parent, a camera's optical frame under it; a URDF robot's link is where its body puts
+    it; a body's name is its frame (/tf with publish_body_frames, or when it carries a sensor)."""
     if frame in ("", frames.world, WORLD):  # WORLD: what a sensor's parent calls the world frame
         return np.eye(4)
     robots = world_robots(world, frames)
@@ -28,7 +29,14 @@ def frame_pose(world, frame, frames):
         f = robot.frames
         if frame in (f.odom, f.footprint, f.base, *f.suspension, *f.steering, *f.wheel):
             edges += robot_frames_now(world, robot, frames)
-    edges += static_frames(world.sensor_specs, mount_frame(frames, robots), sensor_frame(robots))
+    for spec in world.robot_specs:  # a URDF robot's link: where its body puts it
+        prefix = f"{spec['namespace']}/" if spec["namespace"] else ""
+        for link, (body, pose) in spec["model"].link_frames.items():
+            if frame == prefix + link:
+                state = world.body(body)
+                return pose_matrix(state["position"], state["quaternion"]) @ pose
+    carriers = link_carriers(world.robot_specs)
+    edges += static_frames(world.sensor_specs, mount_frame(frames, robots, carriers), sensor_frame(robots, carriers))
     for parent, child, pose in edges:
         if child == frame:  # names are unique among frames, so the chain up ends at the world
             up = frame_pose(world, parent, frames)
