@@ -2,7 +2,6 @@
 no body, vehicle or sensor may take one. A body's name is its frame on /tf and a sensor's name is
 its frame too, so such a name would give a frame two parents, or a loop. A namespaced robot's
 frames hold a '/', which no entity name does."""
-from .messages import WHEEL_NAMES
 from .parameters import FRAMES, Frames
 from .robots import STACK_FRAMES, frames_of, robot_frames
 from .sensor_messages import optical_frame
