@@ -470,3 +470,23 @@ def test_a_sensor_on_a_robots_link_hangs_from_that_link_in_its_namespace(run):
     tip = runtime.sim.call(lambda world: world.body("kuka.lbr_iiwa_link_7"))
     placed = runtime.sim.call(lambda world: world.body("on_the_arm"))
     assert np.linalg.norm(np.subtract(placed["position"], tip["position"])) == pytest.approx(0.5, abs=0.01)
+
+
+def test_the_example_scene_brings_a_rover_that_drives_and_an_arm_that_holds(run):
+    """config/robots_scene.yaml (the README's example, with the package's own rover.urdf and
+    arm.urdf): the rover in the root namespace drives on /cmd_vel and publishes /scan from a
+    lidar on its base; the arm under /arm holds its joint positions."""
+    scene = os.path.join(os.path.dirname(__file__), "..", "config", "robots_scene.yaml")
+    runtime, sink = run(scene)
+    assert {r["name"]: r["namespace"] for r in runtime.sim.world.robot_specs} == {"rover": "", "arm": "arm"}
+    start = runtime.sim.call(lambda world: world.body("rover.base_footprint")["position"])
+    runtime.inputs.handle("cmd_vel", NS(linear=NS(x=1.0, y=0.0, z=0.0), angular=NS(x=0.0, y=0.0, z=0.0)))
+    advance(runtime, 2.0)
+    moved = np.subtract(runtime.sim.call(lambda world: world.body("rover.base_footprint")["position"]), start)
+    assert moved[0] > 1.5 and abs(moved[1]) < 0.05
+    arm = latest(sink, "/arm/joint_states")
+    assert list(arm.name) == ["yaw", "shoulder", "elbow"]
+    assert np.allclose(arm.position, [0.5, 0.6, 1.2], atol=2e-3)
+    scan = sink.of("sensor:scan:sensor_msgs/msg/LaserScan", decoder("sensor_msgs/msg/LaserScan"))
+    assert scan and scan[-1][1].header.frame_id == "laser"
+    assert tree(sink)["laser"] == "base_footprint"
