@@ -10,6 +10,7 @@ import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 import pytest
 from mcap_ros2._dynamic import serialize_dynamic
@@ -570,9 +571,7 @@ def test_the_server_listens_on_an_ipv6_address():
 def test_a_urdf_robot_spawned_over_the_socket_takes_joint_commands_from_a_client(client):
     """A robot spawned from URDF text over the socket: its joint_states channel comes, and a
     client's JSON JointState on its joint_commands (name and position only) moves its joints."""
-    pybullet_data = pytest.importorskip("pybullet_data")
-    folder = f"{pybullet_data.getDataPath()}/kuka_iiwa"
-    text = open(f"{folder}/model.urdf").read().replace('filename="meshes/', f'filename="{folder}/meshes/')
+    text = (Path(__file__).parent.parent / "config" / "arm.urdf").read_text()  # the package's own three-joint arm
     response = client.call(f"{NS}/spawn", {"load_namespace": json.dumps({"name": "sock_arm", "urdf": text,
                                                                           "position": [-12.0, -12.0, 0.0]})})
     assert response.success, response.message
@@ -580,8 +579,8 @@ def test_a_urdf_robot_spawned_over_the_socket_takes_joint_commands_from_a_client
         assert client.wait(lambda: "/sock_arm/joint_states" in client.channels)
         client.subscribe("/sock_arm/joint_states")
         channel = client.advertise("/sock_arm/joint_commands", "json", "sensor_msgs/msg/JointState")
-        target = [0.2, 0.4, 0.0, -0.6, 0.0, 0.3, 0.0]
-        names = [f"lbr_iiwa_joint_{k}" for k in range(1, 8)]
+        target = [0.2, 0.4, 0.7]
+        names = ["yaw", "shoulder", "elbow"]
 
         end, error = time.monotonic() + 30.0, math.inf
         while time.monotonic() < end and error > 2e-3:

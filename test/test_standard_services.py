@@ -4,6 +4,7 @@ be): every service, the result codes the standard defines for each, and a scenar
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -475,12 +476,10 @@ def test_a_urdf_robot_spawned_through_the_standard_service_is_a_ros_robot(ros):
     """SpawnEntity with a URDF (resource_string) and an entity_namespace: the robot is one
     entity (state, move, delete), publishes joint_states and a latched robot_description under
     its namespace, and obeys a JointState on its joint_commands, over real ROS topics."""
-    pybullet_data = pytest.importorskip("pybullet_data")
     from rclpy.qos import DurabilityPolicy, QoSProfile
     from sensor_msgs.msg import JointState
     from std_msgs.msg import String
-    folder = f"{pybullet_data.getDataPath()}/kuka_iiwa"
-    text = open(f"{folder}/model.urdf").read().replace('filename="meshes/', f'filename="{folder}/meshes/')
+    text = (Path(__file__).parent.parent / "config" / "arm.urdf").read_text()  # the package's own three-joint arm
     reply = call(ros, SpawnEntity, "spawn_entity", name="si_arm", resource_string=text, entity_namespace="/cell/arm",
                  initial_pose=pose(-8.0, -8.0, 0.0))
     assert reply.result.result == OK, reply.result.error_message
@@ -498,15 +497,15 @@ def test_a_urdf_robot_spawned_through_the_standard_service_is_a_ros_robot(ros):
         ros.listen(JointState, "/cell/arm/joint_states")
         publisher = ros.client.create_publisher(JointState, "/cell/arm/joint_commands", 10)
         assert wait_for(lambda: publisher.get_subscription_count() > 0)
-        target = [0.0, 0.4, 0.0, -0.8, 0.0, 0.5, 0.0]
-        command = JointState(name=[f"lbr_iiwa_joint_{k}" for k in range(1, 8)], position=target)
+        target = [0.4, 0.5, 0.8]
+        command = JointState(name=["yaw", "shoulder", "elbow"], position=target)
 
         def holding():
             publisher.publish(command)
             latest = ros.latest.get("/cell/arm/joint_states")
             return latest is not None and max(abs(a - b) for a, b in zip(latest.position, target)) < 2e-3
         assert wait_for(holding, timeout=30)
-        assert descriptions and "lbr_iiwa_link_7" in descriptions[-1].data
+        assert descriptions and "forearm" in descriptions[-1].data
         moved = EntityState(pose=pose(-6.0, -8.0, 0.0).pose)
         assert call(ros, SetEntityState, "set_entity_state", entity="si_arm", state=moved).result.result == OK
         got = call(ros, GetEntityState, "get_entity_state", entity="si_arm")

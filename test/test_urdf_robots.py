@@ -490,3 +490,68 @@ def test_the_example_scene_brings_a_rover_that_drives_and_an_arm_that_holds(run)
     scan = sink.of("sensor:scan:sensor_msgs/msg/LaserScan", decoder("sensor_msgs/msg/LaserScan"))
     assert scan and scan[-1][1].header.frame_id == "laser"
     assert tree(sink)["laser"] == "base_footprint"
+
+
+def test_partial_resets_keep_the_scenes_robots_and_restore_them(run):
+    """ResetSimulation's scopes with a scene's robots: SPAWNED keeps them (their links are the
+    scene's), STATE puts their links and joints back as loaded, TIME forgets the commands given
+    commands carry on on the new clock (a drive's deadline moves back with it)."""
+    runtime, sink = run()
+    requests = runtime.requests
+    runtime.inputs.handle("joint_commands", joint_command(ARM_JOINTS, [0.3] * 7), "/joint_commands")
+    advance(runtime, 1.0)
+    assert requests.reset(4)[0]  # SPAWNED
+    assert [r["name"] for r in runtime.sim.world.robot_specs] == ["kuka", "husky"]
+    assert requests.reset(2)[0]  # STATE
+    positions = runtime.sim.call(lambda world: world.joint_states([f"kuka.{j}" for j in ARM_JOINTS])[0])
+    assert np.allclose(positions, 0.0, atol=1e-3)  # as loaded (it was at 0.3), and falling again since
+    runtime.parameters.set({"cmd_vel_timeout": 0.5})
+    runtime.inputs.handle("cmd_vel", NS(linear=NS(x=0.5, y=0.0, z=0.0), angular=NS(x=0.0, y=0.0, z=0.0)),
+                          "/husky/cmd_vel")
+    advance(runtime, 0.1)
+    assert requests.reset(1)[0]  # TIME: 0.5 s of command left, counted on the new clock
+    advance(runtime, 1.0)
+    speeds = runtime.sim.call(lambda world: world.joint_states(["husky.front_left_wheel"])[1])
+    assert abs(speeds[0]) < 0.1
+
+
+def test_hostile_robot_requests_change_nothing(run, tmp_path):
+    """What a request may not do with a description: xacro (it reads environment variables and
+    any file), meshes outside the scene directories, a robot named like a body (or a body like a
+    robot), a link that would be the world frame in the root namespace; and a robot is moved
+    whole or not at all. A trajectory for a mimic joint is refused; nothing pauses."""
+    runtime, sink = run({"version": 1, "bodies": [{"name": "crate", "position": [5, 5, 0.5]}],
+                         "robots": [{"name": "linkage", "urdf": MIMIC, "namespace": "lk"}]})
+    requests = runtime.requests
+    requests.scene_directories = [tmp_path]
+    xacro = MIMIC.replace('<robot name="linkage">', '<robot name="linkage"><!-- $(env HOME) -->')
+    ok, message = requests.spawn(yaml.safe_dump({"name": "x", "urdf": xacro}))
+    assert not ok and message.startswith("RESOURCE_PARSE_ERROR") and "xacro" in message
+    meshes = open(KUKA).read().replace('filename="meshes/', f'filename="{os.path.dirname(KUKA)}/meshes/')
+    ok, message = requests.spawn(yaml.safe_dump({"name": "k", "urdf": meshes}))
+    assert not ok and "outside the allowed directories" in message
+    ok, message = requests.spawn(yaml.safe_dump({"name": "crate", "urdf": MIMIC}))
+    assert not ok and message.startswith("NAME_NOT_UNIQUE")
+    ok, message = requests.spawn(yaml.safe_dump({"name": "linkage", "size": [1, 1, 1], "position": [0, 5, 1]}))
+    assert not ok and message.startswith("NAME_NOT_UNIQUE")
+    rooted = MIMIC.replace('<link name="base">', '<link name="world">').replace('<parent link="base"/>',
+                                                                           '<parent link="world"/>')
+    ok, message = requests.spawn(yaml.safe_dump({"name": "w", "urdf": rooted, "namespace": ""}))
+    assert not ok and "its link 'world' would be the frame 'world'" in message
+    ok, message = requests.spawn(yaml.safe_dump({"name": "w", "urdf": rooted, "position": [3, 3, 0]}))
+    assert ok, message  # in its own namespace: the frame w/world
+    assert runtime.sim.call(lambda world: world.body("w.world")["immovable"])  # a root named world is fixed
+    before = runtime.sim.call(lambda world: [world.body(b)["position"] for b in ("linkage.base", "linkage.a")])
+    ok, message = requests.edit(yaml.safe_dump({"entity": "linkage", "position": [0, 0, 1999.9]}))
+    assert not ok and "outside" in message
+    after = runtime.sim.call(lambda world: [world.body(b)["position"] for b in ("linkage.base", "linkage.a")])
+    assert np.allclose(before, after)
+    runtime.inputs.handle("joint_trajectory", trajectory(["follower"], [(1.0, [0.3], [0.0])]), "/lk/joint_trajectory")
+    advance(runtime, 0.5)
+    assert not runtime.sim.paused and runtime.sim.fault_count == 0
+    assert runtime.sim.world.robot_specs[0]["joints"] == ["leader"]  # a mimic joint is in no command order
+
+
+def test_mimic_joints_take_no_place_in_commands_or_drives():
+    with pytest.raises(SceneError, match="robots\\[0\\].joints: 'follower' mimics 'leader'"):
+        load_world({"version": 1, "robots": [{"name": "linkage", "urdf": MIMIC, "joints": ["leader", "follower"]}]})

@@ -15,6 +15,7 @@ from .api.frames import frame_pose
 from .interfaces import decoder
 from .parameters import frames as frame_names
 from .physics.math3d import rpy_to_quat
+from .physics.specs import MAX_COORDINATE
 from .sensors import pose_matrix
 
 Subscription = namedtuple("Subscription", "key name type")
@@ -267,18 +268,20 @@ def trajectory_command(msg):
     times, positions, velocities = [], [], []
     for k, point in enumerate(points):
         t = float(point.time_from_start.sec) + 1e-9 * float(point.time_from_start.nanosec)
-        if times and t <= times[-1] or t < 0.0:
+        if not (math.isfinite(t) and t >= 0.0) or times and t <= times[-1]:
             raise ValueError(f"points[{k}].time_from_start {t:g} s: times must increase")
         p, v = [float(x) for x in point.positions], [float(x) for x in getattr(point, "velocities", ())]
         if len(p) != len(names) or (v and len(v) != len(names)):
             raise ValueError(f"points[{k}]: {len(p)} positions, {len(v)} velocities for {len(names)} joints")
-        if not all(math.isfinite(x) for x in p + v):
-            raise ValueError(f"points[{k}]: not finite")
+        if not all(abs(x) <= MAX_COORDINATE for x in p + v):  # NaN fails too
+            raise ValueError(f"points[{k}]: a position or velocity not finite or beyond {MAX_COORDINATE:g}")
         times.append(t)
         positions.append(p)
         velocities.append(v)
     header = getattr(msg, "header", None)
     stamp = 0.0 if header is None else float(header.stamp.sec) + 1e-9 * float(header.stamp.nanosec)
+    if not math.isfinite(stamp):
+        raise ValueError("header.stamp not finite")
     given = all(velocities)
     return (names, stamp if stamp > 0.0 else None, times, np.array(positions),
             np.array(velocities) if given else None)

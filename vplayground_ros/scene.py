@@ -342,10 +342,14 @@ def validate_robots(scene, base, directories, owners):
             model = robot_model(file, entry["name"], fields.get("position", [0.0, 0.0, 0.0]),
                                 fields.get("rpy", [0.0, 0.0, 0.0]), entry.get("fixed_base"),
                                 entry.get("self_collide", False), entry["joint_positions"],
-                                label=f"{path}.urdf" + ("" if text else f": {file}"), quaternion=fields.get("quaternion"))
+                                label=f"{path}.urdf" + ("" if text else f": {file}"), quaternion=fields.get("quaternion"),
+                                directories=directories)
         except UrdfError as error:
             raise specs.SpecError("", str(error)) from None
         check_against_model(entry, model, path)
+        if entry["name"] in owners:
+            raise specs.SpecError(f"{path}.name", f"{specs.quote(entry['name'])} is {owners[entry['name']]}")
+        owners[entry["name"]] = "a robot"
         for body in model.bodies:
             if body["name"] in owners:
                 raise specs.SpecError(f"{path}.name", f"its link body {body['name']!r} is {owners[body['name']]}")
@@ -400,7 +404,7 @@ def load_world(path_or_dict, max_bodies=None, directories=None, frames=DEFAULT_F
                         spec["mesh"], dropped)
     # Vehicles before robots: the first of them stands in the root namespace.
     for key, entries, add in (("bodies", bodies, world.add_body), ("vehicles", vehicles, world.add_vehicle),
-                              ("robots", robots, lambda pair, path: add_robot_entry(world, *pair, path)),
+                              ("robots", robots, lambda pair, path: add_robot_entry(world, *pair, path, frames)),
                               ("joints", joints, world.add_joint)):
         for k, entry in enumerate(entries):
             try:
@@ -441,7 +445,7 @@ def saved_robots(world):
         joints = spec["model"].joint_names
         entry = {key: spec[key] for key in ("name", "urdf", "fixed_base", "self_collide", "hold", "namespace", "joints",
                                             "drive", "localization", "publish_odom_tf") if key in spec}
-        if entry["joints"] == list(joints):  # the default order
+        if entry["joints"] == [joint for joint in joints if joint not in spec["model"].mimics]:  # the default
             del entry["joints"]
         entry.update(position=root["position"], quaternion=root["quaternion"],
                      joint_positions={joint: world.joint(entity)["position"] for joint, entity in joints.items()})

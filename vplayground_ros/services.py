@@ -80,7 +80,8 @@ def service_table(runtime):
                             for name, description in requests.entities()]}
 
     return [guarded(runtime, service) for service in [
-        Service("~/spawn", "diagnostic_msgs/srv/AddDiagnostics", text(requests.spawn)),
+        # aside: a robot's description may take a second to read (its meshes' hulls)
+        Service("~/spawn", "diagnostic_msgs/srv/AddDiagnostics", text(requests.spawn), True),
         Service("~/edit", "diagnostic_msgs/srv/AddDiagnostics", text(requests.edit)),
         Service("~/remove", "diagnostic_msgs/srv/AddDiagnostics", text(requests.remove)),
         Service("~/get_entity", "diagnostic_msgs/srv/AddDiagnostics", text(requests.get_entity)),

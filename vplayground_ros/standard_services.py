@@ -39,8 +39,9 @@ LOAD_WORLD_CODES = {"UNSUPPORTED_FORMAT": 101, "NO_RESOURCE": 102, "RESOURCE_PAR
                     "MISSING_ASSETS": 104, "UNSUPPORTED_ASSETS": 105, "UNSUPPORTED_ELEMENTS": 106}
 NO_WORLD_CODES = {"NO_WORLD_LOADED": 101}
 ENTITIES_SPAWN_FAILED = 150
-# What may take long: steps waited for, a message of every entity (10,000: ~0.4 s), a list of spawns.
-ASIDE = {"step_simulation", "get_entities_states", "spawn_entities"}
+# What may take long: steps waited for, a message of every entity (10,000: ~0.4 s), a list of
+# spawns, a robot's description (its meshes' hulls: up to a second).
+ASIDE = {"step_simulation", "get_entities_states", "spawn_entities", "spawn_entity"}
 STEP_POLL = 0.002  # s between looks at the step count while step_simulation waits
 
 
@@ -80,8 +81,10 @@ def is_urdf(uri, text):
 
 
 def robot_name(text):
-    """A spawned robot's name when the request gives none: its description's, as a name may be."""
-    found = re.search(r"<robot\b[^>]*\bname\s*=\s*[\"']([^\"']+)", text)
+    """A spawned robot's name when the request gives none: its description's (the <robot> tag's
+    name, looked for in the 1,000 characters after the tag opens), as a name may be."""
+    start = text.find("<robot")
+    found = re.search(r"\bname\s*=\s*[\"']([^\"']{1,200})", text[start:start + 1000]) if start >= 0 else None
     return re.sub(r"[^A-Za-z0-9_.-]", "_", found.group(1))[:64] if found else "robot"
 
 
@@ -177,6 +180,8 @@ class StandardServices:
         elif not text:
             raise RequestError(NO_RESOURCE, "both uri and resource_string are empty")
         if is_urdf(uri, text):  # a robot description: the file's path (confined above), or the text
+            if len(text.encode("utf-8", "surrogatepass")) > MAX_PAYLOAD:
+                raise RequestError(FAILED, f"the description is more than {MAX_PAYLOAD} bytes")
             spec = {"urdf": str(local_path(uri)) if uri else text}
             if not request.name:
                 spec["name"] = robot_name(text)

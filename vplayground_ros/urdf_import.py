@@ -41,6 +41,8 @@ RobotModel = namedtuple("RobotModel", "bodies joints link_frames description sel
 Visual = namedtuple("Visual", "link kind pose size triangles rgba")
 DEFAULT_RGBA = (0.7, 0.7, 0.72, 1.0)  # a visual without a colour (URDF says nothing of one)
 MAX_VISUAL_TRIANGLES = 400_000  # over a whole robot: beyond it meshes are left undrawn, with a warning
+MAX_VISUALS = 4096  # visual elements drawn of a robot
+MAX_MIMIC_MULTIPLIER = 1.0e3
 
 JOINT_TYPES = {"revolute": "revolute", "continuous": "continuous", "prismatic": "prismatic"}
 MAX_LINKS = 256
@@ -60,9 +62,11 @@ class MissingMesh(UrdfError):
     """A mesh the description names is not found."""
 
 
-def read_description(source, label):
+def read_description(source, label, allow_xacro=True):
     """The URDF text of `source` (a path, or the text itself when it starts with '<'), xacro
-    expanded. Returns (text, folder relative paths are taken from)."""
+    expanded (unless not `allow_xacro`: xacro reads environment variables and any file, so a
+    description from a request is refused rather than expanded). Returns (text, folder relative
+    paths are taken from)."""
     if isinstance(source, str) and source.lstrip().startswith("<"):
         text, folder = source, Path.cwd()
     else:
@@ -73,6 +77,10 @@ def read_description(source, label):
             raise UnreadableUrdf(f"{label}: cannot read it: {error.strerror or error}") from None
         folder = path.resolve().parent
     if Path(str(source)).suffix == ".xacro" or re.search(r"\$[({]", text):
+        if not allow_xacro:
+            raise UnreadableUrdf(f"{label}: it uses xacro, which is expanded only for scenes given on the command "
+                                 "line (xacro reads environment variables and any file): expand it first "
+                                 "(xacro file.xacro > file.urdf)")
         text = expand_xacro(text, label)
     return text, folder
 
@@ -113,10 +121,16 @@ def pose_matrix(position, rotation):
     return matrix
 
 
-def resolve_mesh_file(filename, folder, label, link):
+# Where a description's meshes are looked for: its folder, and (a request's) the only directories
+# they may be read from (None: anywhere).
+Where = namedtuple("Where", "folder directories")
+
+
+def resolve_mesh_file(filename, where, label, link):
     """A mesh's file: `package://<package>/<path>` in the package's share folder (AMENT_PREFIX_PATH)
     or in a folder of that name above the description; `file://` and plain paths relative to
-    the description's folder."""
+    the description's folder; within `where.directories` when it names some."""
+    folder = where.folder
     if filename.startswith("package://"):
         package, _, rest = filename[len("package://"):].partition("/")
         candidates = [Path(prefix) / "share" / package / rest
@@ -127,6 +141,10 @@ def resolve_mesh_file(filename, folder, label, link):
         candidates = [path if path.is_absolute() else folder / path]
     for candidate in candidates:
         if candidate.is_file():
+            if where.directories is not None and not any(
+                    candidate.resolve().is_relative_to(Path(d).resolve()) for d in where.directories):
+                raise UrdfError(f"{label}: link {link!r}: mesh {filename!r} is outside the allowed directories "
+                                "(scene_directories)")
             return candidate
     raise MissingMesh(f"{label}: link {link!r}: mesh {filename!r} not found (looked in "
                     f"{', '.join(str(c) for c in candidates) or 'no package folder'})")
@@ -148,7 +166,7 @@ def hull_points(vertices):
     return points[kept]
 
 
-def collision_part(collision, pose, folder, label, link):
+def collision_part(collision, pose, where, label, link):
     """A compound part spec for one collision element at `pose` (4x4) in the body's frame."""
     geometry = collision.geometry
     placed = pose @ origin(collision)
@@ -162,7 +180,7 @@ def collision_part(collision, pose, folder, label, link):
         return {**part, "shape": "cylinder", "radius": float(geometry.cylinder.radius),
                 "length": float(geometry.cylinder.length)}
     if geometry.mesh is not None:
-        path = resolve_mesh_file(geometry.mesh.filename, folder, label, link)
+        path = resolve_mesh_file(geometry.mesh.filename, where, label, link)
         try:
             vertices, _ = read_mesh(path, f"link {link!r} mesh")
         except ValueError as error:
@@ -206,15 +224,18 @@ def combine_inertials(inertials):
 
 
 def robot_model(source, name, position=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), fixed_base=None,
-                self_collide=False, joint_positions=None, label=None, quaternion=None):
+                self_collide=False, joint_positions=None, label=None, quaternion=None, directories=None):
     """The RobotModel of a URDF file or text, its root link placed at `position` and `rpy` (or
     `quaternion`, x y z w, when given).
     `fixed_base`: the root is fixed to the world (None: when the root's body, with the links
     lumped into it, has no mass). `self_collide`: its links collide with each other (off, as
     PyBullet and Gazebo load URDF robots). `joint_positions`: {joint: rad or m} for joints not
-    at 0 (the links placed accordingly, each joint's coordinate that value)."""
+    at 0 (the links placed accordingly, each joint's coordinate that value). `directories`:
+    a request's scene_directories, the only places its meshes may be read from (and then no
+    xacro); None for a scene of the user's own."""
     label = label or (str(source) if not str(source).lstrip().startswith("<") else "URDF text")
-    text, folder = read_description(source, label)
+    text, folder = read_description(source, label, allow_xacro=directories is None)
+    where = Where(folder, directories)
     robot = parse(text, label)
     links = {link.name: link for link in robot.links}
     if len(links) > MAX_LINKS:
@@ -261,14 +282,15 @@ def robot_model(source, name, position=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), fix
         pose = np.linalg.inv(world_pose[owner]) @ world_pose[link]  # the link in its body's frame
         link_frames[link] = (body_name(name, owner, label), pose)
         entry = bodies.setdefault(owner, {"parts": [], "inertials": []})
-        entry["parts"] += [collision_part(c, pose, folder, label, link) for c in links[link].collisions]
+        entry["parts"] += [collision_part(c, pose, where, label, link) for c in links[link].collisions]
         inertial = link_inertial(links[link], label)
         if inertial is not None:
             mass, centre, tensor = inertial
             entry["inertials"].append((mass, pose[:3, :3] @ centre + pose[:3, 3],
                                        pose[:3, :3] @ tensor @ pose[:3, :3].T))
-    # A root body without mass (PyBullet's and Gazebo's way of fixing a robot) is fixed.
-    fixed = not bodies[root]["inertials"] if fixed_base is None else fixed_base
+    # A root body without mass (PyBullet's and Gazebo's way of fixing a robot), or a root link
+    # named world (Gazebo's), is fixed.
+    fixed = (not bodies[root]["inertials"] or root == "world") if fixed_base is None else fixed_base
     named = {}
     for owner in bodies:
         other = named.setdefault(body_name(name, owner, label), owner)
@@ -331,7 +353,7 @@ def robot_model(source, name, position=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), fix
         except specs.SpecError as error:
             raise UrdfError(f"{label}: {error}") from None
         joint_names[joint.name] = spec["name"]
-    visuals = link_visuals(robot, folder, label)
+    visuals = link_visuals(robot, where, label)
     link_parents = {link: parent_joint[link].parent for link in order[1:]}
     joint_names = {joint.name: joint_names[joint.name] for joint in robot.joints if joint.name in joint_names}
     mimics = {}
@@ -343,6 +365,10 @@ def robot_model(source, name, position=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), fix
                             "continuous or prismatic joints of the description")
         multiplier = 1.0 if joint.mimic.multiplier is None else float(joint.mimic.multiplier)
         offset = 0.0 if joint.mimic.offset is None else float(joint.mimic.offset)
+        if not (abs(multiplier) <= MAX_MIMIC_MULTIPLIER and abs(offset) <= specs.MAX_COORDINATE):
+            raise UrdfError(f"{label}: joint {joint.name!r}: mimic multiplier {multiplier:g} or offset {offset:g} "
+                            f"out of range (|multiplier| <= {MAX_MIMIC_MULTIPLIER:g}, |offset| <= "
+                            f"{specs.MAX_COORDINATE:g})")
         mimics[joint.name] = (joint.mimic.joint, multiplier, offset)
     for joint, (leader, _, _) in mimics.items():
         if leader in mimics:
@@ -352,12 +378,13 @@ def robot_model(source, name, position=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), fix
                       visuals, mimics, body_links)
 
 
-def link_visuals(robot, folder, label):
+def link_visuals(robot, where, label):
     """Every link's <visual> elements as Visuals (what the node draws for the robot; collisions
     are the bodies'). A visual is only a picture: one whose mesh is missing or unreadable is
-    left out with a warning, not refused."""
+    left out with a warning, not refused; each mesh file is read once, none once
+    MAX_VISUAL_TRIANGLES are drawn, and at most MAX_VISUALS elements are."""
     palette = {m.name: m.color.rgba for m in robot.materials if m.color is not None}
-    out, triangles = [], 0
+    out, triangles, meshes = [], 0, {}
     for link in robot.links:
         for visual in link.visuals:
             geometry, pose = visual.geometry, origin(visual)
@@ -373,21 +400,26 @@ def link_visuals(robot, folder, label):
             elif geometry.cylinder is not None:
                 d = 2.0 * float(geometry.cylinder.radius)
                 out.append(Visual(link.name, "cylinder", placed, [d, d, float(geometry.cylinder.length)], None, rgba))
-            elif geometry.mesh is not None:
+            elif geometry.mesh is not None and triangles <= MAX_VISUAL_TRIANGLES:
                 try:
-                    path = resolve_mesh_file(geometry.mesh.filename, folder, label, link.name)
-                    vertices, faces = read_mesh(path, f"link {link.name!r} visual mesh")
+                    path = resolve_mesh_file(geometry.mesh.filename, where, label, link.name)
+                    if path not in meshes:
+                        vertices, faces = read_mesh(path, f"link {link.name!r} visual mesh")
+                        meshes[path] = np.asarray(vertices, dtype=np.float64)[np.asarray(faces)]
                 except (UrdfError, ValueError) as error:
                     log.warning("%s (the link is drawn without it)", error)
                     continue
                 scale = geometry.mesh.scale if geometry.mesh.scale is not None else 1.0
-                mesh = np.asarray(vertices, dtype=np.float64)[np.asarray(faces)] * scale
+                mesh = meshes[path] * scale
                 triangles += len(mesh)
                 if triangles > MAX_VISUAL_TRIANGLES:
                     log.warning("%s: more than %d visual triangles: link %r and the rest drawn without meshes",
                                 label, MAX_VISUAL_TRIANGLES, link.name)
                     continue
                 out.append(Visual(link.name, "mesh", placed, [1.0, 1.0, 1.0], mesh, rgba))
+            if len(out) >= MAX_VISUALS:
+                log.warning("%s: more than %d visual elements: the rest are not drawn", label, MAX_VISUALS)
+                return out
     return out
 
 

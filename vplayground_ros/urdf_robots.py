@@ -21,6 +21,7 @@ Frames are `<prefix><link>`: /tf carries <world_frame> -> the root link (with a 
 <world_frame> -> odom -> root, as the vehicles have it) and each joint's parent link -> child
 link as the bodies stand now; links lumped into one body are fixed to it (/tf_static).
 """
+import logging
 import math
 import re
 from collections import namedtuple
@@ -43,6 +44,7 @@ DRIVE_KEYS = {
 DRIVE_TYPES = tuple(DRIVE_KEYS)
 LOCALIZATIONS = ("ground_truth", "none")
 COMMAND_KINDS = ("position", "velocity", "effort")
+log = logging.getLogger(__name__)
 # diff_drive_controller's default pose and twist covariance diagonals (x y z roll pitch yaw):
 # the wheels' odometry is not exact (they slip), and a filter fusing it must know.
 WHEEL_ODOMETRY_COVARIANCE = [(0.01 if row == 5 else 0.001) if row == column else 0.0
@@ -149,6 +151,9 @@ def check_against_model(entry, model, path):
         if joint not in movable:
             raise specs.SpecError(f"{path}.joints", f"{joint!r} is no revolute, continuous or prismatic joint of "
                                                     "the description")
+        if joint in model.mimics:
+            raise specs.SpecError(f"{path}.joints", f"{joint!r} mimics {model.mimics[joint][0]!r}: it takes no "
+                                                    "commands of its own")
     drive = entry.get("drive")
     if drive is not None:
         kinds = {spec["name"]: spec["type"] for spec in model.joints}
@@ -157,17 +162,35 @@ def check_against_model(entry, model, path):
                 if joint not in movable or kinds[movable[joint]] == "prismatic":
                     raise specs.SpecError(f"{path}.drive.{key}", f"{joint!r} is no revolute or continuous joint "
                                                                  "of the description")
+                if joint in model.mimics:
+                    raise specs.SpecError(f"{path}.drive.{key}", f"{joint!r} mimics {model.mimics[joint][0]!r}: "
+                                                                 "it takes no commands of its own")
 
 
-def add_robot_entry(world, entry, model, path="robot"):
+# Frames no link may be: a stack's (REP 105's map and earth) and what a sensor's parent calls the world.
+STACK_FRAMES = ("map", "earth", "world")
+
+
+def add_robot_entry(world, entry, model, path, frames):
     """Adds a checked entry's robot (urdf_import.add_robot: all or none) and lists it in
     world.robot_specs with its namespace: the entry's, else the root one if no vehicle or robot
-    has it, else its name's. Returns the bodies added."""
+    has it (and none of its links would be a reserved frame there), else its name's. `frames`
+    (parameters.Frames): no link may be the world frame, a stack's or, with a drive, the odom
+    frame. Returns the bodies added."""
     from .urdf_import import add_robot
     taken = world.robot_namespaces()
-    namespace = entry.get("namespace", re.sub(r"[^A-Za-z0-9_]", "_", entry["name"]) if "" in taken else "")
+    reserved = {frames.world, *STACK_FRAMES, *((frames.odom,) if entry.get("drive") else ())}
+    own = re.sub(r"[^A-Za-z0-9_]", "_", entry["name"])
+    # The root namespace by default, unless a robot has it or a link would be a reserved frame there.
+    root_free = "" not in taken and not reserved.intersection(model.link_frames)
+    namespace = entry.get("namespace", "" if root_free else own)
     if namespace in taken:
         raise specs.SpecError(f"{path}.namespace", f"{namespace!r} is the namespace of {taken[namespace]} already")
+    prefix = f"{namespace}/" if namespace else ""
+    clash = next((link for link in model.link_frames if prefix + link in reserved), None)
+    if clash is not None:
+        raise specs.SpecError(f"{path}.namespace", f"its link {clash!r} would be the frame {prefix + clash!r}, which "
+                                                   "the node or a stack publishes: give the robot a namespace")
     added = add_robot(world, model)
     limits = {spec["name"]: (spec["motor"]["max_effort"], spec["motor"]["max_speed"]) for spec in model.joints}
     if entry.get("hold"):  # powered on: position motors hold joint_positions (a mimic follows its own)
@@ -175,7 +198,8 @@ def add_robot_entry(world, entry, model, path="robot"):
                                      "velocity": 0.0, "max_effort": limits[entity][0], "max_speed": limits[entity][1]}
                             for joint, entity in model.joint_names.items() if joint not in model.mimics})
     world.robot_specs = [*world.robot_specs, {
-        **entry, "namespace": namespace, "joints": entry.get("joints", list(model.joint_names)),
+        **entry, "namespace": namespace,
+        "joints": entry.get("joints", [joint for joint in model.joint_names if joint not in model.mimics]),
         "bodies": [b["name"] for b in model.bodies], "joints_held": list(model.joint_names.values()),
         "model": model, "limits": limits}]
     return added
@@ -408,14 +432,23 @@ class RobotControl:
 
     def __init__(self):
         self.world = None          # the World the commands below were given in
+        self.time = 0.0            # its time when last seen
         self.trajectories = {}     # (robot, joint) -> the Trajectory that moves it
         self.drive_deadlines = {}  # robot -> simulated s its last cmd_vel lapses at
         self.mimic_targets = {}    # robot -> (targets, velocities) its <mimic> joints were last given
 
     def _attend(self, world):
-        """Commands given in another World (a scene loaded, a reset) are forgotten."""
+        """Commands given in another World (a scene loaded, a reset) are forgotten; when its
+        time went back (a reset of the time) they carry on on the new clock: a drive's deadline
+        and a trajectory's times move back with it."""
         if world is not self.world:
             self.world, self.trajectories, self.drive_deadlines, self.mimic_targets = world, {}, {}, {}
+        elif world.time < self.time:
+            shift = world.time - self.time
+            self.drive_deadlines = {name: deadline + shift for name, deadline in self.drive_deadlines.items()}
+            for trajectory in {id(t): t for t in self.trajectories.values()}.values():
+                trajectory.times = trajectory.times + shift
+        self.time = world.time
 
     @staticmethod
     def robot(world, name):
@@ -443,7 +476,9 @@ class RobotControl:
                 raise ValueError(f"{joint}: {value} is not finite")
             max_effort, max_speed = spec["limits"][entity]
             if kind == "position":
-                feed_forward = 0.0 if velocities is None else float(velocities[k])
+                # A feed-forward beyond the joint's speed limit is the limit (a trajectory's fast segment).
+                limit = min(max_speed, specs.MAX_SPEED)
+                feed_forward = 0.0 if velocities is None else min(max(float(velocities[k]), -limit), limit)
                 motors[entity] = {"mode": "position", "target": value, "velocity": feed_forward,
                                   "max_effort": max_effort, "max_speed": max_speed}
             elif kind == "velocity":
@@ -462,10 +497,13 @@ class RobotControl:
         """Follows a trajectory of `joints` from `start` (simulated s; None: now)."""
         self._attend(world)
         spec = self.robot(world, name)
-        entities = spec["model"].joint_names
+        entities, mimics = spec["model"].joint_names, spec["model"].mimics
         missing = [joint for joint in joints if joint not in entities]
         if missing:
             raise ValueError(f"{name} has no revolute, continuous or prismatic joint {missing[0]!r}")
+        following = [joint for joint in joints if joint in mimics]
+        if following:
+            raise ValueError(f"{name}'s joint {following[0]!r} mimics {mimics[following[0]][0]!r}: command that one")
         current = world.joint_states([entities[joint] for joint in joints])[0]
         trajectory = Trajectory(joints, world.time if start is None else start, current, times, positions, velocities)
         for joint in joints:
@@ -491,7 +529,11 @@ class RobotControl:
             if last is not None and not np.any(targets[1]) and np.array_equal(targets[0], last[0]):
                 continue  # at rest where it was: a command would wake the robot every batch
             self.mimic_targets[spec["name"]] = targets
-            self.command(world, spec["name"], "position", list(mimics), *targets, mimicking=True)
+            try:
+                self.command(world, spec["name"], "position", list(mimics), *targets, mimicking=True)
+            except ValueError as error:  # a leader so far out that its follower's target cannot be
+                log.warning("%s: mimic joints not moved: %s", spec["name"], error)
+                continue
             moved = True
         return moved
 
@@ -535,7 +577,11 @@ class RobotControl:
             positions, velocities = trajectory.sample(now)
             columns = [trajectory.joints.index(joint) for joint in joints]
             done = now >= trajectory.end
-            self.command(world, name, "position", joints, positions[columns], velocities[columns])
+            try:
+                self.command(world, name, "position", joints, positions[columns], velocities[columns])
+            except ValueError as error:  # a point the joint's motor cannot take: the trajectory ends
+                log.warning("%s: trajectory of %s abandoned: %s", name, ", ".join(joints), error)
+                done = True
             if not done:
                 for joint in joints:
                     self.trajectories[(name, joint)] = trajectory

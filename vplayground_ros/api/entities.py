@@ -12,13 +12,14 @@ import yaml
 from ..broadcast import check_sensors
 from ..frame_names import node_frames, sensor_frames, sensor_frames_taken
 from ..physics import specs
-from ..physics.math3d import matrix_to_quaternion
+from ..physics.math3d import matrix_to_quaternion, rpy_to_quat
 from ..physics.world import prepare_body
 from ..robots import validate_robot, world_robots
 from ..scene import body_mesh_points, resolve_mesh
 from ..sensors import TYPES as SENSOR_TYPES, pose_matrix, validate_sensor
 from ..urdf_robots import add_robot_entry, check_against_model, validate_entry
 from .descriptions import describe, describe_robot, describe_sensor, robot_named
+from .file_access import allowed_directories
 from .frames import frame_pose, pose_in_world
 from .name_filter import MAX_FILTER, match_names
 from .naming import unique_name
@@ -27,6 +28,7 @@ from .results import (FAILED, INVALID_POSE, MISSING_ASSETS, NAME_NOT_UNIQUE, NOT
                       UNSUPPORTED_ASSETS, RequestError, handled, reply)
 
 log = logging.getLogger(__name__)
+ROBOT_EDIT_KEYS = {"position", "quaternion", "rpy", "linear_velocity", "angular_velocity"}  # a robot's, as one
 
 
 def sensor_named(world, name):
@@ -135,7 +137,8 @@ class EntityRequests:
             model = robot_model(source, entry["name"], fields.get("position", [0.0, 0.0, 0.0]),
                                 fields.get("rpy", [0.0, 0.0, 0.0]), entry.get("fixed_base"),
                                 entry.get("self_collide", False), entry["joint_positions"],
-                                label=f"{path}.urdf", quaternion=fields.get("quaternion"))
+                                label=f"{path}.urdf", quaternion=fields.get("quaternion"),
+                                directories=allowed_directories(self.scene_directories))
         except UrdfError as error:
             code = (MISSING_ASSETS if isinstance(error, MissingMesh) else
                     RESOURCE_PARSE_ERROR if isinstance(error, UnreadableUrdf) else UNSUPPORTED_ASSETS)
@@ -153,7 +156,8 @@ class EntityRequests:
                                        f"{len(existing)} bodies and max_bodies is {cap}")
         # Names are frames (a body's on /tf, a sensor's), so the node's own frames are taken too.
         frames_taken = {**node_frames(frames), **sensor_frames_taken(world.sensor_specs)}
-        names, suffixes = set(existing) | {s["name"] for s in world.sensor_specs} | set(frames_taken), {}
+        names, suffixes = (set(existing) | {s["name"] for s in world.sensor_specs} | set(frames_taken)
+                           | {robot["name"] for robot in world.robot_specs}), {}
         # Bodies and vehicles first: a sensor of the request rides the body of the request that
         # its parent names, under the name that body gets.
         renamed = {}
@@ -209,7 +213,7 @@ class EntityRequests:
                 if vehicle in (True, False):
                     added.append(world.add_vehicle(spec) if vehicle else world.add_body(spec))
             for path, entry, model in robots:
-                added += add_robot_entry(world, entry, model, path)
+                added += add_robot_entry(world, entry, model, path, frames)
             if sensors or added:  # with the robots' namespaces, which adding gave them
                 check_sensors([*world.sensor_specs, *sensors], world_robots(world, frames), world.robot_specs)
         except Exception:
@@ -325,10 +329,12 @@ class EntityRequests:
     def _move_robot(world, robot, label, fields, vehicle_edit, frame, stamped, frames):
         """A URDF robot's pose and twist: every link moved as one rigid body with its root (its
         joints stay as they are); its links' other keys are edited one by one by their names."""
-        other = sorted(set(fields) - stamped) + (["vehicle"] if vehicle_edit is not None else [])
+        other = sorted(set(fields) - ROBOT_EDIT_KEYS) + (["vehicle"] if vehicle_edit is not None else [])
         if other:
             raise RequestError(FAILED, f"{label}.{other[0]}: a robot takes a pose and a twist; edit its links "
                                        f"({robot['bodies'][0]}, ...) for anything else")
+        if "rpy" in fields:
+            fields = {**fields, "quaternion": rpy_to_quat(fields.pop("rpy")).tolist()}
         if frame:
             fields = in_world(world, frame, fields, "edit.state", frames)
         root = world.body(robot["bodies"][0])
@@ -351,6 +357,9 @@ class EntityRequests:
                     edit["linear_velocity"] = (base + np.cross(spin, placed[:3, 3] - new[:3, 3])).tolist()
                     edit["angular_velocity"] = spin.tolist()
             edits[body] = edit
+        for body, edit in edits.items():  # every link checked before any moves: all or nothing
+            specs.validate_body_fields(edit, f"{label}.{body}", set(edit))
+            check_inside(world, edit["position"], f"{label}.{body}.position")
         for body, edit in edits.items():
             world.edit_body(body, **edit)
         return reply(OK, f"edited {robot['name']}: {', '.join(sorted(fields))}")

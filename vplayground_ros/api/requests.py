@@ -41,6 +41,7 @@ class Requests(EntityRequests, QueryRequests, ControlRequests, SceneRequests):
                                   else default_scene_directories(bag_directory))
         self.max_bodies = max_bodies
         self.initial = copy.deepcopy(world_to_scene(simulation.world))
+        self.initial_robots = list(simulation.world.robot_specs)  # as loaded: entries and models (a reset's)
 
     def frames(self):
         """The frame names: the parameters' (read-only), parameters.Frames."""

@@ -55,6 +55,7 @@ class SceneRequests:
             self.sim.world = world
             self.sim.clear_steps()  # none queued for the old world run on the new one
             self.initial = initial
+            self.initial_robots = list(world.robot_specs)
             self.scene_label = label
             self.sim.world_loaded = True
             if stopped:
@@ -77,6 +78,7 @@ class SceneRequests:
             self.sim.world = empty
             self.sim.clear_steps()
             self.initial = copy.deepcopy(world_to_scene(empty))
+            self.initial_robots = []
             self.scene_label = ""
             self.sim.world_loaded, self.sim.paused, self.sim.stopped = False, True, False
             return reply(OK, "unloaded: every entity removed")

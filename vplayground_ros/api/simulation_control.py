@@ -16,6 +16,7 @@ from ..parameters import SCOPE_ALL, SCOPE_SPAWNED, SCOPE_STATE, SCOPE_TIME, rese
 from ..physics import specs
 from ..scene import load_world
 from ..simulation import PAUSED, PLAYING, QUITTING, STOPPED
+from ..urdf_robots import add_robot_entry
 from .entities import drop_sensors_of
 from .results import (ALREADY, FAILED, INCORRECT_STATE, INCORRECT_TRANSITION, OK, RequestError, handled,
                       reply)
@@ -152,9 +153,12 @@ class ControlRequests:
             return reply(OK, "reset everything to the loaded scene")
         initial = {b["name"]: b for b in self.initial["bodies"]}
         initial.update({v["name"]: v for v in self.initial["vehicles"]})
+        # The scene's URDF robots: their links are the scene's too; the state restores them whole.
+        robots = {robot["name"]: robot for robot in self.initial_robots}
+        links = {body for robot in world.robot_specs if robot["name"] in robots for body in robot["bodies"]}
         done = []
         if scope & SCOPE_SPAWNED:
-            spawned = [name for name in world.body_names() if name not in initial]
+            spawned = [name for name in world.body_names() if name not in initial and name not in links]
             world.remove_bodies(spawned)
             drop_sensors_of(world, spawned)
             loaded = {s["name"] for s in self.initial.get("sensors", [])}
@@ -170,6 +174,10 @@ class ControlRequests:
                 world.edit_body(name, position=spec["position"], quaternion=spec["quaternion"],
                                 linear_velocity=spec["linear_velocity"],
                                 angular_velocity=spec["angular_velocity"])
+            present = set(world.body_names())
+            for robot in robots.values():  # as loaded: its links where they stood, its joints, its motors
+                world.remove_bodies([body for body in robot["bodies"] if body in present])
+                add_robot_entry(world, robot, robot["model"], f"robots.{robot['name']}", self.frames())
             done.append("states restored")
         if scope & SCOPE_TIME:
             world.time, world.step_count = 0.0, 0

@@ -346,6 +346,7 @@ class World(WorldQueries):
                for robot in self.robot_specs):
             self.robot_specs = [robot for robot in self.robot_specs
                                 if not (gone.intersection(robot["bodies"]) or gone.intersection(robot["joints_held"]))]
+            self.layout_version += 1  # what follows the layout follows the robots
 
     def _release(self, name, slot):
         """Frees a body's slot and name (what it touched already woken)."""
