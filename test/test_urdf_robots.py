@@ -105,6 +105,15 @@ def trajectory(names, points, stamp=0.0):
                          time_from_start=duration(t)) for t, p, v in points])
 
 
+def fitted_circle(points):
+    """(radius, spread of the points' distances from the centre) of the least-squares circle
+    through 2D points."""
+    points = np.asarray(points, dtype=float)
+    a = np.c_[2 * points, np.ones(len(points))]
+    cx, cy, k = np.linalg.lstsq(a, (points ** 2).sum(axis=1), rcond=None)[0]
+    return math.sqrt(k + cx * cx + cy * cy), float(np.std(np.hypot(points[:, 0] - cx, points[:, 1] - cy)))
+
+
 def pose_matrix(transform):
     t, q = transform.translation, transform.rotation
     x, y, z, w = q.x, q.y, q.z, q.w
@@ -229,12 +238,9 @@ def test_the_husky_drives_a_commanded_circle_and_its_wheel_odometry_follows(run)
         snap = runtime.sim.snapshot
         positions.append(snap.state["positions"][snap.names.index("husky.base_footprint")][:2].copy())
         advance(runtime, 0.25)
-    points = np.array(positions)
-    a = np.c_[2 * points, np.ones(len(points))]
-    cx, cy, k = np.linalg.lstsq(a, (points ** 2).sum(axis=1), rcond=None)[0]
-    radius = math.sqrt(k + cx * cx + cy * cy)
+    radius, spread = fitted_circle(positions)
     assert radius == pytest.approx(2.5, rel=0.03)
-    assert np.std(np.hypot(points[:, 0] - cx, points[:, 1] - cy)) < 0.05  # a circle, not a spiral
+    assert spread < 0.05  # a circle, not a spiral
     runtime.sim.stop()
     runtime.stop()  # the last state goes out: odometry and the snapshot at one time
     odometry = latest(sink, "/husky/odom", ODOMETRY)
@@ -265,10 +271,7 @@ def test_an_ackermann_car_drives_a_commanded_circle_and_its_odometry_follows():
         odometry.update(world.joint_states(joints)[0], world.time)
         if k > 40:
             track.append(world.body("rc.base_link")["position"][:2])
-    points = np.array(track)
-    a = np.c_[2 * points, np.ones(len(points))]
-    cx, cy, k = np.linalg.lstsq(a, (points ** 2).sum(axis=1), rcond=None)[0]
-    assert math.sqrt(k + cx * cx + cy * cy) == pytest.approx(4.0, rel=0.02)
+    assert fitted_circle(track)[0] == pytest.approx(4.0, rel=0.02)
     left, right = world.joint_states(joints)[0][:2]
     assert left == pytest.approx(math.atan(0.7 / (4.0 - 0.3)), abs=2e-3)  # inner
     assert right == pytest.approx(math.atan(0.7 / (4.0 + 0.3)), abs=2e-3)  # outer
@@ -337,10 +340,7 @@ def test_the_racecar_with_links_without_collision_geometry_drives_a_commanded_ci
         world.step(8)
         if k > 40:
             track.append(world.body("rc.base_link")["position"][:2])
-    points = np.array(track)
-    a = np.c_[2 * points, np.ones(len(points))]
-    cx, cy, k = np.linalg.lstsq(a, (points ** 2).sum(axis=1), rcond=None)[0]
-    assert math.sqrt(k + cx * cx + cy * cy) == pytest.approx(2.0, rel=0.02)
+    assert fitted_circle(track)[0] == pytest.approx(2.0, rel=0.02)
 
 
 def test_robots_spawn_and_go_whole(run, tmp_path):
