@@ -4,8 +4,9 @@ kinematics), commands on every command topic, a trajectory followed on the simul
 the Husky's differential drive with Clearpath's own controller settings, spawn and remove."""
 import logging
 import math
-import re
 import os
+import random
+import re
 from types import SimpleNamespace as NS
 
 import numpy as np
@@ -555,3 +556,54 @@ def test_hostile_robot_requests_change_nothing(run, tmp_path):
 def test_mimic_joints_take_no_place_in_commands_or_drives():
     with pytest.raises(SceneError, match="robots\\[0\\].joints: 'follower' mimics 'leader'"):
         load_world({"version": 1, "robots": [{"name": "linkage", "urdf": MIMIC, "joints": ["leader", "follower"]}]})
+
+
+def test_mutated_descriptions_and_hostile_commands_leave_the_world_whole(run):
+    """Descriptions with random damage are refused or added whole, and commands with bad names,
+    counts and values (NaN, inf, 1e9) on every command topic are refused or bounded: nothing
+    raises, nothing pauses, every body stays finite, every robot keeps all its links."""
+    runtime, sink = run({"version": 1, "robots": [{"name": "lk", "urdf": MIMIC, "namespace": "lk"},
+                                                  {"name": "rc", "urdf": ACKERMANN_CAR, "position": [3, 0, 0.16],
+                                                   "drive": ACKERMANN}]})
+    rng = random.Random(5)
+    tokens = ['"', "<", ">", "/", "0", "-1", "nan", "1e30", "inf", " ", "joint", "link", "mimic", "world"]
+    added = 0
+    for k in range(300):
+        text = list(rng.choice([MIMIC, ACKERMANN_CAR]))
+        for _ in range(rng.randrange(1, 6)):
+            i = rng.randrange(len(text))
+            if rng.random() < 0.5:
+                del text[i:i + rng.randrange(1, 20)]
+            else:
+                text[i:i] = list(rng.choice(tokens))
+        ok, message = runtime.requests.spawn(yaml.safe_dump({"name": f"m{k}", "urdf": "".join(text),
+                                                             "position": [rng.uniform(-20, 20), 20.0, 0.3]}))
+        added += ok
+    values = [0.0, 1.0, -1.0, 1e9, -1e9, float("nan"), float("inf"), 1e6]
+    names = ["leader", "follower", "left_steering", "right_rear_axle", "x", ""]
+    for _ in range(2000):
+        topic = rng.choice(["/lk/joint_commands", "/joint_commands", "/lk/position_commands", "/effort_commands",
+                            "/lk/joint_trajectory", "/joint_trajectory", "/cmd_vel"])
+        key, n = topic.split("/")[-1], rng.randrange(0, 4)
+        if key == "joint_commands":
+            message = NS(name=[rng.choice(names) for _ in range(n)],
+                         position=[rng.choice(values) for _ in range(rng.choice([0, n]))],
+                         velocity=[rng.choice(values) for _ in range(rng.choice([0, n, n + 1]))])
+        elif key == "joint_trajectory":
+            message = trajectory([rng.choice(names) for _ in range(n)],
+                                 [(t, [rng.choice(values) for _ in range(n)], []) for t in range(1, rng.randrange(1, 4))])
+        elif key == "cmd_vel":
+            message = NS(linear=NS(x=rng.choice(values), y=0.0, z=0.0), angular=NS(x=0.0, y=0.0, z=rng.choice(values)))
+        else:
+            message = NS(data=[rng.choice(values) for _ in range(n)])
+        runtime.inputs.handle(key, message, topic)
+    advance(runtime, 1.0)
+    assert added > 0 and not runtime.sim.paused and runtime.sim.fault_count == 0
+    world = runtime.sim.world
+
+    def whole(world):
+        names = set(world.body_names())
+        return (all(np.all(np.isfinite(world.body(name)["position"])) for name in names)
+                and all(set(robot["bodies"]) <= names for robot in world.robot_specs))
+    assert runtime.sim.call(whole)
+    assert {"lk", "rc"} <= {robot["name"] for robot in world.robot_specs}
