@@ -2,7 +2,6 @@
 tree on /tf checked against the description by an independent reader (yourdfpy's forward
 kinematics), commands on every command topic, a trajectory followed on the simulation's clock,
 the Husky's differential drive with Clearpath's own controller settings, spawn and remove."""
-import logging
 import math
 import os
 import random
@@ -13,15 +12,11 @@ import numpy as np
 import pytest
 import yaml
 
-from vplayground_ros.cli import parse_args
 from vplayground_ros.interfaces import decoder
-from vplayground_ros.runtime import Runtime
 from vplayground_ros.scene import SceneError, load_world, world_to_scene
-from vplayground_ros.simulation import Simulation
 from vplayground_ros.urdf_robots import RobotControl, WheelOdometry, drive_joints
 from helpers import wait_for
-from test_broadcast import Collector
-from test_robots import chain, tree
+from test_robots import chain, start, tree
 
 pybullet_data = pytest.importorskip("pybullet_data")
 yourdfpy = pytest.importorskip("yourdfpy")
@@ -69,13 +64,8 @@ def run():
     started = []
 
     def go(scene=SCENE):
-        options = parse_args(["--no-record", "--real-time-factor", "0"])
-        sim = Simulation(load_world(scene), real_time_factor=0.0)
-        runtime = Runtime(sim, options, logging.getLogger("test_urdf_robots"))
-        runtime.parameters.set({"cmd_vel_timeout": 1000.0})  # as fast as it goes, commands lag in sim time
-        sink = Collector()
-        runtime.broadcaster.add_sink(sink)
-        runtime.start()
+        # As fast as it goes, commands lag in simulated time: they do not lapse here.
+        runtime, sink = start(scene, overrides={"cmd_vel_timeout": 1000.0})
         started.append(runtime)
         return runtime, sink
     yield go

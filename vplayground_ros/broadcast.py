@@ -22,7 +22,7 @@ from .parameters import frames as frame_names
 from .odometry import OdometryTracker
 from .physics.math3d import quaternions_to_matrices
 from .robot_description import robot_description
-from .robots import as_pose, compose, footprint_pose, inverse, robot, robot_transforms
+from .robots import as_pose, compose, footprint_pose, inverse, namespace_prefix, robot, robot_transforms
 from .urdf_robots import (WHEEL_ODOMETRY_COVARIANCE, WheelOdometry, drive_joints, fixed_edges, link_carriers,
                           link_edges, publishing_view, root_pose)
 
@@ -882,7 +882,7 @@ def check_sensor_topics(sensor_specs, robots, robot_specs=()):
         taken[resolve(r.topic("cmd_vel"))] = f"{r.name}'s cmd_vel"
     from .inputs import URDF_ROBOT_INPUTS
     for spec in robot_specs:
-        prefix = f"{spec['namespace']}/" if spec["namespace"] else ""
+        prefix = namespace_prefix(spec["namespace"])
         suffixes = ["joint_states", "robot_description", *(s.name for s in URDF_ROBOT_INPUTS)]
         suffixes += ["cmd_vel", "odom"] if spec.get("drive") else []
         taken.update({resolve(prefix + suffix): f"{spec['name']}'s {suffix}" for suffix in suffixes})

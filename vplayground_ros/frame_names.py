@@ -3,7 +3,7 @@ no body, vehicle or sensor may take one. A body's name is its frame on /tf and a
 its frame too, so such a name would give a frame two parents, or a loop. A namespaced robot's
 frames hold a '/', which no entity name does."""
 from .parameters import FRAMES, Frames
-from .robots import STACK_FRAMES, frames_of, robot_frames
+from .robots import STACK_FRAMES, frames_of, namespace_prefix, robot_frames
 from .sensor_messages import optical_frame
 from .sensors import CAMERAS, WORLD
 from .urdf_robots import link_carriers
@@ -40,7 +40,7 @@ def check_sensor_frames(sensor_specs, robots, robot_specs=()):
     from .physics.specs import SpecError
     taken = frames_of(robots)
     for spec in robot_specs:
-        prefix = f"{spec['namespace']}/" if spec["namespace"] else ""
+        prefix = namespace_prefix(spec["namespace"])
         taken.update({prefix + link: f"a link of the robot {spec['name']}" for link in spec["model"].link_frames})
     frame_of = sensor_frame(robots, link_carriers(robot_specs))
     for spec in sensor_specs:

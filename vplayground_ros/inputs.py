@@ -267,7 +267,7 @@ def trajectory_command(msg):
         raise ValueError(f"{len(points)} points: expected 1 to {MAX_TRAJECTORY_POINTS}")
     times, positions, velocities = [], [], []
     for k, point in enumerate(points):
-        t = float(point.time_from_start.sec) + 1e-9 * float(point.time_from_start.nanosec)
+        t = seconds(point.time_from_start)
         if not (math.isfinite(t) and t >= 0.0) or times and t <= times[-1]:
             raise ValueError(f"points[{k}].time_from_start {t:g} s: times must increase")
         p, v = [float(x) for x in point.positions], [float(x) for x in getattr(point, "velocities", ())]
@@ -279,9 +279,14 @@ def trajectory_command(msg):
         positions.append(p)
         velocities.append(v)
     header = getattr(msg, "header", None)
-    stamp = 0.0 if header is None else float(header.stamp.sec) + 1e-9 * float(header.stamp.nanosec)
+    stamp = 0.0 if header is None else seconds(header.stamp)
     if not math.isfinite(stamp):
         raise ValueError("header.stamp not finite")
     given = all(velocities)
     return (names, stamp if stamp > 0.0 else None, times, np.array(positions),
             np.array(velocities) if given else None)
+
+
+def seconds(time):
+    """A builtin_interfaces Time or Duration in seconds."""
+    return float(time.sec) + 1e-9 * float(time.nanosec)

@@ -36,6 +36,12 @@ STANDARD_GRAVITY = 9.80665
 RobotFrames = namedtuple("RobotFrames", "odom footprint base suspension steering wheel")
 
 
+def namespace_prefix(namespace):
+    """What a robot's frames (and relative topics) start with: `<namespace>/`, or nothing in the
+    root namespace."""
+    return f"{namespace}/" if namespace else ""
+
+
 def validate_robot(vehicle, path):
     """A vehicle spec (specs.validate_vehicle's) with its `odometry` error model checked key by
     key (odometry.validate), which the engine keeps without knowing it."""
@@ -59,7 +65,7 @@ class Robot(namedtuple("Robot", "name namespace localization publish_odom_tf fra
 
     @property
     def prefix(self):
-        return f"{self.namespace}/" if self.namespace else ""
+        return namespace_prefix(self.namespace)
 
     def topic(self, name):
         """A topic of the robot, relative: `name` under its namespace."""
@@ -84,7 +90,7 @@ def robot(vehicle, frames, localization="ground_truth", publish_odom_tf=True):
     namespace = vehicle.get("namespace", "")
     return Robot(vehicle["name"], namespace, vehicle.get("localization", localization),
                  vehicle.get("publish_odom_tf", publish_odom_tf),
-                 robot_frames(frames, f"{namespace}/" if namespace else ""), ride_height(vehicle))
+                 robot_frames(frames, namespace_prefix(namespace)), ride_height(vehicle))
 
 
 def world_robots(world, frames):

@@ -29,7 +29,9 @@ from collections import namedtuple
 import numpy as np
 
 from .physics import specs
-from .physics.math3d import quaternions_to_matrices
+from .physics.math3d import matrix_to_quaternion, quaternions_to_matrices
+from .robots import STACK_FRAMES, namespace_prefix
+from .sensors import WORLD
 
 ENTRY_KEYS = {"name", "urdf", "position", "rpy", "quaternion", "fixed_base", "self_collide",
               "joint_positions", "hold", "namespace", "joints", "drive", "localization", "publish_odom_tf"}
@@ -167,10 +169,6 @@ def check_against_model(entry, model, path):
                                                                  "it takes no commands of its own")
 
 
-# Frames no link may be: a stack's (REP 105's map and earth) and what a sensor's parent calls the world.
-STACK_FRAMES = ("map", "earth", "world")
-
-
 def add_robot_entry(world, entry, model, path, frames):
     """Adds a checked entry's robot (urdf_import.add_robot: all or none) and lists it in
     world.robot_specs with its namespace: the entry's, else the root one if no vehicle or robot
@@ -179,14 +177,15 @@ def add_robot_entry(world, entry, model, path, frames):
     frame. Returns the bodies added."""
     from .urdf_import import add_robot
     taken = world.robot_namespaces()
-    reserved = {frames.world, *STACK_FRAMES, *((frames.odom,) if entry.get("drive") else ())}
+    # (WORLD: what a sensor's parent calls the world)
+    reserved = {frames.world, WORLD, *STACK_FRAMES, *((frames.odom,) if entry.get("drive") else ())}
     own = re.sub(r"[^A-Za-z0-9_]", "_", entry["name"])
     # The root namespace by default, unless a robot has it or a link would be a reserved frame there.
     root_free = "" not in taken and not reserved.intersection(model.link_frames)
     namespace = entry.get("namespace", "" if root_free else own)
     if namespace in taken:
         raise specs.SpecError(f"{path}.namespace", f"{namespace!r} is the namespace of {taken[namespace]} already")
-    prefix = f"{namespace}/" if namespace else ""
+    prefix = namespace_prefix(namespace)
     clash = next((link for link in model.link_frames if prefix + link in reserved), None)
     if clash is not None:
         raise specs.SpecError(f"{path}.namespace", f"its link {clash!r} would be the frame {prefix + clash!r}, which "
@@ -205,6 +204,11 @@ def add_robot_entry(world, entry, model, path, frames):
     return added
 
 
+def robot_spec(world, name):
+    """The world.robot_specs entry of the URDF robot `name`, or None."""
+    return next((robot for robot in world.robot_specs if robot["name"] == name), None)
+
+
 # ---------------------------------------------------------------------- sensors on their links
 class LinkCarrier(namedtuple("LinkCarrier", "name namespace link")):
     """A URDF robot's body as a sensor's parent: the sensor hangs from the body's link frame
@@ -213,7 +217,7 @@ class LinkCarrier(namedtuple("LinkCarrier", "name namespace link")):
 
     @property
     def prefix(self):
-        return f"{self.namespace}/" if self.namespace else ""
+        return namespace_prefix(self.namespace)
 
     def topic(self, name):
         return self.prefix + name
@@ -230,15 +234,15 @@ def link_carriers(robot_specs):
 
 
 # ---------------------------------------------------------------------- as the publisher sees it
-class UrdfRobot(namedtuple("UrdfRobot", "name namespace joint_names entities body_rows links drive localization "
+class UrdfRobot(namedtuple("UrdfRobot", "name namespace joint_names body_rows links drive localization "
                                         "publish_odom_tf description")):
-    """A URDF robot in a snapshot's layout: its joint_states names (URDF) and World joints, the
-    snapshot rows of its bodies, `links`: [(link, parent link or None, body index in body_rows,
+    """A URDF robot in a snapshot's layout: its joint_states names (URDF), the snapshot rows of
+    its bodies, `links`: [(link, parent link or None, body index in body_rows,
     its 4x4 pose in that body's frame)], parents first; `drive` (the entry's, or None)."""
 
     @property
     def prefix(self):
-        return f"{self.namespace}/" if self.namespace else ""
+        return namespace_prefix(self.namespace)
 
     def topic(self, name):
         return self.prefix + name
@@ -258,8 +262,7 @@ def publishing_view(spec, rows, localization="ground_truth", publish_odom_tf=Tru
     index = {body: k for k, body in enumerate(bodies)}
     links = [(link, model.link_parents.get(link), index[body], pose)
              for link, (body, pose) in model.link_frames.items()]
-    return UrdfRobot(spec["name"], spec["namespace"], tuple(model.joint_names), tuple(model.joint_names.values()),
-                     np.array([rows[b] for b in bodies], np.int64), links, spec.get("drive"),
+    return UrdfRobot(spec["name"], spec["namespace"], tuple(model.joint_names), np.array([rows[b] for b in bodies], np.int64), links, spec.get("drive"),
                      spec.get("localization", localization), spec.get("publish_odom_tf", publish_odom_tf),
                      model.description)
 
@@ -296,7 +299,6 @@ def root_pose(robot, state):
 
 
 def matrix_pose(matrix):
-    from .physics.math3d import matrix_to_quaternion
     return [*map(float, matrix[:3, 3]), *map(float, matrix_to_quaternion(matrix[:3, :3]))]
 
 
@@ -452,7 +454,7 @@ class RobotControl:
 
     @staticmethod
     def robot(world, name):
-        spec = next((r for r in world.robot_specs if r["name"] == name), None)
+        spec = robot_spec(world, name)
         if spec is None:
             raise KeyError(f"no robot named {name!r}")
         return spec

@@ -53,11 +53,6 @@ def describe_sensor(world, spec):
     }
 
 
-def robot_named(world, name):
-    """The world.robot_specs entry of the URDF robot `name`, or None."""
-    return next((r for r in world.robot_specs if r["name"] == name), None)
-
-
 def describe_robot(world, spec):
     """A URDF robot as plain data, like describe(): its root link's pose and twist, the mass of
     all its links, frozen when all are, its entry as properties (without the loaded model) and

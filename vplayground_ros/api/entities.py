@@ -17,8 +17,8 @@ from ..physics.world import prepare_body
 from ..robots import validate_robot, world_robots
 from ..scene import body_mesh_points, resolve_mesh
 from ..sensors import TYPES as SENSOR_TYPES, pose_matrix, validate_sensor
-from ..urdf_robots import add_robot_entry, check_against_model, validate_entry
-from .descriptions import describe, describe_robot, describe_sensor, robot_named
+from ..urdf_robots import add_robot_entry, check_against_model, robot_spec, validate_entry
+from .descriptions import describe, describe_robot, describe_sensor
 from .file_access import allowed_directories
 from .frames import frame_pose, pose_in_world
 from .name_filter import MAX_FILTER, match_names
@@ -305,7 +305,7 @@ class EntityRequests:
 
     @staticmethod
     def _edit(world, name, label, fields, vehicle_edit, frame, stamped, frames):
-        robot = robot_named(world, name)
+        robot = robot_spec(world, name)
         if robot is not None:
             return EntityRequests._move_robot(world, robot, label, fields, vehicle_edit, frame, stamped, frames)
         if name not in world.body_names():
@@ -445,7 +445,7 @@ class EntityRequests:
             sensor = sensor_named(world, name)
             if sensor is not None and (sensor["parent"] == "world" or sensor["parent"] in world.body_names()):
                 return describe_sensor(world, sensor)
-            robot = robot_named(world, name)
+            robot = robot_spec(world, name)
             if robot is not None:
                 return describe_robot(world, robot)
             if name not in world.body_names():

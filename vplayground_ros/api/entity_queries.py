@@ -12,7 +12,8 @@ import numpy as np
 
 from ..physics import specs
 from ..physics.math3d import quaternions_to_matrices
-from .descriptions import SENSOR_SIZE, describe, describe_robot, describe_sensor, robot_named
+from ..urdf_robots import robot_spec
+from .descriptions import SENSOR_SIZE, describe, describe_robot, describe_sensor
 from .name_filter import match_names
 from .results import FAILED, FEATURE_UNSUPPORTED, NOT_FOUND, RequestError
 
@@ -124,7 +125,7 @@ class QueryRequests:
             sensor = next((s for s in world.sensor_specs if s["name"] == name), None)
             if sensor is not None and (sensor["parent"] == "world" or sensor["parent"] in world.body_names()):
                 return {**describe_sensor(world, sensor), "time": world.time}
-            robot = robot_named(world, name)
+            robot = robot_spec(world, name)
             if robot is not None:
                 return {**describe_robot(world, robot), "time": world.time}
             if name not in world.body_names():

@@ -9,7 +9,7 @@ import numpy as np
 
 from ..frame_names import mount_frame, sensor_frame
 from ..physics.math3d import matrix_to_quaternion, rpy_to_quat
-from ..robots import robot_transforms, world_robots
+from ..robots import namespace_prefix, robot_transforms, world_robots
 from ..sensor_messages import static_frames
 from ..sensors import WORLD, pose_matrix
 from ..urdf_robots import link_carriers
@@ -30,7 +30,7 @@ def frame_pose(world, frame, frames):
         if frame in (f.odom, f.footprint, f.base, *f.suspension, *f.steering, *f.wheel):
             edges += robot_frames_now(world, robot, frames)
     for spec in world.robot_specs:  # a URDF robot's link: where its body puts it
-        prefix = f"{spec['namespace']}/" if spec["namespace"] else ""
+        prefix = namespace_prefix(spec["namespace"])
         for link, (body, pose) in spec["model"].link_frames.items():
             if frame == prefix + link:
                 state = world.body(body)
