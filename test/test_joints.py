@@ -254,6 +254,23 @@ def test_removing_a_body_removes_its_joints():
     assert world.body("newcomer")["linear_velocity"][2] == pytest.approx(-G, rel=0.01)
 
 
+def test_a_body_id_names_that_body_and_no_other():
+    """Ids outlive their bodies: once a body is removed its id names nothing, even when another
+    body takes its slot or its name (or both), and ids survive the arrays growing."""
+    world = World(capacity=2)
+    first = world.body_id(world.add_body({"name": "a", "position": [0, 0, 1]}))
+    world.remove_body("a")
+    world.add_body({"name": "a", "position": [0, 0, 1]})  # its slot and its name again
+    assert world.body_name(first) is None and world.body_id("a") != first
+    second = world.body_id("a")
+    ids = {world.body_id(world.add_body({"position": [k, 3, 1]})): k for k in range(5)}  # grows twice
+    assert world.body_name(second) == "a" and len(ids) == 5
+    assert [world.body_name(i) for i in ids] == [f"box_{k + 1}" for k in range(5)]
+    assert world.body_name(-1) is None and world.body_name(1 << 40) is None
+    with pytest.raises(KeyError, match="no body named 'b'"):
+        world.body_id("b")
+
+
 def test_edit_and_remove_joint():
     world, _, _ = rod_pendulum(0.0)
     world.edit_joint("hinge", motor={"mode": "velocity", "target": 1.0, "max_effort": 1000.0})

@@ -188,3 +188,27 @@ def test_a_spin_about_the_intermediate_axis_flips():
     middle, largest = spin(1), spin(0)
     assert middle.min() < -2.5  # turned over
     assert largest.min() > 2.9
+
+
+def test_a_body_that_collides_with_nothing_falls_through_everything_but_its_joint_holds_it():
+    """`collides: false`: no contact with the ground, a resting box or the playground, no ray
+    stops at it; gravity and joints act as on any body; an edit turns collisions back on."""
+    world = World({"gravity": [0, 0, -G]})
+    world.set_playground(np.array([[-5, -5, 1.0], [5, -5, 1.0], [0, 5, 1.0]]), np.array([[0, 1, 2]]))
+    world.add_body({"name": "floor_box", "size": [2, 2, 0.5], "position": [0, 0, 0.25], "immovable": True})
+    world.add_body({"name": "ghost", "size": [0.2, 0.2, 0.2], "position": [0, 0, 3], "collides": False})
+    world.add_body({"name": "bob", "size": [0.2, 0.2, 0.2], "position": [3, 0, 3], "collides": False})
+    world.add_joint({"name": "hinge", "type": "revolute", "child": "bob", "anchor": [3, 0, 4], "axis": [0, 1, 0]})
+    hits = world.cast_rays([[0, 0, 3.5]], [[0, 0, -1]], 10.0)
+    assert hits.distance[0] == pytest.approx(2.5, abs=1e-9)  # the playground under it, not the ghost
+    world.step(128)
+    # Through the playground (z 1), the box and the ground as a free fall (exactly: symplectic Euler).
+    t, dt = world.time, 1.0 / 128
+    assert world.body("ghost")["position"][2] == pytest.approx(3 - 0.5 * G * t * (t + dt), abs=1e-9)
+    assert world.stats["points"] == 0
+    assert np.allclose(world.body("bob")["position"], [3, 0, 3], atol=1e-6)  # hangs straight down
+    saved = world.body("ghost")
+    assert saved["collides"] is False and "collides" not in world.body("floor_box")
+    world.edit_body("ghost", position=[0, 0, 2], linear_velocity=[0, 0, 0], collides=True)
+    world.step(256)
+    assert world.body("ghost")["position"][2] == pytest.approx(1.1, abs=0.01)  # on the playground

@@ -267,6 +267,20 @@ def test_sensors_are_saved_with_the_scene_and_go_with_a_removed_parent(caplog):
     assert "sensors" not in world_to_scene(world)
 
 
+def test_a_sensor_goes_with_its_parent_even_when_another_body_takes_its_name(caplog):
+    """Removed and replaced by a body of the same name between two samples: the sensor was on
+    the body that went, so it goes (it does not jump onto the newcomer)."""
+    imu = {"name": "imu", "type": "imu", "parent": "b", "rate": 50}
+    world = load_world(scene(imu, bodies=[{"name": "b", "position": [0, 0, 0.5]}]))
+    sensors = Sensors()
+    world.step(sensors.steps_until_due(world))
+    assert [s.name for s, _ in sensors.sample(world)] == ["imu"]
+    world.remove_body("b")
+    world.add_body({"name": "b", "position": [5, 0, 3]})
+    world.step(sensors.steps_until_due(world))
+    assert sensors.sample(world) == [] and world.sensor_specs == [] and "parent b is gone" in caplog.text
+
+
 @pytest.mark.parametrize("sensor, message", [
     ({"name": "s", "type": "sonar", "parent": "world"}, "sensors[0].type: unknown type 'sonar'"),
     ({"name": "s", "type": "imu", "parent": "nobody"}, "sensors[0].parent: no vehicle or body named 'nobody'"),

@@ -14,7 +14,8 @@ import yaml
 
 from vplayground_ros.interfaces import decoder
 from vplayground_ros.scene import SceneError, load_world, world_to_scene
-from vplayground_ros.urdf_robots import RobotControl, WheelOdometry, drive_joints
+from vplayground_ros.frame_names import DEFAULT_FRAMES
+from vplayground_ros.urdf_robots import RobotControl, WheelOdometry, add_robot_entry, drive_joints
 from helpers import wait_for
 from test_robots import chain, start, tree
 
@@ -379,6 +380,31 @@ def test_a_robot_that_loses_a_link_or_a_joint_is_no_longer_one():
     assert "robots" not in saved and "a.lbr_iiwa_link_1" in [b["name"] for b in saved["bodies"]]
 
 
+def test_commands_do_not_pass_to_another_robot_of_the_same_name():
+    """A trajectory and a drive given to a robot end with it: a robot spawned under its name
+    after it was removed stays as it was loaded."""
+    world = load_world({"version": 1, "settings": {"gravity": [0, 0, 0]},
+                        "robots": [{"name": "kuka", "urdf": KUKA}, {"name": "husky", "urdf": HUSKY,
+                                                                     "position": [4, 0, 0.2], "drive": HUSKY_DRIVE}]})
+    control = RobotControl()
+    control.follow(world, "kuka", ARM_JOINTS[:1], None, [1.0], [[0.5]], None)
+    control.drive(world, "husky", 1.0, 0.0, 100.0)
+    for _ in range(8):  # batches, as the node steps
+        control.before_batch(world)
+        world.step(4)
+    assert world.joint_states(["kuka.lbr_iiwa_joint_1"])[0][0] > 0.05
+    for robot in list(world.robot_specs):
+        world.remove_bodies(robot["bodies"])
+        add_robot_entry(world, robot, robot["model"], "robots", DEFAULT_FRAMES)
+    assert [r["name"] for r in world.robot_specs] == ["kuka", "husky"]
+    for _ in range(16):
+        control.before_batch(world)
+        world.step(4)
+    assert control.trajectories == {} and control.drive_deadlines == {}
+    positions, velocities, _ = world.joint_states(["kuka.lbr_iiwa_joint_1", "husky.front_left_wheel"])
+    assert abs(positions[0]) < 1e-6 and abs(velocities[1]) < 1e-3
+
+
 @pytest.mark.parametrize("robot, message", [
     ({"joints": ["lbr_iiwa_joint_1", "elbow"]}, "robots[0].joints: 'elbow' is no revolute"),
     ({"drive": {**HUSKY_DRIVE, "left_wheel_names": ["lbr_iiwa_joint_1"], "right_wheel_names": ["x"]}},
@@ -487,7 +513,8 @@ def test_partial_resets_keep_the_scenes_robots_and_restore_them(run):
     """ResetSimulation's scopes with a scene's robots: SPAWNED keeps them (their links are the
     scene's), STATE puts their links and joints back as loaded, TIME forgets the commands given
     commands carry on on the new clock (a drive's deadline moves back with it)."""
-    runtime, sink = run()
+    imu = {"name": "tip_imu", "type": "imu", "parent": "kuka.lbr_iiwa_link_7", "rate": 50}
+    runtime, sink = run({**SCENE, "sensors": [imu]})
     requests = runtime.requests
     runtime.inputs.handle("joint_commands", joint_command(ARM_JOINTS, [0.3] * 7), "/joint_commands")
     advance(runtime, 1.0)
@@ -496,6 +523,11 @@ def test_partial_resets_keep_the_scenes_robots_and_restore_them(run):
     assert requests.reset(2)[0]  # STATE
     positions = runtime.sim.call(lambda world: world.joint_states([f"kuka.{j}" for j in ARM_JOINTS])[0])
     assert np.allclose(positions, 0.0, atol=1e-3)  # as loaded (it was at 0.3), and falling again since
+    # The sensor on the arm's link is on the restored link (a new body) and goes on.
+    restored = runtime.sim.snapshot.time
+    advance(runtime, 0.2)
+    assert [s["name"] for s in runtime.sim.world.sensor_specs] == ["tip_imu"]
+    assert sink.of("sensor:imu/data:sensor_msgs/msg/Imu")[-1][0] > restored
     runtime.parameters.set({"cmd_vel_timeout": 0.5})
     runtime.inputs.handle("cmd_vel", NS(linear=NS(x=0.5, y=0.0, z=0.0), angular=NS(x=0.0, y=0.0, z=0.0)),
                           "/husky/cmd_vel")

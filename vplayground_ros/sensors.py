@@ -234,6 +234,7 @@ class Sensor:
         self.samples_taken = 0  # n of the next sample time n / rate
         self.last_velocity = None  # an IMU's mount point's world velocity at its last sample, or
         self.last_time = None      # when it was made (None: its parent was not there then)
+        self.parent_id = None      # World.body_id of the body it was put on (None: the world's)
 
     def due_step(self, steps_per_second):
         """The step count at which the next sample is read: the first step at or after n / rate."""
@@ -252,16 +253,17 @@ class Sensors:
 
     def follow(self, world):
         """New sensors for a new world, or when its time went back; when only its sensor specs
-        changed, new ones for the specs that changed while the others go on (their noise,
-        schedule and IMU history: spawning a sensor does not reset the rest)."""
+        changed, new ones for the specs replaced (another dict: an edit, a reset restoring the
+        bodies they hang on) while the others go on (their noise, schedule and IMU history:
+        spawning a sensor does not reset the rest)."""
         fresh = world is not self._world or world.step_count < self._step
         if fresh or world.sensor_specs is not self._specs:
-            kept = {} if fresh else {sensor.name: sensor for sensor in self.sensors}
+            kept = {} if fresh else {id(sensor.spec): sensor for sensor in self.sensors}
             self._world, self._specs = world, world.sensor_specs
             self.sensors = []
             for spec in world.sensor_specs:
-                sensor = kept.get(spec["name"])
-                if sensor is None or sensor.spec != spec:
+                sensor = kept.get(id(spec))
+                if sensor is None:
                     sensor = Sensor(spec, world.settings["seed"])
                     self.start(sensor, world)
                 self.sensors.append(sensor)
@@ -274,7 +276,12 @@ class Sensors:
         sensor.samples_taken = math.floor(world.step_count * sensor.spec["rate"] / rate) + 1
         while sensor.due_step(rate) <= world.step_count:
             sensor.samples_taken += 1
-        if sensor.kind == "imu" and (sensor.parent == WORLD or sensor.parent in world.body_names()):
+        if sensor.parent != WORLD:
+            try:
+                sensor.parent_id = world.body_id(sensor.parent)
+            except KeyError:  # gone already: the sensor goes at its first sample
+                return
+        if sensor.kind == "imu":
             sensor.last_velocity, sensor.last_time = self.mount_motion(sensor, world)[2], world.time
 
     def steps_until_due(self, world):
@@ -289,10 +296,9 @@ class Sensors:
         """Reads the sensors due at the world's current step and returns [(sensor, reading)]
         (see read()), after handing each to on_reading. Samples whose step was passed without a
         reading (the world stepped past it) are skipped, not read late. A sensor whose parent
-        is gone goes with it, with a warning."""
+        is gone goes with it, with a warning (also when another body took its name since)."""
         self.follow(world)
         rate, now = world.settings["steps_per_second"], world.step_count
-        present = None
         due = []
         for sensor in list(self.sensors):
             while sensor.due_step(rate) < now:
@@ -301,8 +307,7 @@ class Sensors:
                 continue
             sensor.samples_taken += 1
             if sensor.parent != WORLD:
-                present = set(world.body_names()) if present is None else present
-                if sensor.parent not in present:
+                if sensor.parent_id is None or world.body_name(sensor.parent_id) != sensor.parent:
                     log.warning("sensor %s removed: its parent %s is gone", sensor.name, sensor.parent)
                     self.sensors.remove(sensor)
                     world.sensor_specs = self._specs = [s for s in world.sensor_specs if s is not sensor.spec]

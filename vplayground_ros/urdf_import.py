@@ -46,7 +46,7 @@ MAX_MIMIC_MULTIPLIER = 1.0e3
 
 JOINT_TYPES = {"revolute": "revolute", "continuous": "continuous", "prismatic": "prismatic"}
 MAX_LINKS = 256
-POINT_RADIUS = 1.0e-3  # m: the sphere that stands for a link without collision geometry
+POINT_RADIUS = 1.0e-3  # m: the sphere that stands for a link without collision geometry (it collides with nothing)
 log = logging.getLogger(__name__)
 
 
@@ -299,17 +299,20 @@ def robot_model(source, name, position=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), fix
                             f"{body_name(name, owner, label)!r}")
     body_specs = []
     for owner, entry in bodies.items():
-        if not entry["parts"]:
+        collides = bool(entry["parts"])
+        if not collides:
             # No collision geometry (a steering hinge between a chassis and its wheel, a chassis
-            # that only its wheels carry): the engine needs a shape, so a point-like sphere at
-            # its centre of mass (or its origin) stands for one. Inside the link's neighbours,
-            # it touches nothing in practice; its mass and inertia are the inertial's.
+            # that only its wheels carry): a body that collides with nothing, as in Gazebo and
+            # PyBullet; a point-like sphere at its centre of mass (or its origin) gives it the
+            # shape every body has (its mass and inertia are the inertial's).
             centre = combine_inertials(entry["inertials"])[1] if entry["inertials"] else np.zeros(3)
             entry["parts"] = [{"shape": "sphere", "radius": POINT_RADIUS, "position": centre.tolist(),
                                "quaternion": [0.0, 0.0, 0.0, 1.0]}]
         spec = {"name": body_name(name, owner, label), "shape": "compound", "parts": entry["parts"],
                 "position": world_pose[owner][:3, 3].tolist(),
                 "quaternion": matrix_to_quaternion(world_pose[owner][:3, :3]).tolist()}
+        if not collides:
+            spec["collides"] = False
         if entry["inertials"]:
             mass, centre, tensor = combine_inertials(entry["inertials"])
             spec["inertial"] = {"mass": mass, "centre": centre.tolist(), "inertia": tensor.tolist()}

@@ -200,7 +200,7 @@ def add_robot_entry(world, entry, model, path, frames):
         **entry, "namespace": namespace,
         "joints": entry.get("joints", [joint for joint in model.joint_names if joint not in model.mimics]),
         "bodies": [b["name"] for b in model.bodies], "joints_held": list(model.joint_names.values()),
-        "model": model, "limits": limits}]
+        "model": model, "limits": limits, "id": world.body_id(model.bodies[0]["name"])}]
     return added
 
 
@@ -438,19 +438,32 @@ class RobotControl:
         self.trajectories = {}     # (robot, joint) -> the Trajectory that moves it
         self.drive_deadlines = {}  # robot -> simulated s its last cmd_vel lapses at
         self.mimic_targets = {}    # robot -> (targets, velocities) its <mimic> joints were last given
+        self.commanded = {}        # robot -> the id of the robot of that name these were given to
+        self._robot_specs = None   # the world.robot_specs last checked against `commanded`
 
     def _attend(self, world):
-        """Commands given in another World (a scene loaded, a reset) are forgotten; when its
-        time went back (a reset of the time) they carry on on the new clock: a drive's deadline
-        and a trajectory's times move back with it."""
+        """Commands given in another World (a scene loaded, a reset) are forgotten, and so are a
+        robot's once it is gone, even if another of its name came since (its `id` differs);
+        when the world's time went back (a reset of the time) they carry on on the new clock: a
+        drive's deadline and a trajectory's times move back with it."""
         if world is not self.world:
-            self.world, self.trajectories, self.drive_deadlines, self.mimic_targets = world, {}, {}, {}
+            self.world, self.trajectories, self.drive_deadlines, self.mimic_targets, self.commanded = \
+                world, {}, {}, {}, {}
         elif world.time < self.time:
             shift = world.time - self.time
             self.drive_deadlines = {name: deadline + shift for name, deadline in self.drive_deadlines.items()}
             for trajectory in {id(t): t for t in self.trajectories.values()}.values():
                 trajectory.times = trajectory.times + shift
         self.time = world.time
+        if world.robot_specs is not self._robot_specs:
+            self._robot_specs = world.robot_specs
+            present = {robot["name"]: robot["id"] for robot in world.robot_specs}
+            gone = {name for name, robot_id in self.commanded.items() if present.get(name) != robot_id}
+            if gone:
+                self.commanded = {name: robot_id for name, robot_id in self.commanded.items() if name not in gone}
+                self.drive_deadlines = {name: t for name, t in self.drive_deadlines.items() if name not in gone}
+                self.mimic_targets = {name: t for name, t in self.mimic_targets.items() if name not in gone}
+                self.trajectories = {key: t for key, t in self.trajectories.items() if key[0] not in gone}
 
     @staticmethod
     def robot(world, name):
@@ -466,6 +479,7 @@ class RobotControl:
         self._attend(world)
         spec = self.robot(world, name)
         entities, mimics = spec["model"].joint_names, spec["model"].mimics
+        self.commanded[name] = spec["id"]
         motors = {}
         for k, joint in enumerate(joints):
             entity = entities.get(joint)
@@ -556,13 +570,10 @@ class RobotControl:
         mimicked = self.mimic(world)
         if not (self.drive_deadlines or self.trajectories):
             return mimicked
-        present = {r["name"] for r in world.robot_specs}
         now = world.time
         stopped = False
         for name, deadline in list(self.drive_deadlines.items()):
-            if name not in present:
-                del self.drive_deadlines[name]
-            elif now >= deadline:
+            if now >= deadline:
                 del self.drive_deadlines[name]
                 for kind, joints, values in drive_commands(self.robot(world, name)["drive"], 0.0, 0.0):
                     self.command(world, name, kind, joints, values)
@@ -571,9 +582,6 @@ class RobotControl:
             return stopped or mimicked
         by_trajectory = {}
         for (name, joint), trajectory in list(self.trajectories.items()):
-            if name not in present:
-                del self.trajectories[(name, joint)]
-                continue
             by_trajectory.setdefault(id(trajectory), (name, trajectory, []))[2].append(joint)
         for name, trajectory, joints in by_trajectory.values():
             positions, velocities = trajectory.sample(now)

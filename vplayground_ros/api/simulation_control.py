@@ -178,6 +178,8 @@ class ControlRequests:
             for robot in robots.values():  # as loaded: its links where they stood, its joints, its motors
                 world.remove_bodies([body for body in robot["bodies"] if body in present])
                 add_robot_entry(world, robot, robot["model"], f"robots.{robot['name']}", self.frames())
+            # The sensors start again on the bodies as restored (the robots' are new bodies).
+            world.sensor_specs = [dict(spec) for spec in world.sensor_specs]
             done.append("states restored")
         if scope & SCOPE_TIME:
             world.time, world.step_count = 0.0, 0

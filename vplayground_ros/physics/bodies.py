@@ -25,6 +25,8 @@ BodyArrays = namedtuple("BodyArrays", [
     "static_friction",       # (N,)
     "dynamic_friction",      # (N,)
     "immovable",             # (N,) infinite mass, never moves
+    "collides",              # (N,) touches other bodies, the ground and the playground and
+                             # stops rays (else it passes through all: joints alone hold it)
     "allow_freezing",        # (N,)
     "frozen",                # (N,) not simulated, static for others
     "jointed",               # (N,) a joint holds it: it freezes and wakes with its group
@@ -54,6 +56,7 @@ def allocate_bodies(capacity):
         velocity=np.zeros((capacity + 1, 6)), mass=f(), inv_mass=f(), inv_inertia=f(3, 3),
         shape=np.zeros(capacity, np.int64), dimensions=f(3), half_extents=f(3),
         elasticity=f(), static_friction=f(), dynamic_friction=f(), immovable=b(),
+        collides=np.ones(capacity, dtype=np.bool_),
         allow_freezing=b(), frozen=b(), jointed=b(), freeze_timer=f(), static_indexed=b(),
         external_impulse=f(3), external_angular_impulse=f(3), awake=b(), rotation=f(3, 3),
         solver_inv_mass=f(), inv_inertia_world=f(3, 3), pseudo_velocity=np.zeros((capacity + 1, 6)),

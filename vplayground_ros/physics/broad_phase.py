@@ -41,6 +41,7 @@ def allocate_index(capacity):
 BroadPhase = namedtuple("BroadPhase", [
     "moving", "static",   # OctreeIndex of the moving bodies (per step) and of the resting ones
     "moving_ids",         # (N,) the step's live bodies: slots outside the static index
+    "colliding_ids",      # (N,) those of them that collide (bodies.collides)
     "stamp", "scratch",   # (N,) scratch of the ray casts' index queries
     "pair_a", "pair_b",   # (P,) candidate pairs
     "pair_count",         # (1,) pairs found in the last step
@@ -59,7 +60,8 @@ def allocate_broad_phase(body_capacity, pair_capacity):
     index_capacity = MAX_CELLS_PER_OBJECT * body_capacity
     return BroadPhase(
         moving=allocate_index(index_capacity), static=allocate_index(index_capacity),
-        moving_ids=np.zeros(body_capacity, np.int64), stamp=np.full(body_capacity, -1, np.int64),
+        moving_ids=np.zeros(body_capacity, np.int64), colliding_ids=np.zeros(body_capacity, np.int64),
+        stamp=np.full(body_capacity, -1, np.int64),
         scratch=np.zeros(body_capacity, np.int64), pair_a=np.zeros(pair_capacity, np.int64),
         pair_b=np.zeros(pair_capacity, np.int64), pair_count=np.zeros(1, np.int64),
         playground_body=np.zeros(pair_capacity, np.int64),

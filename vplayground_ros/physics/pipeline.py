@@ -67,10 +67,11 @@ def lap(profile, stage_ns, stage, since):
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def rebuild_static_index(bodies, broad, settings):
-    """Indexes every resting (frozen or immovable) body. False when the index is too small."""
+    """Indexes every resting (frozen or immovable) body (those that collide with nothing are
+    counted in but not filed: nothing finds them). False when the index is too small."""
     ids = np.nonzero(bodies.active & ~bodies.awake)[0]
-    if not build_index(broad.static, ids, bodies.aabb_min, bodies.aabb_max, bodies.octree_level,
-                       settings.root_min, settings.root_size):
+    if not build_index(broad.static, ids[bodies.collides[ids]], bodies.aabb_min, bodies.aabb_max,
+                       bodies.octree_level, settings.root_min, settings.root_size):
         return False
     bodies.static_indexed[:] = False
     bodies.static_indexed[ids] = True
@@ -92,6 +93,18 @@ def list_live_bodies(bodies, broad, everyone):
             broad.moving_ids[n] = i
             n += 1
     return broad.moving_ids[:n]
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
+def list_colliding(bodies, broad, live):
+    """The live bodies that collide (bodies.collides), in broad.colliding_ids: what the broad and
+    narrow phases see."""
+    n = 0
+    for k in range(len(live)):
+        if bodies.collides[live[k]]:
+            broad.colliding_ids[n] = live[k]
+            n += 1
+    return broad.colliding_ids[:n]
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
@@ -118,10 +131,11 @@ def reindex_limit(indexed, stale):
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def detect(bodies, hulls, parts, broad, playground, contacts, settings, moving_ids, excluded_pairs):
     """Broad phase then narrow phase for the current positions of the live bodies `moving_ids`
-    (list_live_bodies); `hulls` and `parts` are the World's hull table (of convex bodies and
-    parts) and parts table (of compound bodies); pairs whose key is in `excluded_pairs`
-    (jointed, sorted) are not collided. Returns a status."""
+    (list_live_bodies) that collide; `hulls` and `parts` are the World's hull table (of convex
+    bodies and parts) and parts table (of compound bodies); pairs whose key is in
+    `excluded_pairs` (jointed, sorted) are not collided. Returns a status."""
     s = settings
+    moving_ids = list_colliding(bodies, broad, moving_ids)
     if not build_index(broad.moving, moving_ids, bodies.aabb_min, bodies.aabb_max,
                        bodies.octree_level, s.root_min, s.root_size):
         return GROW_INDEX

@@ -136,6 +136,8 @@ class WorldQueries:
             "immovable": bool(b.immovable[slot]),
             "allow_freezing": bool(b.allow_freezing[slot]),
             "frozen": bool(b.frozen[slot]),
+            # Only where it is not the default, so that ordinary bodies save as they always did.
+            **({} if b.collides[slot] else {"collides": False}),
         }
 
     def stage_seconds(self):

@@ -427,12 +427,13 @@ RayHits = namedtuple("RayHits", [
 
 class RayScene:
     """What rays can hit at one instant (World.ray_scene()): the grid is filed once, and any
-    number of batches (the sensors due at that instant) cast through it."""
+    number of batches (the sensors due at that instant) cast through it. Bodies that collide
+    with nothing are not in it: rays pass through them as other bodies do."""
 
     def __init__(self, bodies, hulls, parts, playground, ground, slots):
         self._bodies, self._playground, self._slots = bodies, playground, slots
         self._ground = ground
-        self._grid = build_ray_grid(bodies.active, bodies.position, bodies.orientation,
+        self._grid = build_ray_grid(bodies.active & bodies.collides, bodies.position, bodies.orientation,
                                     bodies.half_extents, playground.triangles,
                                     playground.aabb_min, playground.aabb_max)
         self._geometry = RayBodies(bodies.position, self._grid.rotation, bodies.half_extents,

@@ -30,7 +30,7 @@ BODY_DEFAULTS = {
     "shape": "box", "position": [0.0, 0.0, 0.0],
     "linear_velocity": [0.0, 0.0, 0.0], "angular_velocity": [0.0, 0.0, 0.0],
     "elasticity": 0.2, "static_friction": 0.6, "dynamic_friction": 0.4,
-    "immovable": False, "allow_freezing": True, "frozen": False,
+    "immovable": False, "allow_freezing": True, "frozen": False, "collides": True,
 }
 MAX_FRICTION = 10.0
 MAX_SIZE = 1.0e4       # m: larger boxes break the octree's and the solver's scales
@@ -221,7 +221,7 @@ PLACEMENT = {
 DIMENSION_KEYS = {key for shape in SHAPES.values() for key in shape.module.SPEC_KEYS}
 BODY_KEYS = {"name", "shape", "position", "rpy", "quaternion", "linear_velocity",
              "angular_velocity", "density", "mass", "elasticity", "static_friction",
-             "dynamic_friction", "immovable", "allow_freezing", "frozen"} | DIMENSION_KEYS
+             "dynamic_friction", "immovable", "allow_freezing", "frozen", "collides"} | DIMENSION_KEYS
 # A compound's part: a shape at a pose in the body's frame, with its own mass or density (else
 # the body's density). Material and motion are the body's.
 PART_KEYS = {"shape", "position", "rpy", "quaternion", "mass", "density"} | DIMENSION_KEYS - {"parts", "inertial"}

@@ -48,8 +48,14 @@ MIN_ROOT_SIZE = 16.0
 # them from a body array (a slice when they are 0..N-1, the common case, so gathers are copies);
 # names, vehicle_names: tuples; row_of_slot: (capacity,) each slot's row (-1 for free slots);
 # compound_rows (K,) the rows of compound bodies and compound_centres (K, 3) their centres of
-# mass in their frames (what turns the engine's positions into the frames' poses).
-Layout = namedtuple("Layout", "version slots rows names vehicle_names row_of_slot compound_rows compound_centres")
+# mass in their frames (what turns the engine's positions into the frames' poses); ids (N,) the
+# rows' body ids (World.body_id).
+Layout = namedtuple("Layout", "version slots rows names vehicle_names row_of_slot compound_rows compound_centres "
+                              "ids")
+
+# A body id is its slot in the low bits and the slot's generation (how many bodies it held
+# before) above them, as Box2D's generational ids: a removal cannot make one name another body.
+SLOT_BITS = 32
 
 BodyShape = namedtuple("BodyShape", "name module dimensions fields")
 
@@ -106,6 +112,7 @@ class World(WorldQueries):
         self._solids = [None] * capacity  # (shape name, shapes.Solid) per slot
         self._pack_shapes()  # self._hulls (convex bodies' by slot, then parts'), self._parts
         self._slots = {}
+        self._generations = np.zeros(capacity, np.int64)  # bodies each slot has released
         self._free = list(range(capacity))
         self._generated = 0
         # Bumped by every change to which bodies exist, their names, or their properties (add,
@@ -129,7 +136,8 @@ class World(WorldQueries):
         # them through cast_rays), but part of the scene, kept and saved with it.
         self.sensor_specs = []
         # The URDF robots (vplayground_ros.urdf_robots), likewise: each entry as validated, with
-        # its namespace and the bodies and joints it made ("bodies", "joints_held"); replaced,
+        # its namespace, the bodies and joints it made ("bodies", "joints_held") and its root's
+        # body_id ("id": which robot of that name it is, for whoever keeps its state); replaced,
         # never changed in place, so that whoever follows it sees it change. A robot losing a
         # body or a joint leaves it.
         self.robot_specs = []
@@ -164,6 +172,20 @@ class World(WorldQueries):
     def body_names(self):
         """Every body (vehicle chassis included), in the row order of state()."""
         return list(self._current_layout().names)
+
+    def body_id(self, name):
+        """The body's id: what names this body and no other for as long as the World lives (a
+        name is free again once its body is removed, an id never is). KeyError if none."""
+        slot = self._slot(name)
+        return int(self._generations[slot]) << SLOT_BITS | slot
+
+    def body_name(self, body_id):
+        """The name of the body with that id, or None once it is gone (whatever now sits in its
+        slot or carries its name)."""
+        slot, generation = int(body_id) & ((1 << SLOT_BITS) - 1), int(body_id) >> SLOT_BITS
+        if slot >= len(self._names) or self._generations[slot] != generation:
+            return None
+        return self._names[slot]
 
     def add_body(self, spec, path="body"):
         """Adds a box from a SPEC 3 body spec; returns its (given or generated) unique name.
@@ -354,7 +376,7 @@ class World(WorldQueries):
         if b.static_indexed[slot]:
             self._broad.stale[0] += 1
         for field, default in (("active", False), ("frozen", False), ("static_indexed", False),
-                               ("awake", False), ("immovable", False)):
+                               ("awake", False), ("immovable", False), ("collides", True)):
             getattr(b, field)[slot] = default
         b.velocity[slot] = 0.0
         b.external_impulse[slot] = 0.0
@@ -362,6 +384,7 @@ class World(WorldQueries):
         del self._slots[name]
         self._vehicles.remove(name)
         self._names[slot] = None
+        self._generations[slot] += 1
         packed = self._solids[slot][1].hull is not None or self._solids[slot][1].compound is not None
         self._solids[slot] = None
         if packed:
@@ -654,11 +677,12 @@ class World(WorldQueries):
             compound_rows = np.nonzero(self._bodies.shape[slots] == shapes.COMPOUND)[0]
             centres = np.array([self._solids[slot][1].compound.centre for slot in slots[compound_rows].tolist()],
                                float).reshape(-1, 3)
-            for array in (slots, row_of_slot, compound_rows, centres):
+            ids = self._generations[slots] << SLOT_BITS | slots
+            for array in (slots, row_of_slot, compound_rows, centres, ids):
                 array.flags.writeable = False  # shared by every caller until the next change
             self._layout = Layout(self.layout_version, slots, rows, names,
                                   tuple(name for name in names if name in self._vehicles), row_of_slot,
-                                  compound_rows, centres)
+                                  compound_rows, centres, ids)
         return self._layout
 
     def _slot(self, name):
@@ -679,7 +703,7 @@ class World(WorldQueries):
         from `mass` (specs.MassProperties, computed for the body's current solid)."""
         b = self._bodies
         for key in ("elasticity", "static_friction", "dynamic_friction", "immovable",
-                    "allow_freezing"):
+                    "allow_freezing", "collides"):
             if key in body:
                 getattr(b, key)[slot] = body[key]
         if "linear_velocity" in body:
@@ -825,6 +849,7 @@ class World(WorldQueries):
         old = len(self._names)
         self._bodies = grow_bodies(self._bodies, capacity)
         self._names.extend([None] * (capacity - old))
+        self._generations = np.concatenate([self._generations, np.zeros(capacity - old, np.int64)])
         self._solids.extend([None] * (capacity - old))
         self._unchecked = np.concatenate([self._unchecked, np.ones(capacity - old, dtype=bool)])
         self.layout_version += 1  # row_of_slot covers every slot
