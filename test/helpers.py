@@ -110,3 +110,14 @@ def drift_every_second(world, seconds):
         world.step(world.settings["steps_per_second"])
         drift = max(drift, max_drift(world, start))
     return drift
+
+
+# SPEC 5's car as the default scene had it as a `vehicles` entry before config/car.urdf.
+SPEC_CAR = {"name": "car", "position": [10.0, -10.0, 1.0], "rpy": [0.0, 0.0, 0.0],
+            "chassis": {"size": [4.0, 1.8, 0.6], "mass": 1200}, "engine_power": 6000, "brake_power": 9000,
+            "max_steer": 0.6, "wheels": [
+                {"mount": mount, "radius": 0.35, "mass": 20, "power_gain": gain, "steered": steered,
+                 "spring_stiffness": 40000, "damper": 4000, "spring_length": 0.5, "static_friction": 1.0,
+                 "dynamic_friction": 0.8}
+                for mount, gain, steered in (([1.3, 0.8, -0.3], 0.0, True), ([1.3, -0.8, -0.3], 0.0, True),
+                                             ([-1.3, 0.8, -0.3], 0.5, False), ([-1.3, -0.8, -0.3], 0.5, False))]}

@@ -16,6 +16,7 @@ from vplayground_ros.api.entity_queries import BOUNDS_BOX, OBJECT, ROBOT, catego
 from vplayground_ros.broadcast import TOPICS
 from vplayground_ros.scene import load_world
 from vplayground_ros.simulation import NO_WORLD, PAUSED, PLAYING, STOPPED, Simulation
+from helpers import SPEC_CAR
 
 SCENE = {"version": 1, "bodies": [{"name": "a", "position": [0, 0, 0.5]},
                                   {"name": "b", "position": [3, 0, 0.5]}]}
@@ -436,8 +437,7 @@ def test_snapshots_follow_every_change_of_the_bodies(requests, tmp_path):
 
 
 # ---------------------------------------------------------------- names and frames (SPEC 6.1, 6.3)
-DEFAULT_SCENE = yaml.safe_load((Path(__file__).parent.parent / "config" / "default_scene.yaml").read_text())
-CAR = {**DEFAULT_SCENE["vehicles"][0], "position": [10.0, -10.0, 1.0], "rpy": [0.0, 0.0, np.pi / 2]}  # facing +y
+CAR = {**SPEC_CAR, "position": [10.0, -10.0, 1.0], "rpy": [0.0, 0.0, np.pi / 2]}  # facing +y
 CAR_SCENE = {"version": 1, "bodies": [{"name": "a", "position": [0, 0, 0.5]}], "vehicles": [CAR],
              "sensors": [{"name": "laser", "type": "lidar_2d", "parent": "car", "pose": [1.8, 0.0, 0.45, 0, 0, 0]},
                          {"name": "cam", "type": "camera", "parent": "a", "pose": [0, 0, 1, 0, 0, 0]},

@@ -3,6 +3,7 @@
 (robots.wheel_transforms, sensor_messages.static_frames)."""
 import io
 import math
+import re
 import xml.etree.ElementTree as ET
 from pathlib import Path
 from types import SimpleNamespace
@@ -17,9 +18,11 @@ from vplayground_ros.physics import specs
 from vplayground_ros.physics.math3d import quaternions_to_matrices, rpy_to_quat
 from vplayground_ros.messages import WHEEL_WIDTH
 from vplayground_ros.messages import joint_names
-from vplayground_ros.robot_description import AXLE_RPY, OPTICAL_RPY, STEER_LIMIT, robot_description
-from vplayground_ros.scene import load_world
+from vplayground_ros.robot_description import (AXLE_RPY, OPTICAL_RPY, STEER_LIMIT, robot_description,
+                                               vehicle_from_description)
+from vplayground_ros.scene import SceneError, load_world
 from vplayground_ros.sensors import validate_sensor
+from helpers import SPEC_CAR
 
 SCENE = Path(__file__).resolve().parents[1] / "config" / "default_scene.yaml"
 EXACT = 1e-12
@@ -191,3 +194,72 @@ def test_xml_special_characters():
     root = ET.fromstring(robot_description(vehicle, [sensor], name))
     assert root.get("name") == name
     assert {link.get("name") for link in root.iter("link")} >= {"c&<>", "c&<>_optical"}
+
+
+CAR_URDF = SCENE.parent / "car.urdf"
+
+
+def test_the_default_scenes_car_is_the_shipped_description_and_spec_5s_car():
+    """config/car.urdf loads (through the default scene's robots entry) as exactly SPEC 5's car,
+    and is what robot_description writes for that car: the two cannot drift apart."""
+    world = load_world(str(SCENE))
+    assert world.vehicle_names() == ["car"] and world.robot_specs == []
+    assert world.vehicle("car") == load_world({"version": 1, "vehicles": [SPEC_CAR]}).vehicle("car")
+    shipped = ET.tostring(ET.parse(CAR_URDF).getroot(), encoding="unicode")
+    assert shipped == robot_description(world.vehicle("car"), [], "car")
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_any_vehicle_reads_back_from_its_description(seed):
+    """robot_description's <vplayground> element and the links and joints give the vehicle back
+    exactly (random sizes, springs, materials; a renamed base frame)."""
+    rng = np.random.default_rng(seed)
+    raw = {"chassis": {"size": rng.uniform(0.5, 5, 3).tolist(), "mass": float(rng.uniform(10, 3000)),
+                       "elasticity": float(rng.uniform(0, 1)), "static_friction": float(rng.uniform(0, 2)),
+                       "dynamic_friction": float(rng.uniform(0, 2)), "allow_freezing": bool(seed % 2)},
+           "engine_power": float(rng.uniform(0, 1e5)), "brake_power": float(rng.uniform(0, 1e5)),
+           "max_steer": float(rng.uniform(0, 1.5)),
+           "wheels": [{"mount": rng.uniform(-2, 2, 3).tolist(), "radius": float(rng.uniform(0.05, 1)),
+                       "mass": float(rng.uniform(1, 50)), "power_gain": float(rng.uniform(0, 1)),
+                       "steered": bool(rng.integers(2)), "spring_stiffness": float(rng.uniform(1e3, 1e5)),
+                       "damper": float(rng.uniform(0, 1e4)), "spring_length": float(rng.uniform(0.05, 1)),
+                       "static_friction": float(rng.uniform(0, 2)), "dynamic_friction": float(rng.uniform(0, 2))}
+                      for _ in range(4)]}
+    vehicle = specs.validate_vehicle(raw)
+    frames = DEFAULT_FRAMES._replace(base="chassis")
+    back = vehicle_from_description(robot_description(vehicle, [], "v", frames), "v.urdf")
+    assert specs.validate_vehicle(back) == vehicle
+
+
+def broken(old, new):
+    text = CAR_URDF.read_text()
+    assert old in text
+    return text.replace(old, new, 1)
+
+
+@pytest.mark.parametrize("text, message", [
+    (broken('mount="1.3 0.8 -0.3"', 'mount="1.3 0.8 -0.2"'),
+     "<vplayground><vehicle><wheel> 1: mount '1.3 0.8 -0.2' is not where its suspension joint puts it"),
+    (broken('suspension="front_right_suspension"', 'suspension="front_right_steer"'),
+     "<wheel> 2: suspension 'front_right_steer' is no prismatic joint"),
+    (broken('<chassis link="base_link"', '<chassis link="wheel_rear_left"'),
+     "<chassis>: link 'wheel_rear_left' needs a box collision and an inertial mass"),
+    (broken('<box size="4.0 1.8 0.6" />\n      </geometry>\n    </collision>',
+            '<box size="4.0 1.8" />\n      </geometry>\n    </collision>'), "size '4.0 1.8': expected 3 numbers"),
+    (broken('steered="false"', 'steered="no"'), "<wheel> 3: steered 'no': expected true or false"),
+    (broken('engine_power="6000.0"', 'engine_power="lots"'), "engine_power 'lots' is not a number"),
+])
+def test_a_broken_vehicle_description_is_refused_naming_the_element(text, message):
+    with pytest.raises(SceneError, match=re.escape(message)):
+        load_world({"version": 1, "robots": [{"name": "car", "urdf": text}]})
+
+
+def test_a_vehicles_robot_entry_takes_the_vehicle_keys_alone():
+    entry = {"name": "car", "urdf": str(CAR_URDF), "namespace": "fleet/a", "localization": "none",
+             "odometry": {"seed": 3}}
+    world = load_world({"version": 1, "robots": [entry]})
+    assert world.vehicle("car")["namespace"] == "fleet/a" and world.vehicle("car")["odometry"]["seed"] == 3
+    with pytest.raises(SceneError, match=re.escape("robots[0].hold: unknown key (allowed: ")):
+        load_world({"version": 1, "robots": [{**entry, "hold": True}]})
+    with pytest.raises(SceneError, match=re.escape("robots[0].odometry.sed: unknown key")):
+        load_world({"version": 1, "robots": [{**entry, "odometry": {"sed": 3}}]})

@@ -16,7 +16,7 @@ from vplayground_ros.interfaces import decoder
 from vplayground_ros.scene import SceneError, load_world, world_to_scene
 from vplayground_ros.frame_names import DEFAULT_FRAMES
 from vplayground_ros.urdf_robots import RobotControl, WheelOdometry, add_robot_entry, drive_joints
-from helpers import wait_for
+from helpers import SPEC_CAR, wait_for
 from test_robots import chain, start, tree
 
 pybullet_data = pytest.importorskip("pybullet_data")
@@ -366,6 +366,32 @@ def test_robots_spawn_and_go_whole(run, tmp_path):
     ok, message = requests.spawn(yaml.safe_dump({"name": "third", "urdf": text}))
     assert not ok and "(8 bodies)" in message and "max_bodies" in message
     assert len(runtime.sim.world.body_names()) == count
+
+
+def test_the_cars_description_spawns_a_car_that_drives_on_its_namespace(run):
+    """config/car.urdf (the built-in car's description) spawned over ~/spawn, as a file in the
+    scene directories and as text: each is a vehicle (ray-cast wheels) named as asked, in its
+    own namespace, and drives on its cmd_vel."""
+    runtime, sink = run({"version": 1, "bodies": [{"name": "crate", "position": [5, 5, 0.5]}]})
+    requests = runtime.requests
+    car = os.path.join(os.path.dirname(__file__), "..", "config", "car.urdf")
+    requests.scene_directories = [os.path.dirname(car)]
+    ok, message = requests.spawn(yaml.safe_dump({"name": "red", "urdf": car, "position": [0, -10, 1]}))
+    assert (ok, message) == (True, "RESULT_OK: red")
+    ok, message = requests.spawn(yaml.safe_dump({"name": "blue", "urdf": open(car).read(), "namespace": "fleet/blue",
+                                                 "position": [0, 10, 1]}))
+    assert (ok, message) == (True, "RESULT_OK: blue")
+    world = runtime.sim.world
+    assert world.vehicle_names() == ["red", "blue"] and world.robot_specs == []
+    assert {name: world.vehicle(name)["namespace"] for name in ("red", "blue")} == {"red": "", "blue": "fleet/blue"}
+    assert world.vehicle("red")["wheels"] == load_world({"version": 1, "vehicles": [SPEC_CAR]}).vehicle("car")["wheels"]
+    assert wait_for(lambda: "blue" in runtime.sim.snapshot.vehicle_specs)
+    runtime.inputs.handle("cmd_vel", NS(linear=NS(x=3.0, y=0.0, z=0.0), angular=NS(x=0.0, y=0.0, z=0.0)),
+                          "/fleet/blue/cmd_vel")
+    advance(runtime, 2.0)
+    assert runtime.sim.call(lambda world: world.body("blue")["position"][0]) > 1.0
+    assert abs(runtime.sim.call(lambda world: world.body("red")["position"][0])) < 0.05
+    assert not requests.spawn(yaml.safe_dump({"name": "green", "urdf": car, "hold": True}))[0]
 
 
 def test_a_robot_that_loses_a_link_or_a_joint_is_no_longer_one():

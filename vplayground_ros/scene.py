@@ -22,7 +22,8 @@ from .physics.math3d import quaternions_to_matrices
 from .resources import find_shared
 from .robots import validate_robot, world_robots
 from .sensors import validate_sensors
-from .urdf_robots import add_robot_entry, check_against_model, validate_entry
+from .urdf_robots import (ENTRY_KEYS, VEHICLE_ENTRY_KEYS, add_robot_entry, check_against_model, validate_entry,
+                          vehicle_entry)
 
 SCENE_VERSION = 1
 TOP_LEVEL_KEYS = {"version", "settings", "ground", "playground", "bodies", "vehicles", "robots",
@@ -303,19 +304,28 @@ def validate_scene(scene, base, max_bodies=None, directories=None, frames=DEFAUL
               for k, raw in enumerate(validate_list(scene, "bodies"))]
     vehicles = [claim(validate_robot(specs.validate_vehicle(raw, f"vehicles[{k}]"), f"vehicles[{k}]"), f"vehicles[{k}]")
                 for k, raw in enumerate(validate_list(scene, "vehicles"))]
+    vehicle_paths = [f"vehicles[{k}]" for k in range(len(vehicles))]
+    described = robot_sources(scene, base, directories)
+    for k, (entry, source, label) in enumerate(described):  # a ray-cast vehicle's description: a vehicle
+        vehicle = read_robot(lambda: vehicle_entry(entry, f"robots[{k}]", source, label))
+        if vehicle is not None:
+            vehicles.append(claim(vehicle, f"robots[{k}]"))
+            vehicle_paths.append(f"robots[{k}]")
+            described[k] = None
     # Named before the sensors are checked: a sensor's name is a frame and must not be a body's,
     # generated or not.
     owners = name_unnamed(bodies, vehicles, names)
-    robots = validate_robots(scene, base, directories, owners)
+    robots = validate_robots(described, directories, owners)
     sensors = validate_sensors(scene.get("sensors"), owners)
     # The names against the node's frames and the optical frames of the cameras named by them;
     # a frame_id is checked against everything below, naming the sensor's key.
     reserved = {**node_frames(frames), **sensor_frames_taken([s for s in sensors if "frame_id" not in s])}
-    for key, entries in (("bodies", bodies), ("vehicles", vehicles), ("sensors", sensors)):
-        for k, entry in enumerate(entries):
+    for paths, entries in (([f"bodies[{k}]" for k in range(len(bodies))], bodies), (vehicle_paths, vehicles),
+                           ([f"sensors[{k}]" for k in range(len(sensors))], sensors)):
+        for path, entry in zip(paths, entries):
             if entry["name"] in reserved:
-                raise specs.SpecError(f"{key}[{k}].name", f"{specs.quote(entry['name'])} is {reserved[entry['name']]} "
-                                                          "(names are frames: the node publishes that one)")
+                raise specs.SpecError(f"{path}.name", f"{specs.quote(entry['name'])} is {reserved[entry['name']]} "
+                                                      "(names are frames: the node publishes that one)")
     # A sensor's frame_id is a frame too: none of the node's, no entity's name, no other sensor's.
     taken = {**reserved, **owners, **{s["name"]: f"the sensor {s['name']}" for s in sensors}}
     for k, sensor in enumerate(sensors):
@@ -327,25 +337,49 @@ def validate_scene(scene, base, max_bodies=None, directories=None, frames=DEFAUL
     return settings, ground, playground, bodies, vehicles, robots, joints, sensors
 
 
-def validate_robots(scene, base, directories, owners):
-    """The scene's `robots` (URDF robots): each entry checked (urdf_robots.validate_entry) and
-    its description read into a urdf_import.RobotModel, the file found as a mesh is; `owners`
-    (body and vehicle names) gains their bodies. Returns [(entry, model)]."""
-    from .urdf_import import UrdfError, robot_model  # (urdf_import reads meshes through this module)
-    robots = []
+def robot_sources(scene, base, directories):
+    """The scene's `robots` entries, each with its description's source (the file, found as a
+    mesh is, or the text itself) and the label its errors start with: [(raw entry, source, label)]."""
+    sources = []
     for k, raw in enumerate(validate_list(scene, "robots")):
         path = f"robots[{k}]"
-        entry, fields = validate_entry(raw, path)
+        specs.mapping(raw, path, ENTRY_KEYS | VEHICLE_ENTRY_KEYS)
+        if not isinstance(raw.get("urdf"), str) or not raw["urdf"]:
+            raise specs.SpecError(f"{path}.urdf", "missing (a robot is a name and a URDF file)" if "urdf" not in raw
+                                  else "expected a file name or the description's text")
         text = raw["urdf"].lstrip().startswith("<")  # the description itself, not a file
         file = raw["urdf"] if text else resolve_mesh(raw["urdf"], base, directories, f"{path}.urdf")
-        try:
-            model = robot_model(file, entry["name"], fields.get("position", [0.0, 0.0, 0.0]),
-                                fields.get("rpy", [0.0, 0.0, 0.0]), entry.get("fixed_base"),
-                                entry.get("self_collide", False), entry["joint_positions"],
-                                label=f"{path}.urdf" + ("" if text else f": {file}"), quaternion=fields.get("quaternion"),
-                                directories=directories)
-        except UrdfError as error:
-            raise specs.SpecError("", str(error)) from None
+        sources.append((raw, str(file), f"{path}.urdf" + ("" if text else f": {file}")))
+    return sources
+
+
+def read_robot(read):
+    """What `read()` reads of a description, its UrdfError a SpecError (the message names the file)."""
+    from .urdf_import import UrdfError  # (urdf_import reads meshes through this module)
+    try:
+        return read()
+    except UrdfError as error:
+        raise specs.SpecError("", str(error)) from None
+
+
+def validate_robots(described, directories, owners):
+    """The scene's URDF robots (robot_sources' entries; None for those that are vehicles): each
+    entry checked (urdf_robots.validate_entry) and its description read into a
+    urdf_import.RobotModel; `owners` (body and vehicle names) gains their bodies. Returns
+    [(entry, model)]."""
+    from .urdf_import import robot_model
+    robots = []
+    for k, item in enumerate(described):
+        if item is None:
+            continue
+        raw, file, label = item
+        path = f"robots[{k}]"
+        entry, fields = validate_entry(raw, path)
+        model = read_robot(lambda: robot_model(file, entry["name"], fields.get("position", [0.0, 0.0, 0.0]),
+                                               fields.get("rpy", [0.0, 0.0, 0.0]), entry.get("fixed_base"),
+                                               entry.get("self_collide", False), entry["joint_positions"],
+                                               label=label, quaternion=fields.get("quaternion"),
+                                               directories=directories))
         check_against_model(entry, model, path)
         if entry["name"] in owners:
             raise specs.SpecError(f"{path}.name", f"{specs.quote(entry['name'])} is {owners[entry['name']]}")

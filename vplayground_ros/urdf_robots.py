@@ -30,7 +30,7 @@ import numpy as np
 
 from .physics import specs
 from .physics.math3d import matrix_to_quaternion, quaternions_to_matrices
-from .robots import STACK_FRAMES, namespace_prefix
+from .robots import STACK_FRAMES, namespace_prefix, validate_robot
 from .sensors import WORLD
 
 ENTRY_KEYS = {"name", "urdf", "position", "rpy", "quaternion", "fixed_base", "self_collide",
@@ -44,6 +44,8 @@ DRIVE_KEYS = {
                   "rear_wheel_track", "rear_wheels_radius"},
 }
 DRIVE_TYPES = tuple(DRIVE_KEYS)
+# What an entry of a ray-cast vehicle's description may say (urdf_robots.vehicle_entry).
+VEHICLE_ENTRY_KEYS = {"name", "urdf", "position", "rpy", "quaternion"} | specs.ROBOT_KEYS
 LOCALIZATIONS = ("ground_truth", "none")
 COMMAND_KINDS = ("position", "velocity", "effort")
 log = logging.getLogger(__name__)
@@ -94,6 +96,24 @@ def validate_entry(raw, path):
     if raw.get("drive") is not None:
         entry["drive"] = validate_drive(raw["drive"], f"{path}.drive")
     return entry, fields
+
+
+def vehicle_entry(raw, path, source, label, allow_xacro=True):
+    """The vehicle (a `vehicles` entry, validated) that a robot entry stands for when its
+    description (`source`: a file or the text) is a ray-cast vehicle's, with a
+    <vplayground><vehicle> element (robot_description writes it; the built-in car's is the
+    package's config/car.urdf): name, placement and the vehicle's robot keys (namespace,
+    localization, publish_odom_tf, odometry) from the entry. None for any other description.
+    UrdfError when the description does not hold together."""
+    from .robot_description import vehicle_from_description  # (it imports frame_names, which imports this)
+    from .urdf_import import read_description
+    description, _ = read_description(source, label, allow_xacro)
+    vehicle = vehicle_from_description(description, label)
+    if vehicle is None:
+        return None
+    specs.mapping(raw, path, VEHICLE_ENTRY_KEYS)  # no joints to name, hold or drive: its wheels are rays
+    return validate_robot(specs.validate_vehicle({**vehicle, **{key: value for key, value in raw.items()
+                                                                if key != "urdf"}}, path), path)
 
 
 def names_list(value, path):

@@ -17,7 +17,7 @@ from ..physics.world import prepare_body
 from ..robots import validate_robot, world_robots
 from ..scene import body_mesh_points, resolve_mesh
 from ..sensors import TYPES as SENSOR_TYPES, pose_matrix, validate_sensor
-from ..urdf_robots import add_robot_entry, check_against_model, robot_spec, validate_entry
+from ..urdf_robots import add_robot_entry, check_against_model, robot_spec, validate_entry, vehicle_entry
 from .descriptions import describe, describe_robot, describe_sensor
 from .file_access import allowed_directories
 from .frames import frame_pose, pose_in_world
@@ -64,6 +64,18 @@ def taken_name(name, frames_taken):
     if name in frames_taken:
         return f"{name!r} is {frames_taken[name]}, a frame the node publishes"
     return f"{name!r} is taken"
+
+
+def described(read):
+    """What `read()` reads of a robot description; its UrdfError a RequestError with the result
+    code the standard services give it."""
+    from ..urdf_import import MissingMesh, UnreadableUrdf, UrdfError
+    try:
+        return read()
+    except UrdfError as error:
+        code = (MISSING_ASSETS if isinstance(error, MissingMesh) else
+                RESOURCE_PARSE_ERROR if isinstance(error, UnreadableUrdf) else UNSUPPORTED_ASSETS)
+        raise RequestError(code, str(error)) from None
 
 
 def check_inside(world, position, path):
@@ -114,35 +126,40 @@ class EntityRequests:
             if "quaternion" in item:
                 item.pop("rpy", None)  # the pose's orientation wins over the spec's
         if "urdf" in item:
-            return path, "robot", self._prepare_robot(item, path, frame), rename, ""
+            source, vehicle = self._prepare_description(item, path)
+            if vehicle is not None:  # a ray-cast vehicle's description (the built-in car's)
+                return path, True, vehicle, rename, frame
+            return path, "robot", self._prepare_robot(item, source, path, frame), rename, ""
         vehicle = "wheels" in item or "chassis" in item
         # A body's hull and mass are checked here too: a list is refused before the world is
         # asked, not rolled back (which would wake what the bodies touched).
         spec = validate_robot(specs.validate_vehicle(item, path), path) if vehicle else prepare_body(item, path)[0]
         return path, vehicle, spec, rename, frame
 
-    def _prepare_robot(self, item, path, frame):
-        """(entry, RobotModel) of a URDF robot to spawn: `urdf` a file (found as a mesh is, in
-        the scene directories) or the description's text; placed in the world frame."""
-        from ..urdf_import import MissingMesh, UnreadableUrdf, UrdfError, robot_model
+    def _prepare_description(self, item, path):
+        """(the description's source: a file found as a mesh is, in the scene directories, or
+        the text itself; the vehicle it describes, or None for a URDF robot)."""
+        source = item["urdf"]
+        if not isinstance(source, str) or not source:
+            raise specs.SpecError(f"{path}.urdf", "expected a file name or the description's text")
+        if not source.lstrip().startswith("<"):
+            source = str(resolve_mesh(source, Path.cwd(), self.scene_directories, f"{path}.urdf"))
+        return source, described(lambda: vehicle_entry({**item, "urdf": source}, path, source, f"{path}.urdf",
+                                                       allow_xacro=False))
+
+    def _prepare_robot(self, item, source, path, frame):
+        """(entry, RobotModel) of a URDF robot to spawn from its description's `source`; placed
+        in the world frame."""
+        from ..urdf_import import robot_model
         if frame and frame != self.frames().world:
             raise RequestError(INVALID_POSE, f"{path}.initial_pose.header.frame_id: a robot is placed in the world "
                                              f"frame ({self.frames().world!r} or empty), not {specs.quote(frame)}")
-        entry, fields = validate_entry(item, path)
-        source = entry["urdf"]
-        if not source.lstrip().startswith("<"):
-            source = str(resolve_mesh(source, Path.cwd(), self.scene_directories, f"{path}.urdf"))
-            entry["urdf"] = source
-        try:
-            model = robot_model(source, entry["name"], fields.get("position", [0.0, 0.0, 0.0]),
-                                fields.get("rpy", [0.0, 0.0, 0.0]), entry.get("fixed_base"),
-                                entry.get("self_collide", False), entry["joint_positions"],
-                                label=f"{path}.urdf", quaternion=fields.get("quaternion"),
-                                directories=allowed_directories(self.scene_directories))
-        except UrdfError as error:
-            code = (MISSING_ASSETS if isinstance(error, MissingMesh) else
-                    RESOURCE_PARSE_ERROR if isinstance(error, UnreadableUrdf) else UNSUPPORTED_ASSETS)
-            raise RequestError(code, str(error)) from None
+        entry, fields = validate_entry({**item, "urdf": source}, path)
+        model = described(lambda: robot_model(source, entry["name"], fields.get("position", [0.0, 0.0, 0.0]),
+                                              fields.get("rpy", [0.0, 0.0, 0.0]), entry.get("fixed_base"),
+                                              entry.get("self_collide", False), entry["joint_positions"],
+                                              label=f"{path}.urdf", quaternion=fields.get("quaternion"),
+                                              directories=allowed_directories(self.scene_directories)))
         check_against_model(entry, model, path)
         entry.update({key: fields[key] for key in ("position", "rpy", "quaternion") if key in fields})
         return entry, model
