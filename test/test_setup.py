@@ -188,6 +188,7 @@ def test_make_builds_the_venv_with_the_chosen_python_and_remakes_it_when_the_cho
     assert f"executable = {python311}" in cfg and "include-system-site-packages = false" in cfg
     assert "-m pip install --quiet -e .[ros]" in calls()
     assert "tools/build_interfaces.py" in calls()  # the wheels' venv builds the types
+    assert "-c from vplayground_ros.physics import World; World()" in calls()  # the engine beside them
 
 
 def test_the_wheels_venv_has_the_vendored_interface_types():
