@@ -2,12 +2,14 @@
 kernels (joints.py) solve, kept packed in the order they were made (the solver's sweep order).
 The bodies they hold are the World's; this registry knows them by slot, and the World removes a
 body's joints with it, so no joint ever holds a slot another body has since taken."""
+from collections import Counter
+
 import numpy as np
 
 from .joints import (ANCHOR, BODY_A, BODY_B, COLLIDE_CONNECTED, EFFORT, FEED_FORWARD, FRAME,
                      IMPULSE, KIND, KINDS, LOWER, MAX_EFFORT, MAX_SPEED, MOTORS, MOTOR_MODE,
                      MOTOR_TARGET, PER_JOINT, POSITION, SPEED, UPPER, WORLD_SIDE, WRAPPED_ANGLE,
-                     allocate_joints, pair_key)
+                     allocate_joints, island_floats, pair_key)
 
 
 class JointRegistry:
@@ -119,20 +121,35 @@ class JointRegistry:
         self._apart = [kept for kept in (group - gone for group in self._apart) if len(kept) > 1]
 
     def update_bodies(self, jointed):
-        """Marks the jointed bodies in `jointed` (the bodies' flag array) and lists the pairs
-        that must not collide (jointed without collide_connected, or kept apart), sorted, for
-        the broad phase."""
+        """Marks the jointed bodies in `jointed` (the bodies' flag array), lists the pairs that
+        must not collide (jointed without collide_connected, or kept apart), sorted, for the
+        broad phase, and sizes the islands' solver storage for the groups the joints make."""
         a, count = self.arrays, len(self._names)
         jointed[:] = False
         excluded = [pair_key(x, y) for group in self._apart for x in group for y in group if x < y]
+        group_of = {}  # body slot -> a body of its group (union-find)
+
+        def root(slot):
+            while group_of.setdefault(slot, slot) != slot:
+                group_of[slot] = group_of[group_of[slot]]  # halves the path
+                slot = group_of[slot]
+            return slot
+
         for row in range(count):
             pair = [int(a.links[row, BODY_A]), int(a.links[row, BODY_B])]
             for slot in pair:
                 if slot != WORLD_SIDE:
                     jointed[slot] = True
+            held = [slot for slot in pair if slot != WORLD_SIDE]
+            if len(held) == 2:
+                group_of[root(held[0])] = root(held[1])
             if WORLD_SIDE not in pair and not a.links[row, COLLIDE_CONNECTED]:
                 excluded.append(pair_key(*pair))
-        self.arrays = a._replace(excluded_pairs=np.array(sorted(set(excluded)), np.int64))
+        sizes = Counter(root(int(a.links[row, BODY_B] if a.links[row, BODY_A] == WORLD_SIDE else a.links[row, BODY_A]))
+                        for row in range(count))
+        floats = island_floats(sizes.values())
+        solver = a.island_solver if len(a.island_solver) >= floats else np.zeros(floats)
+        self.arrays = a._replace(excluded_pairs=np.array(sorted(set(excluded)), np.int64), island_solver=solver)
 
     def _grow(self, capacity):
         grown = allocate_joints(capacity)
@@ -140,4 +157,5 @@ class JointRegistry:
         n = len(old.links)
         for field in PER_JOINT:
             getattr(grown, field)[:n] = getattr(old, field)
-        self.arrays = grown._replace(count=old.count, excluded_pairs=old.excluded_pairs)
+        self.arrays = grown._replace(count=old.count, excluded_pairs=old.excluded_pairs,
+                                     island_solver=old.island_solver)

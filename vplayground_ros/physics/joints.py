@@ -52,10 +52,11 @@ EQUALITY_ROWS, JOINT_ROWS = 6, 9
 # would fight the other rows' sweeps and ring; a fifth settles in ~25 steps (0.2 s at 128/s).
 POSITION_MOTOR_RATE = 0.2
 
-# Islands of up to this many joints have their equality rows solved as one (a K of up to 192 x
-# 192, ~1 ms to factor); larger ones joint by joint, which holds chains of up to 16 joints only
-# (a 17-link chain hanging still came apart: sequential blocks and full drift correction).
-MAX_DIRECT_JOINTS = 32
+# Islands of up to this many joints have their equality rows solved as one (a K of up to 384 x
+# 384; factored within each row's envelope, a chain's costs as its neighbours' blocks); larger
+# ones joint by joint, which holds chains of up to 16 joints only (a 17-link chain hanging
+# still came apart: sequential blocks and full drift correction).
+MAX_DIRECT_JOINTS = 64
 
 # A pivot of K's factor this small against its diagonal is a redundant row's.
 REDUNDANT_PIVOT = 1.0e-9
@@ -63,9 +64,8 @@ REDUNDANT_PIVOT = 1.0e-9
 # changed more than this has left their equalities solved exactly: another would change nothing.
 SETTLED_IMPULSE = 1.0e-12
 # An island of m joints keeps (6m)^2 floats of K's factor, 3m x 6m of its bounded rows'
-# responses and 3m x 2m x 6 of their velocity changes: at most this many a joint.
+# responses and 3m x 2m x 6 of their velocity changes: ISLAND_FLOATS m^2 (island_floats).
 ISLAND_FLOATS = 36 + 18 + 36
-ISLAND_FLOATS_PER_JOINT = ISLAND_FLOATS * MAX_DIRECT_JOINTS
 
 # A limit row is solved only while its joint is this close to it (rad or m), or closer than two
 # steps at its speed: far from its limit it cannot act, and each solved row costs the island.
@@ -118,7 +118,7 @@ JointArrays = namedtuple("JointArrays", [
                    # each island's first place there, where its factor starts (-1: joint by
                    # joint), its moving bodies' first place in the next row, those bodies'
                    # velocity rows
-    "island_solver",    # (J * ISLAND_FLOATS_PER_JOINT,) each island's Cholesky factor of K (n x n,
+    "island_solver",    # (island_floats(...),) each island's Cholesky factor of K (n x n,
                         # row-major), its bounded rows' equality responses (3 x joints x n),
                         # and their velocity changes (3 x joints x 2 joints x 6)
     "island_residual",  # (J * EQUALITY_ROWS,) scratch of the sweeps
@@ -135,8 +135,16 @@ def allocate_joints(capacity):
         row_values=np.zeros((capacity, JOINT_ROWS, 8)),
         block_inverse=np.zeros((capacity, EQUALITY_ROWS, EQUALITY_ROWS)),
         islands=np.zeros((5, 2 * capacity + 1), np.int64),
-        island_solver=np.zeros(capacity * ISLAND_FLOATS_PER_JOINT),
+        island_solver=np.zeros(capacity * ISLAND_FLOATS),
         island_residual=np.zeros(capacity * EQUALITY_ROWS), excluded_pairs=np.zeros(0, np.int64))
+
+
+def island_floats(group_sizes):
+    """island_solver's length for joints that hold their bodies in groups of `group_sizes`
+    joints (the groups of bodies joints connect, the world apart): enough for whatever islands
+    a step makes of them (frozen and immovable bodies split a group; islands of m <=
+    MAX_DIRECT_JOINTS joints take ISLAND_FLOATS m^2 each), ISLAND_FLOATS m min(m, MAX) a group."""
+    return ISLAND_FLOATS * sum(m * min(m, MAX_DIRECT_JOINTS) for m in group_sizes)
 
 
 # The arrays whose rows are joints, kept from step to step (the rest prepare_joints rebuilds).
@@ -425,9 +433,12 @@ def group_islands(joints, bodies):
     offset = 0
     for island in range(islands):
         start[island + 1] = start[island] + sizes[island]
-        if sizes[island] <= MAX_DIRECT_JOINTS:
+        floats = ISLAND_FLOATS * sizes[island] ** 2
+        # (The registry sizes island_solver for any islands its joints can make; were it short,
+        # an island would be solved joint by joint rather than written past its end.)
+        if sizes[island] <= MAX_DIRECT_JOINTS and offset + floats <= len(joints.island_solver):
             joints.islands[ISLAND_OFFSET, island] = offset
-            offset += ISLAND_FLOATS * sizes[island] ** 2
+            offset += floats
         else:
             joints.islands[ISLAND_OFFSET, island] = -1
     filled = sizes  # reused: joints placed so far per island
