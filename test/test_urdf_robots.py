@@ -614,10 +614,12 @@ def test_mutated_descriptions_and_hostile_commands_leave_the_world_whole(run):
                                                   {"name": "rc", "urdf": ACKERMANN_CAR, "position": [3, 0, 0.16],
                                                    "drive": ACKERMANN}]})
     rng = random.Random(5)
-    tokens = ['"', "<", ">", "/", "0", "-1", "nan", "1e30", "inf", " ", "joint", "link", "mimic", "world"]
+    tokens = ['"', "<", ">", "/", "0", "-1", "nan", "1e30", "inf", " ", "joint", "link", "mimic", "world", "wheel",
+              "vehicle", "true"]
+    car = open(os.path.join(os.path.dirname(__file__), "..", "config", "car.urdf")).read()  # a vehicle's
     added = 0
     for k in range(300):
-        text = list(rng.choice([MIMIC, ACKERMANN_CAR]))
+        text = list(rng.choice([MIMIC, ACKERMANN_CAR, car]))
         for _ in range(rng.randrange(1, 6)):
             i = rng.randrange(len(text))
             if rng.random() < 0.5:
