@@ -45,8 +45,10 @@ $(STAMP): setup.py setup.cfg package.xml interfaces/simulation_interfaces/packag
 	$(PY) -c "import rclpy" 2>/dev/null || $(PY) -m pip install --quiet -e ".[ros]"
 	@echo "make: compiling the engine (minutes, once) while the interface packages build"; \
 	$(PY) -c "from vplayground_ros.physics import World; World()" >$(VENV)/engine_compile.log 2>&1 & \
-	engine=$$!; $(MAKE) --no-print-directory interfaces; \
-	wait $$engine || { echo "make: the engine did not compile:"; cat $(VENV)/engine_compile.log; }
+	engine=$$!; trap 'kill $$engine 2>/dev/null; exit 130' INT TERM; \
+	$(MAKE) --no-print-directory interfaces; built=$$?; \
+	wait $$engine || { echo "make: the engine did not compile:"; cat $(VENV)/engine_compile.log; exit 1; }; \
+	exit $$built
 	touch $(STAMP)
 
 # The interface packages no wheel brings: simulation_interfaces (the standard services, README

@@ -248,6 +248,7 @@ def broken(old, new):
             '<box size="4.0 1.8" />\n      </geometry>\n    </collision>'), "size '4.0 1.8': expected 3 numbers"),
     (broken('steered="false"', 'steered="no"'), "<wheel> 3: steered 'no': expected true or false"),
     (broken('engine_power="6000.0"', 'engine_power="lots"'), "engine_power 'lots' is not a number"),
+    (broken('<origin xyz="1.3 0.8 -0.8"', '<origin xyz="1.3 0.8 nan"'), "<wheel> 1: mount '1.3 0.8 -0.3' is not where"),
 ])
 def test_a_broken_vehicle_description_is_refused_naming_the_element(text, message):
     with pytest.raises(SceneError, match=re.escape(message)):
@@ -263,3 +264,28 @@ def test_a_vehicles_robot_entry_takes_the_vehicle_keys_alone():
         load_world({"version": 1, "robots": [{**entry, "hold": True}]})
     with pytest.raises(SceneError, match=re.escape("robots[0].odometry.sed: unknown key")):
         load_world({"version": 1, "robots": [{**entry, "odometry": {"sed": 3}}]})
+
+
+def test_a_vehicles_description_from_a_request_is_not_expanded_and_names_its_entry(tmp_path):
+    """A scene a service loads (scene directories given) does not expand xacro in a vehicle's
+    description (it reads environment variables and any file); errors name the robots entry;
+    max_bodies counts the vehicles robots entries make; a copy of the default scene elsewhere
+    still finds the package's car.urdf."""
+    text = broken('engine_power="6000.0"', 'engine_power="$(env HOME)"')
+    with pytest.raises(SceneError, match=re.escape("robots[0].urdf: it uses xacro, which is expanded only")):
+        load_world({"version": 1, "robots": [{"name": "car", "urdf": text}]}, directories=[str(tmp_path)])
+    car = {"name": "car", "urdf": str(CAR_URDF)}
+    sensor = {"name": "car", "type": "imu", "parent": "world"}
+    with pytest.raises(SceneError, match=re.escape("sensors[0].name: duplicate name 'car': already robots[1]'s name")):
+        load_world({"version": 1, "robots": [{**car, "name": "other"}, car], "sensors": [sensor]})
+    with pytest.raises(SceneError, match=re.escape("robots[1].namespace")):
+        load_world({"version": 1, "robots": [{**car, "namespace": "a"}, {**car, "name": "b", "namespace": "a"}]})
+    with pytest.raises(SceneError, match=re.escape("robots[0].name: missing")):
+        load_world({"version": 1, "robots": [{"urdf": str(CAR_URDF)}]})
+    three = {"version": 1, "robots": [{**car, "name": f"c{k}", "position": [5.0 * k, 0, 1]} for k in range(3)]}
+    with pytest.raises(SceneError, match=re.escape("the scene has 3 bodies (vehicles and the robots' links counted), "
+                                                   "more than max_bodies (2)")):
+        load_world(three, max_bodies=2)
+    copied = tmp_path / "my_scene.yaml"
+    copied.write_text(SCENE.read_text())
+    assert load_world(str(copied)).vehicle("car") == load_world(str(SCENE)).vehicle("car")

@@ -200,7 +200,7 @@ def vehicle_from_description(description, label):
         mount = [xyz[0], xyz[1], xyz[2] + spring]
         if wheel.get("mount") is not None:
             given = numbers_of(wheel, "mount", at)
-            if max(abs(a - b) for a, b in zip(given, mount)) > MOUNT_TOLERANCE:
+            if not all(abs(a - b) <= MOUNT_TOLERANCE for a, b in zip(given, mount)):  # (NaN too)
                 raise UrdfError(f"{label}: {at}: mount {wheel.get('mount')!r} is not where its suspension joint "
                                 f"puts it ({numbers(mount)}: the joint's origin, raised by its upper limit)")
             mount = given

@@ -115,11 +115,12 @@ def read_scene(path_or_dict):
 PACKAGE_MESHES = "package://vplayground_ros/meshes/"
 
 
-def resolve_mesh(name, base, directories=None, key="playground.mesh"):
+def resolve_mesh(name, base, directories=None, key="playground.mesh", shared_folder="meshes"):
     """A mesh path as written in a scene: `package://vplayground_ros/meshes/<file>`, absolute,
-    else relative to the scene file's folder, else one of the package's meshes/. With
-    `directories` (scenes loaded for a service call), a mesh outside them and the package's
-    meshes/ is refused, symbolic links resolved. Returns the path or raises SpecError listing
+    else relative to the scene file's folder, else one of the package's `shared_folder` (meshes/;
+    config/ for a robot's description: the built-in car's, wherever its scene was copied to).
+    With `directories` (scenes loaded for a service call), a mesh outside them and the package's
+    folder is refused, symbolic links resolved. Returns the path or raises SpecError listing
     where it looked."""
     if name.startswith("package://") and not name.startswith(PACKAGE_MESHES):
         raise specs.SpecError(key, f"mesh file {specs.quote(name)}: package:// names only this package's "
@@ -137,10 +138,10 @@ def resolve_mesh(name, base, directories=None, key="playground.mesh"):
             raise MissingMesh(key, f"mesh file {specs.quote(name)} resolves outside the allowed directories")
         return tried[0]
     if not candidate.is_absolute():
-        shared = find_shared(f"meshes/{name}")
+        shared = find_shared(f"{shared_folder}/{name}")
         if shared is not None:
             return shared
-        tried.append(Path("<package>/meshes") / name)
+        tried.append(Path(f"<package>/{shared_folder}") / name)
     raise MissingMesh(key, f"mesh file {specs.quote(name)} not found (looked in: "
                            f"{', '.join(str(p) for p in tried)})")
 
@@ -253,22 +254,22 @@ def body_mesh_points(raw, path, base, directories=None):
 
 
 def name_unnamed(bodies, vehicles, taken):
-    """Gives the unnamed bodies and vehicles the names World._generate_name would (box_<n>, then
-    car_<n>, one counter, in the order load_world adds them) but skipping every name in `taken`,
-    so a name given further down the file still wins. `taken` gains them. Returns {name: what
-    has it} for the sensors' messages."""
+    """Gives the unnamed bodies and vehicles ([(path, entry)]) the names World._generate_name
+    would (box_<n>, then car_<n>, one counter, in the order load_world adds them) but skipping
+    every name in `taken`, so a name given further down the file still wins. `taken` gains them.
+    Returns {name: what has it} for the sensors' messages."""
     owners, count = {}, 0
-    for key, prefix, entries in (("bodies", "box", bodies), ("vehicles", "car", vehicles)):
-        for k, entry in enumerate(entries):
+    for prefix, entries in (("box", bodies), ("car", vehicles)):
+        for path, entry in entries:
             if "name" in entry:
-                owners[entry["name"]] = f"{key}[{k}]'s name"
+                owners[entry["name"]] = f"{path}'s name"
                 continue
             count += 1
             while f"{prefix}_{count}" in taken:
                 count += 1
             entry["name"] = f"{prefix}_{count}"
             taken.add(entry["name"])
-            owners[entry["name"]] = f"the name generated for {key}[{k}]"
+            owners[entry["name"]] = f"the name generated for {path}"
     return owners
 
 
@@ -299,33 +300,36 @@ def validate_scene(scene, base, max_bodies=None, directories=None, frames=DEFAUL
             names.add(entry["name"])
         return entry
 
-    bodies = [claim(specs.validate_body(body_mesh_points(raw, f"bodies[{k}]", base, directories),
-                                        f"bodies[{k}]"), f"bodies[{k}]")
+    # Each entry with the key its errors name: [(path, entry)].
+    bodies = [(f"bodies[{k}]", claim(specs.validate_body(body_mesh_points(raw, f"bodies[{k}]", base, directories),
+                                                         f"bodies[{k}]"), f"bodies[{k}]"))
               for k, raw in enumerate(validate_list(scene, "bodies"))]
-    vehicles = [claim(validate_robot(specs.validate_vehicle(raw, f"vehicles[{k}]"), f"vehicles[{k}]"), f"vehicles[{k}]")
+    vehicles = [(f"vehicles[{k}]", claim(validate_robot(specs.validate_vehicle(raw, f"vehicles[{k}]"), f"vehicles[{k}]"),
+                                         f"vehicles[{k}]"))
                 for k, raw in enumerate(validate_list(scene, "vehicles"))]
-    vehicle_paths = [f"vehicles[{k}]" for k in range(len(vehicles))]
     described = robot_sources(scene, base, directories)
     for k, (entry, source, label) in enumerate(described):  # a ray-cast vehicle's description: a vehicle
-        vehicle = read_robot(lambda: vehicle_entry(entry, f"robots[{k}]", source, label))
+        # (xacro reads environment variables and any file: expanded for the command line's scene alone)
+        vehicle = read_robot(lambda: vehicle_entry(entry, f"robots[{k}]", source, label, directories is None))
         if vehicle is not None:
-            vehicles.append(claim(vehicle, f"robots[{k}]"))
-            vehicle_paths.append(f"robots[{k}]")
+            vehicles.append((f"robots[{k}]", claim(vehicle, f"robots[{k}]")))
             described[k] = None
     # Named before the sensors are checked: a sensor's name is a frame and must not be a body's,
     # generated or not.
     owners = name_unnamed(bodies, vehicles, names)
     robots = validate_robots(described, directories, owners)
+    count = len(bodies) + len(vehicles) + sum(len(model.bodies) for _, (_, model) in robots)
+    if max_bodies is not None and count > max_bodies:
+        raise specs.SpecError("robots", f"the scene has {count} bodies (vehicles and the robots' links counted), "
+                                        f"more than max_bodies ({max_bodies})")
     sensors = validate_sensors(scene.get("sensors"), owners)
     # The names against the node's frames and the optical frames of the cameras named by them;
     # a frame_id is checked against everything below, naming the sensor's key.
     reserved = {**node_frames(frames), **sensor_frames_taken([s for s in sensors if "frame_id" not in s])}
-    for paths, entries in (([f"bodies[{k}]" for k in range(len(bodies))], bodies), (vehicle_paths, vehicles),
-                           ([f"sensors[{k}]" for k in range(len(sensors))], sensors)):
-        for path, entry in zip(paths, entries):
-            if entry["name"] in reserved:
-                raise specs.SpecError(f"{path}.name", f"{specs.quote(entry['name'])} is {reserved[entry['name']]} "
-                                                      "(names are frames: the node publishes that one)")
+    for path, entry in (*bodies, *vehicles, *((f"sensors[{k}]", sensor) for k, sensor in enumerate(sensors))):
+        if entry["name"] in reserved:
+            raise specs.SpecError(f"{path}.name", f"{specs.quote(entry['name'])} is {reserved[entry['name']]} "
+                                                  "(names are frames: the node publishes that one)")
     # A sensor's frame_id is a frame too: none of the node's, no entity's name, no other sensor's.
     taken = {**reserved, **owners, **{s["name"]: f"the sensor {s['name']}" for s in sensors}}
     for k, sensor in enumerate(sensors):
@@ -348,7 +352,7 @@ def robot_sources(scene, base, directories):
             raise specs.SpecError(f"{path}.urdf", "missing (a robot is a name and a URDF file)" if "urdf" not in raw
                                   else "expected a file name or the description's text")
         text = raw["urdf"].lstrip().startswith("<")  # the description itself, not a file
-        file = raw["urdf"] if text else resolve_mesh(raw["urdf"], base, directories, f"{path}.urdf")
+        file = raw["urdf"] if text else resolve_mesh(raw["urdf"], base, directories, f"{path}.urdf", "config")
         sources.append((raw, str(file), f"{path}.urdf" + ("" if text else f": {file}")))
     return sources
 
@@ -366,7 +370,7 @@ def validate_robots(described, directories, owners):
     """The scene's URDF robots (robot_sources' entries; None for those that are vehicles): each
     entry checked (urdf_robots.validate_entry) and its description read into a
     urdf_import.RobotModel; `owners` (body and vehicle names) gains their bodies. Returns
-    [(entry, model)]."""
+    [(path, (entry, model))]."""
     from .urdf_import import robot_model
     robots = []
     for k, item in enumerate(described):
@@ -390,13 +394,13 @@ def validate_robots(described, directories, owners):
             owners[body["name"]] = f"a link of the robot {entry['name']}"
         entry.update({key: fields[key] for key in ("position", "rpy", "quaternion") if key in fields})
         entry["urdf"] = str(file)  # found once: a scene saved elsewhere must still find it
-        robots.append((entry, model))
+        robots.append((path, (entry, model)))
     return robots
 
 
 def validate_joints(scene, owners):
     """The scene's `joints` (specs.validate_joint), each name given once, between bodies or
-    vehicles of the scene (`owners`: their names)."""
+    vehicles of the scene (`owners`: their names): [(path, joint)]."""
     joints, names = [], set()
     for k, raw in enumerate(validate_list(scene, "joints")):
         path = f"joints[{k}]"
@@ -409,12 +413,13 @@ def validate_joints(scene, owners):
             if joint["name"] in names:
                 raise specs.SpecError(f"{path}.name", f"duplicate joint name {specs.quote(joint['name'])}")
             names.add(joint["name"])
-        joints.append(joint)
+        joints.append((path, joint))
     return joints
 
 
 def load_world(path_or_dict, max_bodies=None, directories=None, frames=DEFAULT_FRAMES):
-    """A World from a scene file or dict. `max_bodies` caps bodies plus vehicles; `directories`
+    """A World from a scene file or dict. `max_bodies` caps its bodies (vehicles and robot links
+    counted); `directories`
     confines the playground mesh to them (and the package's meshes/); `frames` are the node's
     frame names (parameters.Frames), which no body or sensor may take."""
     scene, label, base = read_scene(path_or_dict)
@@ -437,12 +442,12 @@ def load_world(path_or_dict, max_bodies=None, directories=None, frames=DEFAULT_F
             log.warning("%s: playground mesh %s: dropped %d degenerate triangles", label,
                         spec["mesh"], dropped)
     # Vehicles before robots: the first of them stands in the root namespace.
-    for key, entries, add in (("bodies", bodies, world.add_body), ("vehicles", vehicles, world.add_vehicle),
-                              ("robots", robots, lambda pair, path: add_robot_entry(world, *pair, path, frames)),
-                              ("joints", joints, world.add_joint)):
-        for k, entry in enumerate(entries):
+    for entries, add in ((bodies, world.add_body), (vehicles, world.add_vehicle),
+                         (robots, lambda pair, path: add_robot_entry(world, *pair, path, frames)),
+                         (joints, world.add_joint)):
+        for path, entry in entries:
             try:
-                add(entry, f"{key}[{k}]")
+                add(entry, path)
             except ValueError as error:  # checks that need the world (e.g. inside its bounds)
                 raise SceneError(f"{label}: {error}") from None
     try:  # needs the robots' namespaces, which the World gave them

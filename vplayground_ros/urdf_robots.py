@@ -112,6 +112,8 @@ def vehicle_entry(raw, path, source, label, allow_xacro=True):
     if vehicle is None:
         return None
     specs.mapping(raw, path, VEHICLE_ENTRY_KEYS)  # no joints to name, hold or drive: its wheels are rays
+    if "name" not in raw:
+        raise specs.SpecError(f"{path}.name", "missing (a robot is a name and a URDF file)")
     return validate_robot(specs.validate_vehicle({**vehicle, **{key: value for key, value in raw.items()
                                                                 if key != "urdf"}}, path), path)
 

@@ -101,8 +101,8 @@ def cast_ray(origin, direction, reach, exclude, query_id, bodies, hulls, parts, 
         n = query_index(index, level, box, True, broad.stamp, query_id, broad.scratch)
         for m in range(n):
             j = broad.scratch[m]
-            if j == exclude or not bodies.active[j]:
-                continue
+            if j == exclude or not bodies.active[j] or not bodies.collides[j]:
+                continue  # (a static entry can outlive an edit that made its body collide with nothing)
             t, normal = ray_body(origin, direction, reach, geometry, hulls, parts, j)
             if t < best:
                 best, hit, best_normal = t, j, normal

@@ -48,10 +48,8 @@ MIN_ROOT_SIZE = 16.0
 # them from a body array (a slice when they are 0..N-1, the common case, so gathers are copies);
 # names, vehicle_names: tuples; row_of_slot: (capacity,) each slot's row (-1 for free slots);
 # compound_rows (K,) the rows of compound bodies and compound_centres (K, 3) their centres of
-# mass in their frames (what turns the engine's positions into the frames' poses); ids (N,) the
-# rows' body ids (World.body_id).
-Layout = namedtuple("Layout", "version slots rows names vehicle_names row_of_slot compound_rows compound_centres "
-                              "ids")
+# mass in their frames (what turns the engine's positions into the frames' poses).
+Layout = namedtuple("Layout", "version slots rows names vehicle_names row_of_slot compound_rows compound_centres")
 
 # A body id is its slot in the low bits and the slot's generation (how many bodies it held
 # before) above them, as Box2D's generational ids: a removal cannot make one name another body.
@@ -677,12 +675,11 @@ class World(WorldQueries):
             compound_rows = np.nonzero(self._bodies.shape[slots] == shapes.COMPOUND)[0]
             centres = np.array([self._solids[slot][1].compound.centre for slot in slots[compound_rows].tolist()],
                                float).reshape(-1, 3)
-            ids = self._generations[slots] << SLOT_BITS | slots
-            for array in (slots, row_of_slot, compound_rows, centres, ids):
+            for array in (slots, row_of_slot, compound_rows, centres):
                 array.flags.writeable = False  # shared by every caller until the next change
             self._layout = Layout(self.layout_version, slots, rows, names,
                                   tuple(name for name in names if name in self._vehicles), row_of_slot,
-                                  compound_rows, centres, ids)
+                                  compound_rows, centres)
         return self._layout
 
     def _slot(self, name):

@@ -1,7 +1,6 @@
 """Box: `size` (full edge lengths); dimensions = half extents (x, y, z). Local frame: centred,
 edges along the axes. The SAT box/box and box/triangle manifolds stay in narrow_phase.py (the
 fast special cases); these functions serve the general convex path and the ray casts."""
-import numpy as np
 from numba import njit
 
 from .geometry import NO_HIT, axis_vector
