@@ -455,6 +455,19 @@ def test_odometry_starts_again_for_a_robot_spawned_again(run):
     assert wait_for(lambda: any(t > spawned for t, _ in sink.of("/odom")), 60)
     odom = next(ODOMETRY(data) for t, data in sink.of("/odom") if t > spawned)
     assert np.array(odom.pose.covariance).reshape(6, 6)[1, 1] < 0.3 ** 2 * 0.5  # not the 16 m of drift before
+    # Removed and spawned again where it stands within one batch (no round between): a new car too.
+    runtime.sim.call(lambda world: world.drive("car", 4.0, 0.0, timeout=100))
+    assert wait_for(lambda: runtime.sim.snapshot.time > spawned + 4.0, 60)
+
+    def respawn(world):
+        again = world.vehicle("car")
+        world.remove_body("car")
+        world.add_vehicle(again)
+    runtime.sim.call(respawn)
+    spawned = runtime.sim.snapshot.time
+    assert wait_for(lambda: any(t > spawned for t, _ in sink.of("/odom")), 60)
+    odom = next(ODOMETRY(data) for t, data in sink.of("/odom") if t > spawned)
+    assert np.array(odom.pose.covariance).reshape(6, 6)[1, 1] < 0.3 ** 2 * 0.5
 
 
 @pytest.mark.parametrize("overrides", [{"localization": "none"}, {"publish_odom_tf": False}])

@@ -172,7 +172,7 @@ class Broadcaster:
         self._robots = None      # (key, [robots.Robot]) last made
         self._urdf_robots = None  # (key, [urdf_robots.UrdfRobot]) last made
         self._wheel_odometry = {}  # URDF robot name -> its WheelOdometry
-        self._odometry = {}      # robot name -> (OdometryTracker, its error model)
+        self._odometry = {}      # robot name -> (OdometryTracker, its error model, the car's body id)
         self._last_clock = -math.inf
         self._last_clock_step = None  # (world, step) of the last batch's /clock
         self._last_state = None
@@ -674,19 +674,22 @@ class Broadcaster:
         return edges
 
     def odometry_tracker(self, name, spec, snap, truth, velocity):
-        """The robot's OdometryTracker, started at the true pose when the robot is new (or its
-        error model changed; a robot removed is forgotten at the next round), when time went back (a reset, another scene) and when the robot
-        moved farther than it can drive since the last round (a teleport: ~/edit, initialpose);
-        the odom frame then starts where the robot stands, as a robot's driver starts again."""
-        model = spec.get("odometry")
+        """The robot's OdometryTracker, started at the true pose when the robot is new (another
+        car of its name, by body id, even one spawned within a round; or its error model
+        changed; a robot removed is forgotten at the next round), when time went back (a reset,
+        another scene) and when the robot moved farther than it can drive since the last round
+        (a teleport: ~/edit, initialpose); the odom frame then starts where the robot stands, as
+        a robot's driver starts again."""
+        model, body_id = spec.get("odometry"), snap.vehicle_ids.get(name)
         entry = self._odometry.get(name)
         if entry is not None:
-            tracker, last_model = entry
-            if last_model == model and (tracker.noiseless or drove(tracker, truth, velocity, snap.time)):
+            tracker, last_model, last_id = entry
+            if (last_model == model and last_id == body_id
+                    and (tracker.noiseless or drove(tracker, truth, velocity, snap.time))):
                 return tracker
         tracker = OdometryTracker(name, model)
         tracker.reset(*truth, snap.time)
-        self._odometry[name] = (tracker, model)
+        self._odometry[name] = (tracker, model, body_id)
         return tracker
 
     def pose_block(self, snap):

@@ -65,6 +65,7 @@ class Snapshot:
     # simulation thread (the rays need the World); the publisher turns them into messages.
     readings: list = field(default_factory=list)
     vehicle_specs: dict = field(default_factory=dict)  # vehicle name -> World.vehicle() (shared)
+    vehicle_ids: dict = field(default_factory=dict)  # vehicle name -> World.body_id (which car of that name; shared)
     scenery: "Scenery" = None
     robot_specs: list = field(default_factory=list)  # World.robot_specs (URDF robots; shared)
     robot_joints: dict = field(default_factory=dict)  # URDF robot name -> World.joint_states of its joints
@@ -76,8 +77,8 @@ class Snapshot:
 Scenery = namedtuple("Scenery", "ground triangles version")
 
 # What the snapshots of one world's layout share, taken once per layout rather than per batch.
-SharedLayout = namedtuple("SharedLayout", "world version names vehicle_names properties vehicle_specs scenery "
-                                         "robot_specs")
+SharedLayout = namedtuple("SharedLayout", "world version names vehicle_names properties vehicle_specs vehicle_ids "
+                                         "scenery robot_specs")
 
 
 class Simulation:
@@ -388,7 +389,8 @@ class Simulation:
             state={**self._motion_state(world, layout), **layout.properties},
             vehicles={name: world.vehicle_state(name) for name in layout.vehicle_names},
             contacts=world.contacts() if self.with_contacts else None,
-            vehicle_specs=layout.vehicle_specs, scenery=layout.scenery, robot_specs=layout.robot_specs,
+            vehicle_specs=layout.vehicle_specs, vehicle_ids=layout.vehicle_ids, scenery=layout.scenery,
+            robot_specs=layout.robot_specs,
             robot_joints={robot["name"]: world.joint_states(robot["model"].joint_names.values())
                           for robot in layout.robot_specs})
 
@@ -434,5 +436,6 @@ class Simulation:
                 scenery = Scenery(world.ground, triangles, world.scenery_version)
             layout = self._layout = SharedLayout(
                 world, version, world.body_names(), vehicle_names, properties,
-                {name: world.vehicle(name) for name in vehicle_names}, scenery, world.robot_specs)
+                {name: world.vehicle(name) for name in vehicle_names},
+                {name: world.body_id(name) for name in vehicle_names}, scenery, world.robot_specs)
         return layout
