@@ -308,9 +308,8 @@ def validate_scene(scene, base, max_bodies=None, directories=None, frames=DEFAUL
                                          f"vehicles[{k}]"))
                 for k, raw in enumerate(validate_list(scene, "vehicles"))]
     described = robot_sources(scene, base, directories)
-    for k, (entry, source, label) in enumerate(described):  # a ray-cast vehicle's description: a vehicle
-        # (xacro reads environment variables and any file: expanded for the command line's scene alone)
-        vehicle = read_robot(lambda: vehicle_entry(entry, f"robots[{k}]", source, label, directories is None))
+    for k, (entry, _, label, (text, _)) in enumerate(described):  # a ray-cast vehicle's description: a vehicle
+        vehicle = read_robot(lambda: vehicle_entry(entry, f"robots[{k}]", text, label))
         if vehicle is not None:
             vehicles.append((f"robots[{k}]", claim(vehicle, f"robots[{k}]")))
             described[k] = None
@@ -343,7 +342,11 @@ def validate_scene(scene, base, max_bodies=None, directories=None, frames=DEFAUL
 
 def robot_sources(scene, base, directories):
     """The scene's `robots` entries, each with its description's source (the file, found as a
-    mesh is, or the text itself) and the label its errors start with: [(raw entry, source, label)]."""
+    mesh is, or the text itself), the label its errors start with and the description as read
+    once (urdf_import.read_description's text and folder; xacro, which reads environment
+    variables and any file, expanded for the command line's scene alone):
+    [(raw entry, source, label, (text, folder))]."""
+    from .urdf_import import read_description  # (urdf_import reads meshes through this module)
     sources = []
     for k, raw in enumerate(validate_list(scene, "robots")):
         path = f"robots[{k}]"
@@ -352,8 +355,9 @@ def robot_sources(scene, base, directories):
             raise specs.SpecError(f"{path}.urdf", "missing (a robot is a name and a URDF file)" if "urdf" not in raw
                                   else "expected a file name or the description's text")
         text = raw["urdf"].lstrip().startswith("<")  # the description itself, not a file
-        file = raw["urdf"] if text else resolve_mesh(raw["urdf"], base, directories, f"{path}.urdf", "config")
-        sources.append((raw, str(file), f"{path}.urdf" + ("" if text else f": {file}")))
+        file = str(raw["urdf"] if text else resolve_mesh(raw["urdf"], base, directories, f"{path}.urdf", "config"))
+        label = f"{path}.urdf" + ("" if text else f": {file}")
+        sources.append((raw, file, label, read_robot(lambda: read_description(file, label, directories is None))))
     return sources
 
 
@@ -376,14 +380,14 @@ def validate_robots(described, directories, owners):
     for k, item in enumerate(described):
         if item is None:
             continue
-        raw, file, label = item
+        raw, file, label, description = item
         path = f"robots[{k}]"
         entry, fields = validate_entry(raw, path)
         model = read_robot(lambda: robot_model(file, entry["name"], fields.get("position", [0.0, 0.0, 0.0]),
                                                fields.get("rpy", [0.0, 0.0, 0.0]), entry.get("fixed_base"),
                                                entry.get("self_collide", False), entry["joint_positions"],
                                                label=label, quaternion=fields.get("quaternion"),
-                                               directories=directories))
+                                               directories=directories, description=description))
         check_against_model(entry, model, path)
         if entry["name"] in owners:
             raise specs.SpecError(f"{path}.name", f"{specs.quote(entry['name'])} is {owners[entry['name']]}")

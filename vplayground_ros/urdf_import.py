@@ -224,7 +224,8 @@ def combine_inertials(inertials):
 
 
 def robot_model(source, name, position=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), fixed_base=None,
-                self_collide=False, joint_positions=None, label=None, quaternion=None, directories=None):
+                self_collide=False, joint_positions=None, label=None, quaternion=None, directories=None,
+                description=None):
     """The RobotModel of a URDF file or text, its root link placed at `position` and `rpy` (or
     `quaternion`, x y z w, when given).
     `fixed_base`: the root is fixed to the world (None: when the root's body, with the links
@@ -232,9 +233,10 @@ def robot_model(source, name, position=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), fix
     PyBullet and Gazebo load URDF robots). `joint_positions`: {joint: rad or m} for joints not
     at 0 (the links placed accordingly, each joint's coordinate that value). `directories`:
     a request's scene_directories, the only places its meshes may be read from (and then no
-    xacro); None for a scene of the user's own."""
+    xacro); None for a scene of the user's own. `description`: (text, folder) as
+    read_description gave them for `source`, when the caller read it already."""
     label = label or (str(source) if not str(source).lstrip().startswith("<") else "URDF text")
-    text, folder = read_description(source, label, allow_xacro=directories is None)
+    text, folder = description or read_description(source, label, allow_xacro=directories is None)
     where = Where(folder, directories)
     robot = parse(text, label)
     links = {link.name: link for link in robot.links}

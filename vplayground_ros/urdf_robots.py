@@ -98,16 +98,14 @@ def validate_entry(raw, path):
     return entry, fields
 
 
-def vehicle_entry(raw, path, source, label, allow_xacro=True):
+def vehicle_entry(raw, path, description, label):
     """The vehicle (a `vehicles` entry, validated) that a robot entry stands for when its
-    description (`source`: a file or the text) is a ray-cast vehicle's, with a
+    description (the URDF text, urdf_import.read_description's) is a ray-cast vehicle's, with a
     <vplayground><vehicle> element (robot_description writes it; the built-in car's is the
     package's config/car.urdf): name, placement and the vehicle's robot keys (namespace,
     localization, publish_odom_tf, odometry) from the entry. None for any other description.
     UrdfError when the description does not hold together."""
     from .robot_description import vehicle_from_description  # (it imports frame_names, which imports this)
-    from .urdf_import import read_description
-    description, _ = read_description(source, label, allow_xacro)
     vehicle = vehicle_from_description(description, label)
     if vehicle is None:
         return None

@@ -126,10 +126,10 @@ class EntityRequests:
             if "quaternion" in item:
                 item.pop("rpy", None)  # the pose's orientation wins over the spec's
         if "urdf" in item:
-            source, vehicle = self._prepare_description(item, path)
+            source, description, vehicle = self._prepare_description(item, path)
             if vehicle is not None:  # a ray-cast vehicle's description (the built-in car's)
                 return path, True, vehicle, rename, frame
-            return path, "robot", self._prepare_robot(item, source, path, frame), rename, ""
+            return path, "robot", self._prepare_robot(item, source, description, path, frame), rename, ""
         vehicle = "wheels" in item or "chassis" in item
         # A body's hull and mass are checked here too: a list is refused before the world is
         # asked, not rolled back (which would wake what the bodies touched).
@@ -138,18 +138,21 @@ class EntityRequests:
 
     def _prepare_description(self, item, path):
         """(the description's source: a file found as a mesh is, in the scene directories, or
-        the text itself; the vehicle it describes, or None for a URDF robot)."""
+        the text itself; the description as read once, no xacro (read_description's text and
+        folder); the vehicle it describes, or None for a URDF robot)."""
+        from ..urdf_import import read_description
         source = item["urdf"]
         if not isinstance(source, str) or not source:
             raise specs.SpecError(f"{path}.urdf", "expected a file name or the description's text")
         if not source.lstrip().startswith("<"):
             source = str(resolve_mesh(source, Path.cwd(), self.scene_directories, f"{path}.urdf"))
-        return source, described(lambda: vehicle_entry({**item, "urdf": source}, path, source, f"{path}.urdf",
-                                                       allow_xacro=False))
+        description = described(lambda: read_description(source, f"{path}.urdf", allow_xacro=False))
+        return source, description, described(lambda: vehicle_entry({**item, "urdf": source}, path, description[0],
+                                                                    f"{path}.urdf"))
 
-    def _prepare_robot(self, item, source, path, frame):
-        """(entry, RobotModel) of a URDF robot to spawn from its description's `source`; placed
-        in the world frame."""
+    def _prepare_robot(self, item, source, description, path, frame):
+        """(entry, RobotModel) of a URDF robot to spawn from its description's `source`, as read
+        (`description`); placed in the world frame."""
         from ..urdf_import import robot_model
         if frame and frame != self.frames().world:
             raise RequestError(INVALID_POSE, f"{path}.initial_pose.header.frame_id: a robot is placed in the world "
@@ -159,7 +162,8 @@ class EntityRequests:
                                               fields.get("rpy", [0.0, 0.0, 0.0]), entry.get("fixed_base"),
                                               entry.get("self_collide", False), entry["joint_positions"],
                                               label=f"{path}.urdf", quaternion=fields.get("quaternion"),
-                                              directories=allowed_directories(self.scene_directories)))
+                                              directories=allowed_directories(self.scene_directories),
+                                              description=description))
         check_against_model(entry, model, path)
         entry.update({key: fields[key] for key in ("position", "rpy", "quaternion") if key in fields})
         return entry, model
