@@ -140,9 +140,11 @@ def vehicle_from_description(description, label):
     def numbers_of(element, key, where, count=3):
         values = (element.get(key) or "").split()
         try:
-            return [float(v) for v in values] if len(values) == count else float("x")
+            if len(values) == count:
+                return [float(v) for v in values]
         except ValueError:
-            raise UrdfError(f"{label}: {where}: {key} {element.get(key)!r}: expected {count} numbers") from None
+            pass
+        raise UrdfError(f"{label}: {where}: {key} {element.get(key)!r}: expected {count} numbers")
 
     def link_part(kind, name, where):
         """(geometry element of the link's collision, its mass) of the link `name`."""

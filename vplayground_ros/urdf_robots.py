@@ -282,7 +282,8 @@ def publishing_view(spec, rows, localization="ground_truth", publish_odom_tf=Tru
     index = {body: k for k, body in enumerate(bodies)}
     links = [(link, model.link_parents.get(link), index[body], pose)
              for link, (body, pose) in model.link_frames.items()]
-    return UrdfRobot(spec["name"], spec["namespace"], tuple(model.joint_names), np.array([rows[b] for b in bodies], np.int64), links, spec.get("drive"),
+    return UrdfRobot(spec["name"], spec["namespace"], tuple(model.joint_names),
+                     np.array([rows[b] for b in bodies], np.int64), links, spec.get("drive"),
                      spec.get("localization", localization), spec.get("publish_odom_tf", publish_odom_tf),
                      model.description)
 
