@@ -188,6 +188,25 @@ def test_position_motor_target_moves_at_its_velocity():
     assert world.joint("shoulder")["position"] == pytest.approx(0.4, abs=1e-3)
 
 
+def test_coupled_motors_reach_their_speeds_in_the_first_step():
+    """Velocity motors along a chain whose links differ 100:1 in mass are coupled through it
+    (turning the first hinge swings the links beyond it): solved together with the chain's
+    equalities, each reaches its speed exactly in the first step (sweeping row by row, 10
+    sweeps left the first two 1e-3 rad/s off, then swinging about the answer)."""
+    world = World(UNFROZEN, ground=None)
+    targets = [1.0, -2.0, 3.0]
+    for k, (mass, target) in enumerate(zip([10.0, 1.0, 0.1], targets)):
+        world.add_body({"name": f"link{k}", "size": [0.5, 0.05, 0.05], "mass": mass,
+                        "position": [0.25 + 0.5 * k, 0, 2]})
+        world.add_joint({"name": f"hinge{k}", "type": "revolute", "child": f"link{k}",
+                         **({"parent": f"link{k - 1}"} if k else {}), "anchor": [0.5 * k, 0, 2],
+                         "axis": [0, 0, 1], "motor": {"mode": "velocity", "target": target}})
+    for _ in range(3):
+        world.step(1)
+        for k, target in enumerate(targets):
+            assert world.joint(f"hinge{k}")["velocity"] == pytest.approx(target, abs=1e-12)
+
+
 def test_continuous_joint_counts_turns():
     world = World(UNFROZEN, ground=None)
     world.add_body({"name": "wheel", "shape": "cylinder", "radius": 0.3, "length": 0.1,

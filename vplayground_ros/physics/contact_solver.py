@@ -37,8 +37,8 @@ from .constants import (LINEAR_SLOP, MAX_CORRECTION_SPEED, POSITION_CORRECTION,
                         RESTITUTION_THRESHOLD, SHOCK_SWEEPS, SHOCK_TOLERANCE,
                         STICKING_SPEED)
 from .contact import ARM_A, ARM_B, DIRECTION, TURN_A, TURN_B
-from .joints import (COLLISION_IMPULSE, COLLISION_TARGET, CONTACT_TARGET, IMPULSE, SETTLED_IMPULSE, islands_touched,
-                     settle_island_impulses, solve_joint_sweep)
+from .joints import (COLLISION_IMPULSE, COLLISION_TARGET, CONTACT_TARGET, IMPULSE, islands_touched,
+                     settle_island_impulses, solve_islands_alone, solve_joint_sweep)
 from .math3d import cross
 from .solve_schedule import shock_levels, split_chains, support_groups
 
@@ -531,11 +531,11 @@ def solve_with_joints(velocity, contacts, joints, sweeps, target, normal_impulse
     """solve_rows' sweeps (with friction) with a sweep over the joint rows of the islands the
     pass's contact points touch after each, in alternating order too: one pass over both kinds
     of row, so a robot's wheels press on the ground through its axles. The islands no point
-    touches are solved after, their sweeps in a row (with the pile's contacts in between, their
-    rows fell out of the cache every sweep: a KUKA arm beside a 200-box pile cost 4 times what
-    it costs alone); the collision pass leaves them out (nothing hits them). On the stepping
-    thread alone (the two-thread schedule knows contacts only); worlds without joints take
-    solve_rows."""
+    touches are solved after (with the pile's contacts in between, their rows fell out of the
+    cache every sweep: a KUKA arm beside a 200-box pile cost 4 times what it costs alone): at
+    once where solved whole (solve_island_alone), else their sweeps in a row; the collision
+    pass leaves them out (nothing hits them). On the stepping thread alone (the two-thread
+    schedule knows contacts only); worlds without joints take solve_rows."""
     count = select_points(contacts, target)
     rows, row_mass, row_inv_mass = contacts.rows, contacts.row_mass, contacts.row_inv_mass
     rows_a, rows_b, mu = contacts.velocity_a, contacts.velocity_b, contacts.friction_coefficient
@@ -546,12 +546,13 @@ def solve_with_joints(velocity, contacts, joints, sweeps, target, normal_impulse
                    contacts.sweep_points, 0, count, backwards, target, normal_impulse, friction,
                    True)
         solve_joint_sweep(velocity, joints, joint_target, joint_impulse, backwards, with_motors,
-                          touched, True)
+                          touched)
     if with_motors:
-        for sweep in range(sweeps):
-            if solve_joint_sweep(velocity, joints, joint_target, joint_impulse, sweep % 2 == 1, True,
-                                 touched, False) <= SETTLED_IMPULSE:
-                break  # settled: the rest would change nothing
+        by_joint = solve_islands_alone(velocity, joints, joint_target, joint_impulse, touched)
+        if by_joint.any():
+            for sweep in range(sweeps):
+                solve_joint_sweep(velocity, joints, joint_target, joint_impulse, sweep % 2 == 1, True,
+                                  by_joint)
     settle_island_impulses(joints, joint_impulse)
 
 
