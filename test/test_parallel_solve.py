@@ -95,6 +95,23 @@ def test_two_threads_give_the_serial_result_bit_for_bit():
     assert_same_bytes(shared[0], shared[1])
 
 
+def test_a_pile_beside_a_swinging_pendulum_on_two_threads_is_the_serial_one():
+    """Joints no contact point touches leave the pile's sweeps to the threads as in a world
+    without joints (the pendulum's island is solved on its own): the bytes are the serial ones."""
+    def build():
+        world = pile(300, seed=3)
+        world.add_body({"name": "bob", "size": [0.1, 0.1, 1.0], "mass": 1.0, "position": [-20, 0, 9.5],
+                        "rpy": [0.4, 0, 0]})
+        world.add_joint({"type": "revolute", "child": "bob", "anchor": [-20, 0, 10], "axis": [1, 0, 0],
+                         "motor": {"mode": "velocity", "target": 0.5, "max_effort": 2.0}})
+        return world
+    serial = stepped(build, 1, 130)
+    count, lengths, waiting = last_split(serial)
+    assert count >= PARALLEL_MIN_POINTS and 0 < waiting * MAX_WAITING_SHARE <= count  # shared
+    assert abs(serial.body("bob")["angular_velocity"][0]) > 0.1  # swinging, on its motor
+    assert_same_bytes(snapshot(serial), snapshot(stepped(build, 2, 130)))
+
+
 @pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="needs two Numba threads")
 def test_two_threads_on_one_core_do_all_the_work_alone():
     """Numba with one thread runs the region's two workers one after the other: the first takes

@@ -315,8 +315,16 @@ def solve_rows(velocity, contacts, sweeps, target, normal_impulse, friction, wit
     counts. Within a manifold that also puts the lowest (most loaded) corner first. With
     `threads` > 1 and enough points, two threads share the sweeps, with the same result
     (solve_schedule)."""
-    points = contacts.sweep_points
     count = select_points(contacts, target)
+    solve_selected(velocity, contacts, sweeps, target, normal_impulse, friction, with_friction,
+                   position, gravity, count, threads)
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
+def solve_selected(velocity, contacts, sweeps, target, normal_impulse, friction, with_friction,
+                   position, gravity, count, threads):
+    """solve_rows' sweeps over the `count` points select_points chose."""
+    points = contacts.sweep_points
     if threads > 1 and count >= PARALLEL_MIN_POINTS and solve_rows_shared(
             velocity, contacts, sweeps, target, normal_impulse, friction, with_friction, position,
             gravity, points, count, threads):
@@ -516,37 +524,43 @@ def collision_pass(contacts, bodies, iterations, gravity, threads):
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
-def collision_pass_with_joints(contacts, joints, bodies, iterations):
+def collision_pass_with_joints(contacts, joints, bodies, iterations, gravity, threads):
     """collision_pass in a world with joints (worlds without do not hand the joints over:
     each array handed to a call costs it)."""
     solve_with_joints(bodies.velocity, contacts, joints, iterations, contacts.collision_target,
                       contacts.collision_impulse, contacts.collision_friction,
                       joints.row_values[:, :, COLLISION_TARGET],
-                      joints.row_values[:, :, COLLISION_IMPULSE], False)
+                      joints.row_values[:, :, COLLISION_IMPULSE], False, bodies.position, gravity,
+                      threads)
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
 def solve_with_joints(velocity, contacts, joints, sweeps, target, normal_impulse, friction,
-                      joint_target, joint_impulse, with_motors):
+                      joint_target, joint_impulse, with_motors, position, gravity, threads):
     """solve_rows' sweeps (with friction) with a sweep over the joint rows of the islands the
     pass's contact points touch after each, in alternating order too: one pass over both kinds
     of row, so a robot's wheels press on the ground through its axles. The islands no point
     touches are solved after (with the pile's contacts in between, their rows fell out of the
     cache every sweep: a KUKA arm beside a 200-box pile cost 4 times what it costs alone): at
     once where solved whole (solve_island_alone), else their sweeps in a row; the collision
-    pass leaves them out (nothing hits them). On the stepping thread alone (the two-thread
-    schedule knows contacts only); worlds without joints take solve_rows."""
+    pass leaves them out (nothing hits them). Sweeps with joint rows run on the stepping thread
+    alone (the two-thread schedule knows contacts only); when no point touches an island, the
+    points are solve_rows' alone (and threads share them as in a world without joints)."""
     count = select_points(contacts, target)
     rows, row_mass, row_inv_mass = contacts.rows, contacts.row_mass, contacts.row_inv_mass
     rows_a, rows_b, mu = contacts.velocity_a, contacts.velocity_b, contacts.friction_coefficient
     touched = islands_touched(joints, rows_a, rows_b, contacts.sweep_points, count, len(velocity))
-    for sweep in range(sweeps):
-        backwards = sweep % 2 == 1
-        solve_span(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu,
-                   contacts.sweep_points, 0, count, backwards, target, normal_impulse, friction,
-                   True)
-        solve_joint_sweep(velocity, joints, joint_target, joint_impulse, backwards, with_motors,
-                          touched)
+    if touched.any():
+        for sweep in range(sweeps):
+            backwards = sweep % 2 == 1
+            solve_span(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu,
+                       contacts.sweep_points, 0, count, backwards, target, normal_impulse, friction,
+                       True)
+            solve_joint_sweep(velocity, joints, joint_target, joint_impulse, backwards, with_motors,
+                              touched)
+    else:
+        solve_selected(velocity, contacts, sweeps, target, normal_impulse, friction, True, position,
+                       gravity, count, threads)
     if with_motors:
         by_joint = solve_islands_alone(velocity, joints, joint_target, joint_impulse, touched)
         if by_joint.any():
@@ -903,7 +917,7 @@ def contact_pass_with_joints(contacts, joints, bodies, iterations, gravity, thre
     """contact_pass in a world with joints: their rows in each velocity sweep."""
     solve_with_joints(bodies.velocity, contacts, joints, iterations, contacts.contact_target,
                       contacts.impulse, contacts.friction, joints.row_values[:, :, CONTACT_TARGET],
-                      joints.row_values[:, :, IMPULSE], True)
+                      joints.row_values[:, :, IMPULSE], True, bodies.position, gravity, threads)
     finish_contact_pass(contacts, bodies, iterations, gravity, threads)
 
 

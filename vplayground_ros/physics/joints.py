@@ -669,6 +669,7 @@ def bounded_responses(joints, island, rows):
     bodies_first = joints.islands[ISLAND_BODY_START, island]
     for place in range(bodies_first, joints.islands[ISLAND_BODY_START, island + 1]):
         slot_of[joints.islands[ISLAND_BODIES, place]] = place - bodies_first
+    u = np.empty(n)
     for p in range(size):
         j = joints.islands[ISLAND_JOINTS, first + p]
         for which in range(3):
@@ -683,7 +684,8 @@ def bounded_responses(joints, island, rows):
                     w[EQUALITY_ROWS * q + c] = (shared_response(joints, k, c, j, row)
                                                 if linked and joints.row_values[k, c, ROW_MASS] != 0.0 else 0.0)
             response = 1.0 / joints.row_values[j, row, ROW_MASS]
-            u = w[:n].copy()
+            for r in range(n):
+                u[r] = w[r]
             cholesky_solve(factor, n, w)
             for r in range(n):
                 w[r] = -w[r]

@@ -277,7 +277,8 @@ def step_world(steps, ctx):
         prepare_contacts(current, bodies, s.ground_material, s.gravity, s.dt)
         if jointed:
             prepare_joints(joints, bodies, s.dt)
-            collision_pass_with_joints(current, joints, bodies, s.resolve_iterations)
+            collision_pass_with_joints(current, joints, bodies, s.resolve_iterations, s.gravity,
+                                       s.solver_threads)
         else:
             collision_pass(current, bodies, s.resolve_iterations, s.gravity, s.solver_threads)
         t = lap(profile, stage_ns, np.int64(STAGE_COLLISION), t)
