@@ -207,6 +207,28 @@ def test_coupled_motors_reach_their_speeds_in_the_first_step():
             assert world.joint(f"hinge{k}")["velocity"] == pytest.approx(target, abs=1e-12)
 
 
+@pytest.mark.parametrize("mass", [0.01253, 0.02531, 0.0813, 0.5])
+def test_a_motor_driving_into_its_limit_stays_bounded(mass):
+    """A light link whose motor drives it into its joint's lower limit: the motor's and the
+    limit's rows share the axis (solved together they have no single answer). With an effort
+    bound the limit holds the link there; without one the motor wins, as it always has, but
+    never by impulses of 1e15 N s (a whole-matrix inverse of their coupling once gave that,
+    and the link spun at hundreds of rad/s)."""
+    for effort, lowest in ((0.01, -0.02 - 2e-3), (np.inf, -np.inf)):
+        world = World(UNFROZEN, ground=None)
+        world.add_body({"name": "link", "size": [0.5, 0.05, 0.05], "mass": mass, "position": [0.25, 0, 2]})
+        world.add_joint({"name": "hinge", "type": "revolute", "child": "link", "anchor": [0, 0, 2],
+                         "axis": [0, 0, 1], "lower": -0.02, "upper": 1.0,
+                         "motor": {"mode": "velocity", "target": -1.0, "max_effort": effort}})
+        for _ in range(RATE):
+            world.step(1)
+            joint = world.joint("hinge")
+            assert joint["position"] >= lowest and abs(joint["velocity"]) <= 1.0 + 1e-6
+            assert abs(joint["effort"]) < 1e3
+        if np.isfinite(effort):
+            assert joint["position"] == pytest.approx(-0.02, abs=2e-3) and abs(joint["velocity"]) < 1e-3
+
+
 def test_continuous_joint_counts_turns():
     world = World(UNFROZEN, ground=None)
     world.add_body({"name": "wheel", "shape": "cylinder", "radius": 0.3, "length": 0.1,

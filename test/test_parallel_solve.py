@@ -96,8 +96,9 @@ def test_two_threads_give_the_serial_result_bit_for_bit():
 
 
 def test_a_pile_beside_a_swinging_pendulum_on_two_threads_is_the_serial_one():
-    """Joints no contact point touches leave the pile's sweeps to the threads as in a world
-    without joints (the pendulum's island is solved on its own): the bytes are the serial ones."""
+    """Joints no contact point touches: the pile's points go to the sweeps worlds without joints
+    use, which two threads may share (the pendulum's island is solved on its own). Whoever runs
+    them, the bytes are the serial ones (this holds the result, not which path ran)."""
     def build():
         world = pile(300, seed=3)
         world.add_body({"name": "bob", "size": [0.1, 0.1, 1.0], "mass": 1.0, "position": [-20, 0, 9.5],

@@ -562,7 +562,7 @@ def solve_with_joints(velocity, contacts, joints, sweeps, target, normal_impulse
         solve_selected(velocity, contacts, sweeps, target, normal_impulse, friction, True, position,
                        gravity, count, threads)
     if with_motors:
-        by_joint = solve_islands_alone(velocity, joints, joint_target, joint_impulse, touched)
+        by_joint = solve_islands_alone(velocity, joints, joint_target, joint_impulse, touched, sweeps)
         if by_joint.any():
             for sweep in range(sweeps):
                 solve_joint_sweep(velocity, joints, joint_target, joint_impulse, sweep % 2 == 1, True,

@@ -25,8 +25,8 @@ more than MAX_DIRECT_JOINTS solve each joint's block alone (6x6), one after the 
 Rows 6-8 are bounded, solved one by one before the block, each with its effective mass
 through the island's equalities (what moving the axis moves: a motor turning a light link that
 carries a heavy one feels the heavy one) and its change carried through them by a response
-computed once a step, so one such row is exact in one sweep; in an island no contact touches
-they are solved together at once (solve_island_alone). A row with no effective mass
+computed once a step, so one such row is exact in one sweep; in the contact pass, an island no
+contact touches has them solved together (solve_island_alone). A row with no effective mass
 (both sides static, or a limit or motor the joint does not have) is skipped. Position errors are corrected through the real velocities in full each step
 (target -C/dt, a velocity-level SHAKE): the split-impulse correction the contacts use forgets
 the centripetal share of a swing, and a pendulum corrected so lost ~1 % of its energy a
@@ -62,11 +62,10 @@ MAX_DIRECT_JOINTS = 64
 # A pivot of K's factor this small against its diagonal is a redundant row's.
 REDUNDANT_PIVOT = 1.0e-9
 # The projected Gauss-Seidel sweeps over the bounded rows of an island no contact touches
-# (solve_island_alone, each a few hundred multiply-adds for an arm's 7 motors) stop when none
-# changed more than SETTLED_IMPULSE (N s, N m s: another would change nothing), or after
-# MAX_BOUNDED_SWEEPS.
+# (solve_island_alone, each a few hundred multiply-adds for an arm's 7 motors; at most the
+# pass's sweeps: where a motor fights a limit no answer exists, and more sweeps only push
+# both harder) stop when none changed more than this (N s, N m s: another changes nothing).
 SETTLED_IMPULSE = 1.0e-12
-MAX_BOUNDED_SWEEPS = 100
 # An island of m joints keeps (6m)^2 floats of K's factor, 3m x 6m of its bounded rows'
 # responses and 3m x 2m x 6 of their velocity changes: ISLAND_FLOATS m^2 (island_floats).
 ISLAND_FLOATS = 36 + 18 + 36
@@ -842,17 +841,18 @@ def solve_island_equalities(velocity, joints, target, impulse, island):
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
-def solve_island_alone(velocity, joints, target, impulse, island):
+def solve_island_alone(velocity, joints, target, impulse, island, sweeps):
     """An island solved whole that no contact point touches, in the contact pass: what sweeps
     of solve_island reach in the limit, in about the time of one. Its equalities are solved;
     then its motor and limit rows as a bounded problem in their own coupling through the
     equalities, S[i, k] = row i's speed change per unit impulse of row k (with the equality
-    impulses that keep the equalities: body_changes): S^-1 times what they lack, projected onto
-    their bounds, then projected Gauss-Seidel sweeps on S alone (a few hundred multiply-adds
-    each instead of every island body's velocity a row, as solve_island's sweeps are); their
-    changes are applied once through body_changes, and the
-    equalities solved again for what rounding left. Sweeping the bodies, 10 sweeps of a KUKA
-    arm took ~25 us of its ~80 us step and stopped short of the answer."""
+    impulses that keep the equalities: body_changes): S^-1 times what they lack (rows that
+    depend on earlier ones left out), projected onto their bounds, then up to `sweeps` projected
+    Gauss-Seidel sweeps on S alone (a few hundred multiply-adds each instead of every island
+    body's velocity a row, as solve_island's sweeps are); their changes are applied once
+    through body_changes, and the equalities solved again for what rounding left. Sweeping the
+    bodies, 10 sweeps of a KUKA arm took ~25 us of its ~80 us step and stopped short of the
+    answer."""
     first, last = joints.islands[ISLAND_START, island], joints.islands[ISLAND_START, island + 1]
     size = last - first
     bodies_first = joints.islands[ISLAND_BODY_START, island]
@@ -899,21 +899,44 @@ def solve_island_alone(velocity, joints, target, impulse, island):
             coupling[i, k] = speed
     # Start from the answer without bounds, S^-1 times what the rows lack, projected onto the
     # bounds: the sweeps then only settle the rows a bound holds (sweeping from zero, an arm's
-    # rows, coupled across a 13:1 mass ratio, had not settled in 100).
-    work = np.empty((count, 2 * count))
-    work[:, :count] = coupling
-    invert_in_place(work, count)
+    # rows, coupled across a 13:1 mass ratio, had not settled in 100). S is factored (Cholesky)
+    # in the rows' order, and a row that depends on those before it gets no share of the start
+    # (a motor on a joint at its limit: the same axis; with an inverse of the whole S, such a
+    # pair started at +-1e15 N s).
+    factor = np.zeros((count, count))
+    for c in range(count):
+        for r in range(c, count):
+            total = coupling[r, c]
+            for k in range(c):
+                total -= factor[r, k] * factor[c, k]
+            if r == c:
+                if total <= REDUNDANT_PIVOT * coupling[c, c]:
+                    break  # redundant: its column stays zero
+                factor[c, c] = np.sqrt(total)
+            else:
+                factor[r, c] = total / factor[c, c]
+    exact = lacking.copy()
+    for c in range(count):  # L y = lacking, then L^T x = y, redundant rows 0
+        if factor[c, c] == 0.0:
+            exact[c] = 0.0
+            continue
+        for k in range(c):
+            exact[c] -= factor[c, k] * exact[k]
+        exact[c] /= factor[c, c]
+    for c in range(count - 1, -1, -1):
+        if factor[c, c] == 0.0:
+            continue
+        for k in range(c + 1, count):
+            exact[c] -= factor[k, c] * exact[k]
+        exact[c] /= factor[c, c]
     change = np.empty(count)
     for i in range(count):
         j, row = joints.islands[ISLAND_JOINTS, first + bounded[i, 0]], LOWER_ROW + bounded[i, 1]
-        exact = 0.0
-        for k in range(count):
-            exact += work[i, count + k] * lacking[k]
         old = impulse[j, row]
-        impulse[j, row] = min(max(old + exact, joints.row_values[j, row, IMPULSE_LOW]),
+        impulse[j, row] = min(max(old + exact[i], joints.row_values[j, row, IMPULSE_LOW]),
                               joints.row_values[j, row, IMPULSE_HIGH])
         change[i] = impulse[j, row] - old
-    for _ in range(MAX_BOUNDED_SWEEPS):
+    for _ in range(sweeps):
         largest = 0.0
         for i in range(count):
             p, row = bounded[i, 0], LOWER_ROW + bounded[i, 1]
@@ -1011,7 +1034,7 @@ def solve_joint_sweep(velocity, joints, target, impulse, backwards, with_motors,
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
-def solve_islands_alone(velocity, joints, target, impulse, touched):
+def solve_islands_alone(velocity, joints, target, impulse, touched, sweeps):
     """The contact pass's islands no point touched: those solved whole at once
     (solve_island_alone). Returns which are left to sweep joint by joint."""
     left = np.zeros(joints.count[1], np.bool_)
@@ -1019,7 +1042,7 @@ def solve_islands_alone(velocity, joints, target, impulse, touched):
         if touched[island]:
             continue
         if joints.islands[ISLAND_OFFSET, island] >= 0:
-            solve_island_alone(velocity, joints, target, impulse, island)
+            solve_island_alone(velocity, joints, target, impulse, island, sweeps)
         else:
             left[island] = True
     return left
