@@ -21,6 +21,7 @@ import numpy as np
 from numba import njit
 
 from .constants import MAX_OCTREE_DEPTH
+from .sorting import sorted_keys
 
 OctreeIndex = namedtuple("OctreeIndex", [
     "keys",          # (M,) int64 cell keys, sorted
@@ -168,7 +169,7 @@ def build_index(index, ids, aabb_min, aabb_max, levels, root_min, root_size):
                     # key and id in one int64, so a plain sort orders by cell then object.
                     index.keys[n] = ((base + morton(x, y, z)) << ID_BITS) | obj
                     n += 1
-    packed = np.sort(index.keys[:n])
+    packed = sorted_keys(index.keys[:n])
     id_mask = (1 << ID_BITS) - 1
     for k in range(n):
         index.ids[k] = packed[k] & id_mask

@@ -41,6 +41,7 @@ from .joints import (COLLISION_IMPULSE, COLLISION_TARGET, CONTACT_TARGET, IMPULS
                      settle_island_impulses, solve_islands_alone, solve_joint_sweep)
 from .math3d import cross
 from .solve_schedule import shock_levels, split_chains, support_groups
+from .sorting import stable_argsort
 
 # Products may fuse with the sum they feed into one multiply-add (one rounding instead of two):
 # the sweeps' dot products and impulse updates are mostly that, and fused the velocity sweeps
@@ -207,7 +208,7 @@ def prepare_contacts(contacts, bodies, ground_material, gravity, dt):
         heights[c] = -(p[0] * gravity[0] + p[1] * gravity[1] + p[2] * gravity[2])
     # Copied point by point, as build_ray_grid copies its rows: an array assigned to a slice or a
     # row compiles Numba's shape-mismatch message (number formatting, 2-3.5 s of a cold compile).
-    by_height = np.argsort(heights, kind="mergesort")
+    by_height = stable_argsort(heights)
     for k in range(count):
         contacts.solve_order[k] = by_height[k]
     order_supports(contacts, bodies, gravity)
@@ -269,8 +270,11 @@ def order_supports(contacts, bodies, gravity):
     for r in range(n_uppers):
         p = bodies.position[uppers[r]]
         heights[r] = -(p[0] * gravity[0] + p[1] * gravity[1] + p[2] * gravity[2])
-    by_slot = np.argsort(uppers[:n_uppers], kind="mergesort")
-    ranked = by_slot[np.argsort(heights[by_slot], kind="mergesort")]
+    slots = np.empty(n_uppers)
+    for r in range(n_uppers):
+        slots[r] = uppers[r]  # (exact as floats)
+    by_slot = stable_argsort(slots)
+    ranked = by_slot[stable_argsort(heights[by_slot])]
     # Each upper's first place in the order (reusing `points` as the running place).
     place = 0
     for k in range(n_uppers):
