@@ -392,6 +392,10 @@ def test_the_cars_description_spawns_a_car_that_drives_on_its_namespace(run):
     assert runtime.sim.call(lambda world: world.body("blue")["position"][0]) > 1.0
     assert abs(runtime.sim.call(lambda world: world.body("red")["position"][0])) < 0.05
     assert not requests.spawn(yaml.safe_dump({"name": "green", "urdf": car, "hold": True}))[0]
+    # By its bare name, as a scene's robots entry finds it: the package's config/ last.
+    requests.scene_directories = []  # none: the package's own folders alone
+    ok, message = requests.spawn(yaml.safe_dump({"name": "green", "urdf": "car.urdf", "position": [0, 20, 1]}))
+    assert (ok, message) == (True, "RESULT_OK: green") and "green" in world.vehicle_names()
 
 
 def test_a_robot_that_loses_a_link_or_a_joint_is_no_longer_one():

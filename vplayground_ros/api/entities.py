@@ -137,15 +137,15 @@ class EntityRequests:
         return path, vehicle, spec, rename, frame
 
     def _prepare_description(self, item, path):
-        """(the description's source: a file found as a mesh is, in the scene directories, or
-        the text itself; the description as read once, no xacro (read_description's text and
+        """(the description's source: a file found as a scene's robot is (the package's config/
+        last: `car.urdf` is the built-in car's), in the scene directories, or the text itself; the description as read once, no xacro (read_description's text and
         folder); the vehicle it describes, or None for a URDF robot)."""
         from ..urdf_import import read_description
         source = item["urdf"]
         if not isinstance(source, str) or not source:
             raise specs.SpecError(f"{path}.urdf", "expected a file name or the description's text")
         if not source.lstrip().startswith("<"):
-            source = str(resolve_mesh(source, Path.cwd(), self.scene_directories, f"{path}.urdf"))
+            source = str(resolve_mesh(source, Path.cwd(), self.scene_directories, f"{path}.urdf", "config"))
         description = described(lambda: read_description(source, f"{path}.urdf", allow_xacro=False))
         return source, description, described(lambda: vehicle_entry({**item, "urdf": source}, path, description[0],
                                                                     f"{path}.urdf"))
