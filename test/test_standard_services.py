@@ -128,6 +128,21 @@ def test_spawn_from_a_file_in_the_scene_directories_and_relative_to_a_frame(ros)
     crate = call(ros, GetEntityState, "get_entity_state", entity="crate").state
     box = call(ros, GetEntityState, "get_entity_state", entity="si_box").state
     assert abs(crate.pose.position.z - box.pose.position.z - 1.0) < 1e-6  # placed in si_box's frame
+    # A robot description by file (the package's three-joint arm, copied there), and what no
+    # spawn reads: another kind of file, or a description outside the directories.
+    (ros.scene_directory / "arm.urdf").write_text((Path(__file__).parent.parent / "config" / "arm.urdf").read_text())
+    reply = call(ros, SpawnEntity, "spawn_entity", name="file_arm", uri=str(ros.scene_directory / "arm.urdf"),
+                 initial_pose=pose(-8.0, 8.0, 0.0))
+    assert reply.result.result == OK, reply.result.error_message
+    info = call(ros, GetEntityInfo, "get_entity_info", entity="file_arm").info
+    assert info.category.category == EntityCategory.CATEGORY_ROBOT
+    assert call(ros, DeleteEntity, "delete_entity", entity="file_arm").result.result == OK
+    (ros.scene_directory / "notes.txt").write_text("shape: box\n")
+    other = call(ros, SpawnEntity, "spawn_entity", name="notes", uri=str(ros.scene_directory / "notes.txt"))
+    assert other.result.result == NOT_FOUND and ".urdf" in other.result.error_message
+    outside = call(ros, SpawnEntity, "spawn_entity", name="outside",
+                   uri=str(Path(__file__).parent.parent / "config" / "arm.urdf"))
+    assert outside.result.result == NOT_FOUND and "outside the scene directories" in outside.result.error_message
     play(ros)
 
 

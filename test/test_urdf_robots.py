@@ -396,6 +396,10 @@ def test_the_cars_description_spawns_a_car_that_drives_on_its_namespace(run):
     requests.scene_directories = []  # none: the package's own folders alone
     ok, message = requests.spawn(yaml.safe_dump({"name": "green", "urdf": "car.urdf", "position": [0, 20, 1]}))
     assert (ok, message) == (True, "RESULT_OK: green") and "green" in world.vehicle_names()
+    # ... and never out of that folder: a request named any file there once (config/../setup.py).
+    for name in ("../config/car.urdf", "../setup.py", "sub/../../config/car.urdf"):
+        ok, message = requests.spawn(yaml.safe_dump({"name": "stray", "urdf": name}))
+        assert not ok and "not found" in message, (name, message)
 
 
 def test_a_robot_that_loses_a_link_or_a_joint_is_no_longer_one():

@@ -137,7 +137,7 @@ def resolve_mesh(name, base, directories=None, key="playground.mesh", shared_fol
         if directories is not None and not inside(tried[0], directories):
             raise MissingMesh(key, f"mesh file {specs.quote(name)} resolves outside the allowed directories")
         return tried[0]
-    if not candidate.is_absolute():
+    if not candidate.is_absolute() and ".." not in candidate.parts:  # (no way out of the folder)
         shared = find_shared(f"{shared_folder}/{name}")
         if shared is not None:
             return shared

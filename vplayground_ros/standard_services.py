@@ -73,6 +73,10 @@ def plain_pose(pose):
             "orientation": [pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w]}
 
 
+# What SpawnEntity's uri may name: this package's YAML entity spec, or a robot description.
+SPAWN_SUFFIXES = (".yaml", ".yml", ".urdf", ".xacro")
+
+
 def is_urdf(uri, text):
     """A URDF (or xacro) robot description rather than this package's YAML entity spec."""
     if uri:
@@ -220,7 +224,8 @@ class StandardServices:
 
     def _read_resource(self, uri):
         try:
-            target = confine(local_path(uri), "uri", self.requests.scene_directories)
+            target = confine(local_path(uri), "uri", self.requests.scene_directories, SPAWN_SUFFIXES,
+                             "entity files")
         except RequestError as error:
             raise RequestError(NOT_FOUND, str(error).partition(": ")[2]) from None
         if not target.is_file():

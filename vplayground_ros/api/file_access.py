@@ -44,10 +44,11 @@ def local_path(uri):
     return uri[len("file://"):] if uri.startswith("file://") else uri
 
 
-def confine(raw, what, directories):
-    """The absolute, resolved path of a scene file named in a request, refused (FAILED)
-    unless it lies inside one of `directories` and ends in .yaml or .yml. Relative paths start
-    from the current working directory, as on the command line."""
+def confine(raw, what, directories, suffixes=SCENE_SUFFIXES, kind="scene files"):
+    """The absolute, resolved path of a file named in a request (a scene file, unless `suffixes`
+    and `kind` say otherwise), refused (FAILED) unless it lies inside one of `directories` and
+    ends in one of `suffixes`. Relative paths start from the current working directory, as on
+    the command line."""
     if not isinstance(raw, str) or not raw:
         raise RequestError(FAILED, f"{what}: the path is missing")
     if len(raw) > MAX_PATH or "\0" in raw:
@@ -61,8 +62,8 @@ def confine(raw, what, directories):
         raise RequestError(FAILED, f"{what}: {specs.quote(raw)} resolves to {specs.quote(str(resolved))}, "
                                    f"outside the scene directories ({', '.join(map(str, roots)) or 'none'}; "
                                    "the scene_directories parameter)")
-    if resolved.suffix.lower() not in SCENE_SUFFIXES:
-        raise RequestError(FAILED, f"{what}: {specs.quote(raw)}: scene files end in .yaml or .yml")
+    if resolved.suffix.lower() not in suffixes:
+        raise RequestError(FAILED, f"{what}: {specs.quote(raw)}: {kind} end in {' or '.join(suffixes)}")
     return resolved
 
 
