@@ -249,7 +249,7 @@ def test_scene_robots_load_and_save_as_robots(tmp_path):
 
 
 @pytest.mark.parametrize("robot, message", [
-    ({"urdf": None}, "robots[0].urdf: expected a file name"),
+    ({"urdf": None}, "robots[0].urdf: expected a file name or the description's text"),
     ({"joint_positions": {"elbow": 1.0}}, "joint_positions: no revolute, continuous or prismatic joint named 'elbow'"),
     ({"name": "crate.x"}, None),
     ({"urdf": "missing.urdf"}, "robots[0].urdf"),

@@ -22,8 +22,8 @@ from .physics.math3d import quaternions_to_matrices
 from .resources import find_shared
 from .robots import validate_robot, world_robots
 from .sensors import validate_sensors
-from .urdf_robots import (ENTRY_KEYS, VEHICLE_ENTRY_KEYS, add_robot_entry, check_against_model, validate_entry,
-                          vehicle_entry)
+from .urdf_robots import (ENTRY_KEYS, VEHICLE_ENTRY_KEYS, add_robot_entry, check_against_model, description_source,
+                          validate_entry, vehicle_entry)
 
 SCENE_VERSION = 1
 TOP_LEVEL_KEYS = {"version", "settings", "ground", "playground", "bodies", "vehicles", "robots",
@@ -351,11 +351,9 @@ def robot_sources(scene, base, directories):
     for k, raw in enumerate(validate_list(scene, "robots")):
         path = f"robots[{k}]"
         specs.mapping(raw, path, ENTRY_KEYS | VEHICLE_ENTRY_KEYS)
-        if not isinstance(raw.get("urdf"), str) or not raw["urdf"]:
-            raise specs.SpecError(f"{path}.urdf", "missing (a robot is a name and a URDF file)" if "urdf" not in raw
-                                  else "expected a file name or the description's text")
-        text = raw["urdf"].lstrip().startswith("<")  # the description itself, not a file
-        file = str(raw["urdf"] if text else resolve_mesh(raw["urdf"], base, directories, f"{path}.urdf", "config"))
+        source = description_source(raw, path)
+        text = source.lstrip().startswith("<")  # the description itself, not a file
+        file = str(source if text else resolve_mesh(source, base, directories, f"{path}.urdf", "config"))
         label = f"{path}.urdf" + ("" if text else f": {file}")
         sources.append((raw, file, label, read_robot(lambda: read_description(file, label, directories is None))))
     return sources

@@ -58,20 +58,27 @@ WHEEL_ODOMETRY_COVARIANCE = [(0.01 if row == 5 else 0.001) if row == column else
 EFFORT_SPEED = 1.0e3
 
 
+def description_source(raw, path):
+    """A robot entry's `urdf`, checked: a file's name, or the description's text itself."""
+    if "urdf" not in raw:
+        raise specs.SpecError(f"{path}.urdf", "missing (a robot is a name and a URDF file)")
+    if not isinstance(raw["urdf"], str) or not raw["urdf"]:
+        raise specs.SpecError(f"{path}.urdf", "expected a file name or the description's text")
+    return raw["urdf"]
+
+
 def validate_entry(raw, path):
     """The keys of a robot entry that need no description, checked: name, urdf, placement,
     fixed_base, self_collide, joint_positions, hold (its joints' position motors hold
     joint_positions from the start), namespace, joints, drive, localization, publish_odom_tf.
     Returns (entry, placement fields)."""
     specs.mapping(raw, path, ENTRY_KEYS)
-    for key in ("name", "urdf"):
-        if key not in raw:
-            raise specs.SpecError(f"{path}.{key}", "missing (a robot is a name and a URDF file)")
+    if "name" not in raw:
+        raise specs.SpecError(f"{path}.name", "missing (a robot is a name and a URDF file)")
+    source = description_source(raw, path)
     fields = specs.validate_body_fields({key: raw[key] for key in ("name", "position", "rpy", "quaternion")
                                          if key in raw}, path)
-    if not isinstance(raw["urdf"], str) or not raw["urdf"]:
-        raise specs.SpecError(f"{path}.urdf", "expected a file name")
-    entry = {"name": fields["name"], "urdf": raw["urdf"]}
+    entry = {"name": fields["name"], "urdf": source}
     for key in ("fixed_base", "self_collide", "hold", "publish_odom_tf"):
         if raw.get(key) is not None:
             entry[key] = specs.boolean(raw[key], f"{path}.{key}")

@@ -17,7 +17,8 @@ from ..physics.world import prepare_body
 from ..robots import validate_robot, world_robots
 from ..scene import body_mesh_points, resolve_mesh
 from ..sensors import TYPES as SENSOR_TYPES, pose_matrix, validate_sensor
-from ..urdf_robots import add_robot_entry, check_against_model, robot_spec, validate_entry, vehicle_entry
+from ..urdf_robots import (add_robot_entry, check_against_model, description_source, robot_spec, validate_entry,
+                           vehicle_entry)
 from .descriptions import describe, describe_robot, describe_sensor
 from .file_access import allowed_directories
 from .frames import frame_pose, pose_in_world
@@ -141,9 +142,7 @@ class EntityRequests:
         last: `car.urdf` is the built-in car's), in the scene directories, or the text itself; the description as read once, no xacro (read_description's text and
         folder); the vehicle it describes, or None for a URDF robot)."""
         from ..urdf_import import read_description
-        source = item["urdf"]
-        if not isinstance(source, str) or not source:
-            raise specs.SpecError(f"{path}.urdf", "expected a file name or the description's text")
+        source = description_source(item, path)
         if not source.lstrip().startswith("<"):
             source = str(resolve_mesh(source, Path.cwd(), self.scene_directories, f"{path}.urdf", "config"))
         description = described(lambda: read_description(source, f"{path}.urdf", allow_xacro=False))
