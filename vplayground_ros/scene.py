@@ -23,7 +23,7 @@ from .resources import find_shared
 from .robots import validate_robot, world_robots
 from .sensors import validate_sensors
 from .urdf_robots import (ENTRY_KEYS, VEHICLE_ENTRY_KEYS, add_robot_entry, check_against_model, description_source,
-                          validate_entry, vehicle_entry)
+                          is_description_text, validate_entry, vehicle_entry)
 
 SCENE_VERSION = 1
 TOP_LEVEL_KEYS = {"version", "settings", "ground", "playground", "bodies", "vehicles", "robots",
@@ -352,7 +352,7 @@ def robot_sources(scene, base, directories):
         path = f"robots[{k}]"
         specs.mapping(raw, path, ENTRY_KEYS | VEHICLE_ENTRY_KEYS)
         source = description_source(raw, path)
-        text = source.lstrip().startswith("<")  # the description itself, not a file
+        text = is_description_text(source)
         file = str(source if text else resolve_mesh(source, base, directories, f"{path}.urdf", "config"))
         label = f"{path}.urdf" + ("" if text else f": {file}")
         sources.append((raw, file, label, read_robot(lambda: read_description(file, label, directories is None))))

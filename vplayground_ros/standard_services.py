@@ -24,6 +24,7 @@ from .api.simulation_control import SPAWN_FORMATS
 from .physics import specs
 from .scene import read_capped
 from .services import Service, carriable
+from .urdf_robots import is_description_text
 
 PACKAGE = "simulation_interfaces"
 # Result.result, and the numbers each service adds above 100, by the code names of api/results.py.
@@ -81,7 +82,7 @@ def is_urdf(uri, text):
     """A URDF (or xacro) robot description rather than this package's YAML entity spec."""
     if uri:
         return uri.lower().endswith((".urdf", ".xacro"))
-    return text.lstrip().startswith("<")
+    return is_description_text(text)
 
 
 def robot_name(text):

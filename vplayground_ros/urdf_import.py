@@ -25,6 +25,7 @@ from .physics import specs
 from .physics.math3d import axis_rotation, matrix_to_quaternion, quaternions_to_matrices, rpy_to_quat
 from .physics.shapes.convex import MAX_HULL_POINTS
 from .scene import read_mesh
+from .urdf_robots import is_description_text
 
 # What a robot description becomes: body specs (the root's first), joint specs, each link's body
 # and pose in that body's frame (4x4), and the description's text (for robot_description).
@@ -67,7 +68,7 @@ def read_description(source, label, allow_xacro=True):
     expanded (unless not `allow_xacro`: xacro reads environment variables and any file, so a
     description from a request is refused rather than expanded). Returns (text, folder relative
     paths are taken from)."""
-    if isinstance(source, str) and source.lstrip().startswith("<"):
+    if is_description_text(source):
         text, folder = source, Path.cwd()
     else:
         path = Path(source)
@@ -235,7 +236,7 @@ def robot_model(source, name, position=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), fix
     a request's scene_directories, the only places its meshes may be read from (and then no
     xacro); None for a scene of the user's own. `description`: (text, folder) as
     read_description gave them for `source`, when the caller read it already."""
-    label = label or (str(source) if not str(source).lstrip().startswith("<") else "URDF text")
+    label = label or (str(source) if not is_description_text(source) else "URDF text")
     text, folder = description or read_description(source, label, allow_xacro=directories is None)
     where = Where(folder, directories)
     robot = parse(text, label)

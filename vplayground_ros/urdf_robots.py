@@ -58,6 +58,12 @@ WHEEL_ODOMETRY_COVARIANCE = [(0.01 if row == 5 else 0.001) if row == column else
 EFFORT_SPEED = 1.0e3
 
 
+def is_description_text(source):
+    """Whether a robot's `urdf` (or a description's source) is the description's text itself,
+    not a file's name: it starts with '<'."""
+    return isinstance(source, str) and source.lstrip().startswith("<")
+
+
 def description_source(raw, path):
     """A robot entry's `urdf`, checked: a file's name, or the description's text itself."""
     if "urdf" not in raw:

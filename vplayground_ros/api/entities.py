@@ -17,8 +17,8 @@ from ..physics.world import prepare_body
 from ..robots import validate_robot, world_robots
 from ..scene import body_mesh_points, resolve_mesh
 from ..sensors import TYPES as SENSOR_TYPES, pose_matrix, validate_sensor
-from ..urdf_robots import (add_robot_entry, check_against_model, description_source, robot_spec, validate_entry,
-                           vehicle_entry)
+from ..urdf_robots import (add_robot_entry, check_against_model, description_source, is_description_text, robot_spec,
+                           validate_entry, vehicle_entry)
 from .descriptions import describe, describe_robot, describe_sensor
 from .file_access import allowed_directories
 from .frames import frame_pose, pose_in_world
@@ -139,11 +139,12 @@ class EntityRequests:
 
     def _prepare_description(self, item, path):
         """(the description's source: a file found as a scene's robot is (the package's config/
-        last: `car.urdf` is the built-in car's), in the scene directories, or the text itself; the description as read once, no xacro (read_description's text and
-        folder); the vehicle it describes, or None for a URDF robot)."""
+        last: `car.urdf` is the built-in car's), in the scene directories, or the text itself;
+        the description as read once, no xacro (read_description's text and folder); the
+        vehicle it describes, or None for a URDF robot)."""
         from ..urdf_import import read_description
         source = description_source(item, path)
-        if not source.lstrip().startswith("<"):
+        if not is_description_text(source):
             source = str(resolve_mesh(source, Path.cwd(), self.scene_directories, f"{path}.urdf", "config"))
         description = described(lambda: read_description(source, f"{path}.urdf", allow_xacro=False))
         return source, description, described(lambda: vehicle_entry({**item, "urdf": source}, path, description[0],
