@@ -1,9 +1,9 @@
-"""The step's stable sort against numpy's (physics/sorting.py)."""
+"""The step's stable sorts against numpy's (physics/sorting.py)."""
 import numpy as np
 import pytest
 from numba import njit
 
-from vplayground_ros.physics.sorting import ARGSORT_RADIX_MIN, SORT_RADIX_MIN, sorted_keys, stable_argsort
+from vplayground_ros.physics.sorting import ARGSORT_RADIX_MIN, radix_sort, stable_argsort
 
 
 @njit
@@ -12,8 +12,9 @@ def argsort(values):  # Python entries to the compiled-only kernels
 
 
 @njit
-def sort_head(keys, n):  # as the octree sorts its keys: the used part of a larger array
-    return sorted_keys(keys[:n]).copy()
+def sort_head(keys, values, n):  # as the octree sorts its entries: the used part of larger arrays
+    sorted_keys, sorted_values = radix_sort(keys[:n].view(np.uint64), values[:n])
+    return sorted_keys.view(np.int64).copy(), sorted_values.copy()
 
 
 def cases():
@@ -38,11 +39,13 @@ def test_stable_argsort_is_numpys_stable_argsort(name):
     assert np.array_equal(argsort(values), np.argsort(values, kind="stable"))
 
 
-@pytest.mark.parametrize("n", [0, 5, SORT_RADIX_MIN - 1, SORT_RADIX_MIN, 6000])
-def test_sorted_keys_is_numpys_sort(n):
-    """Octree keys: a cell's key above an object id (some cells shared), the array longer than
-    the part sorted."""
+@pytest.mark.parametrize("n", [0, 1, 5, 500, 6000])
+def test_radix_sort_carries_values_stably(n):
+    """Octree entries: cell keys (some shared, a few bytes varying) with the ids in ascending
+    order carried along, the arrays longer than the part sorted: numpy's stable order."""
     rng = np.random.default_rng(n)
-    cells = rng.integers(0, 1 << 24, n) // 16 * 16
-    keys = np.concatenate([(cells << 20) | rng.integers(0, 1 << 20, n), np.full(7, -1)]).astype(np.int64)
-    assert np.array_equal(sort_head(keys.copy(), n), np.sort(keys[:n]))
+    cells = np.concatenate([4681 + rng.integers(0, 1 << 15, n) // 4, np.full(7, -1)]).astype(np.int64)
+    ids = np.concatenate([np.sort(rng.integers(0, 1000, n)), np.full(7, -1)]).astype(np.int64)
+    keys, values = sort_head(cells.copy(), ids.copy(), n)
+    order = np.argsort(cells[:n], kind="stable")
+    assert np.array_equal(keys, cells[:n][order]) and np.array_equal(values, ids[:n][order])

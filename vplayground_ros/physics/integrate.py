@@ -59,7 +59,9 @@ def update_bodies(bodies, live, dt, root_size, depth):
             step = velocity[i, e] * dt
             bodies.aabb_min[i, e] = position[i, e] - extent + min(step, 0.0)
             bodies.aabb_max[i, e] = position[i, e] + extent + max(step, 0.0)
-        bodies.octree_level[i] = object_level(bodies.aabb_min[i], bodies.aabb_max[i], root_size, depth)
+        lo, hi = bodies.aabb_min, bodies.aabb_max
+        bodies.octree_level[i] = object_level((lo[i, 0], lo[i, 1], lo[i, 2]), (hi[i, 0], hi[i, 1], hi[i, 2]),
+                                              root_size, depth)
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)

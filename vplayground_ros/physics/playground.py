@@ -61,7 +61,8 @@ EMPTY_PLAYGROUND_ARGS = (np.zeros((0, 3)), np.zeros((0, 3), np.int64))
 def index_playground(playground, root_min, root_size, depth):
     """(Re)builds the triangles' octree index for the given root cube and depth."""
     for t in range(len(playground.triangles)):
-        playground.octree_level[t] = object_level(playground.aabb_min[t], playground.aabb_max[t],
+        lo, hi = playground.aabb_min, playground.aabb_max
+        playground.octree_level[t] = object_level((lo[t, 0], lo[t, 1], lo[t, 2]), (hi[t, 0], hi[t, 1], hi[t, 2]),
                                                   root_size, depth)
     ids = np.arange(len(playground.triangles))
     return build_index(playground.index, ids, playground.aabb_min, playground.aabb_max,
@@ -85,7 +86,8 @@ def find_playground_pairs(playground, moving_ids, bodies, root_min, root_size, p
         if not bodies.awake[i]:
             continue
         level = bodies.octree_level[i]
-        box = cell_box(body_min[i], body_max[i], level, root_min, root_size)
+        box = cell_box((body_min[i, 0], body_min[i, 1], body_min[i, 2]),
+                       (body_max[i, 0], body_max[i, 1], body_max[i, 2]), level, root_min, root_size)
         n = query_index(playground.index, level, box, True, stamp, i, scratch)
         for m in range(n):
             t = scratch[m]

@@ -93,8 +93,8 @@ def cast_ray(origin, direction, reach, exclude, query_id, bodies, hulls, parts, 
         if 0.0 <= t <= reach:
             best = t
     end = (origin[0] + reach * direction[0], origin[1] + reach * direction[1], origin[2] + reach * direction[2])
-    lo = np.array((min(origin[0], end[0]), min(origin[1], end[1]), min(origin[2], end[2])))
-    hi = np.array((max(origin[0], end[0]), max(origin[1], end[1]), max(origin[2], end[2])))
+    lo = (min(origin[0], end[0]), min(origin[1], end[1]), min(origin[2], end[2]))
+    hi = (max(origin[0], end[0]), max(origin[1], end[1]), max(origin[2], end[2]))
     level = object_level(lo, hi, root_size, depth)
     box = cell_box(lo, hi, level, root_min, root_size)
     for index in (broad.moving, broad.static):

@@ -1,12 +1,12 @@
 """The step's sorts: the sweep orders' stable argsort (np.argsort(kind="mergesort")'s result)
-and the octree indexes' keys (np.sort's), faster for the thousands of items of a landing pile.
+and the octree indexes' entries by cell, faster for the thousands of items of a landing pile.
 
 Numba's merge sort took ~255 us for a landing's 4,000 point heights (35 us at 1,000, superlinear
 past a few hundred), a tenth of the step at its peak, and its np.sort ~100 us for 3,000 index
 keys. An LSD radix sort, a byte a pass, skipping the passes in which every key has the same byte
 (the high bytes of heights within a few metres, of cells near each other), takes ~72 us for the
-4,000 heights and ~50 for the 3,000 keys; below ARGSORT_RADIX_MIN / SORT_RADIX_MIN values the
-library sorts are faster (their setup is small). Both keep equal keys in their order (stable).
+4,000 heights and ~14 for 3,840 entries' cells (two bytes vary); below ARGSORT_RADIX_MIN heights
+the merge sort is faster (its setup is small). Both keep equal keys in their order (stable).
 A float is sorted by its bits ordered as the numbers are: negatives flipped whole, positives
 with the sign bit set.
 """
@@ -14,7 +14,6 @@ import numpy as np
 from numba import njit
 
 ARGSORT_RADIX_MIN = 512   # heights: merge 4.2 / radix 5.6 us at 300, 35 / 16 at 1,000
-SORT_RADIX_MIN = 2048     # keys: np.sort 28 / radix 25 us at 1,500, 98 / 51 at 3,000
 DIGIT_BITS = 8
 SIGN_BIT = np.uint64(1 << 63)
 
@@ -65,11 +64,3 @@ def stable_argsort(values):
         x = bits[k]
         keys[k] = np.uint64(~x) if x < 0 else np.uint64(x) | SIGN_BIT
     return radix_sort(keys, np.arange(n))[1]
-
-
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
-def sorted_keys(keys):
-    """np.sort(keys) of non-negative int64 keys; may overwrite `keys`."""
-    if len(keys) < SORT_RADIX_MIN:
-        return np.sort(keys)
-    return radix_sort(keys.view(np.uint64), np.arange(len(keys)))[0].view(np.int64)
