@@ -153,7 +153,7 @@ def detect(bodies, hulls, parts, broad, playground, contacts, settings, moving_i
         return GROW_PAIRS
     broad.playground_count[0] = pairs
     if not collide(contacts, bodies, hulls, parts, broad, playground, s.ground_enabled, s.ground_height,
-                   moving_ids):
+                   moving_ids, s.solver_threads):
         return GROW_CONTACTS
     return DONE
 
