@@ -10,7 +10,7 @@ from vplayground_ros.physics import World
 from vplayground_ros.physics.contact_solver import (MAX_WAITING_SHARE, MIN_GROUPS_PER_LEVEL, PARALLEL_MIN_POINTS,
                                                    SHOCK_ROW_SIZE, reads_body, shock_group, shock_propagation)
 from vplayground_ros.physics.contact import allocate_contacts
-from vplayground_ros.physics.narrow_phase import PARALLEL_MIN_PAIRS, collide
+from vplayground_ros.physics.narrow_phase import PARALLEL_MIN_PAIRS, collide, collide_shared
 from vplayground_ros.physics.pipeline import list_colliding, list_live_bodies
 from vplayground_ros.physics.solve_schedule import NO_WAIT, shock_levels, split_chains, support_groups
 from vplayground_ros.physics.step_context import newest_contacts
@@ -239,9 +239,12 @@ def test_shock_propagation_in_pairs_gives_the_one_at_a_time_result():
 
 
 @njit
-def narrow_phase(contacts, bodies, hulls, parts, broad, playground, live, threads):
+def narrow_phase(contacts, bodies, hulls, parts, broad, playground, live, threads, shared_only):
     """The narrow phase of the last step's candidate pairs at the bodies' current positions
-    (a Python entry to the compiled-only kernel)."""
+    (Python entries to the compiled-only kernels): collide, or its two-thread part alone."""
+    if shared_only:
+        jobs = broad.pair_count[0] + broad.playground_count[0] + len(live)
+        return collide_shared(contacts, bodies, hulls, parts, broad, playground, True, 0.0, live, jobs)
     return collide(contacts, bodies, hulls, parts, broad, playground, True, 0.0, live, threads)
 
 
@@ -254,21 +257,32 @@ POINT_FIELDS = ("body_a", "body_b", "point", "normal", "depth", "local_a")
 MANIFOLD_FIELDS = ("manifold_start", "manifold_size", "manifold_a", "manifold_b")
 
 
-def manifolds_of(world, points, manifolds, threads):
-    """(fits, the contact set) of collide into a fresh set of that capacity."""
+def manifolds_of(world, points, manifolds, threads, shared_only=False):
+    """(fits, the contact set) of the narrow phase into a fresh set of that capacity."""
     contacts = allocate_contacts(points, manifolds)
     live = live_colliding(world._bodies, world._broad)
     fits = narrow_phase(contacts, world._bodies, world._hulls, world._parts, world._broad,
-                        world._playground, live, threads)
+                        world._playground, live, threads, shared_only)
     return fits, contacts
+
+
+def assert_same_contacts(first, second):
+    count, manifolds = first.count[0], first.manifold_count[0]
+    assert (second.count[0], second.manifold_count[0]) == (count, manifolds)
+    for field in POINT_FIELDS:
+        assert np.array_equal(getattr(second, field)[:count], getattr(first, field)[:count]), field
+    for field in MANIFOLD_FIELDS:
+        assert np.array_equal(getattr(second, field)[:manifolds], getattr(first, field)[:manifolds]), field
 
 
 def test_the_narrow_phase_on_two_threads_is_the_serial_one():
     """A landing with more candidate pairs than PARALLEL_MIN_PAIRS: the two threads' parts of
     the narrow phase (the second's manifolds written from the buffers' middle, then moved down
-    behind the first's) make the serial contact set, point for point; a part that outgrows its
-    half of the buffers says so (the step grows them and runs again), and the whole run's
-    bytes are the serial run's."""
+    behind the first's) make the serial contact set, point for point. Buffers that hold the
+    points but not in halves (two parts of equal work hold unequal numbers of points): the
+    shared part says so, and collide runs the jobs again on one thread instead of growing the
+    buffers, so the step grows them exactly when the serial one does. The run's bytes are the
+    serial run's."""
     build = lambda: pile(600, seed=5)  # noqa: E731
     serial = stepped(build, 1, 110)
     assert serial._broad.pair_count[0] >= PARALLEL_MIN_PAIRS  # the last step shared its narrow phase
@@ -276,14 +290,13 @@ def test_the_narrow_phase_on_two_threads_is_the_serial_one():
     count, manifolds = alone.count[0], alone.manifold_count[0]
     assert fits and count > 1000 and manifolds > 300
     for points_capacity, manifold_capacity in ((16 * 4096, 4 * 4096), (2 * count, 2 * manifolds)):
-        fits, shared = manifolds_of(serial, points_capacity, manifold_capacity, 2)
-        assert fits and (shared.count[0], shared.manifold_count[0]) == (count, manifolds)
-        for field in POINT_FIELDS:
-            assert np.array_equal(getattr(shared, field)[:count], getattr(alone, field)[:count]), field
-        for field in MANIFOLD_FIELDS:
-            assert np.array_equal(getattr(shared, field)[:manifolds], getattr(alone, field)[:manifolds]), field
-    # Room for the points, not in halves: two parts of equal work hold unequal numbers of points.
-    assert manifolds_of(serial, count, manifolds, 1)[0]
-    fits, shared = manifolds_of(serial, count, manifolds, 2)
-    assert not fits or np.array_equal(shared.point[:count], alone.point[:count])
+        fits, shared = manifolds_of(serial, points_capacity, manifold_capacity, 2, shared_only=True)
+        assert fits
+        assert_same_contacts(alone, shared)
+    fits, shared = manifolds_of(serial, count, manifolds, 2, shared_only=True)
+    assert not fits and shared.count[0] == 0  # unequal halves: the first outgrew its own
+    fits, tight = manifolds_of(serial, count, manifolds, 2)
+    assert fits
+    assert_same_contacts(alone, tight)
+    assert not manifolds_of(serial, count - 1, manifolds, 2)[0]  # full: the step grows the buffers
     assert_same_bytes(snapshot(serial), snapshot(stepped(build, 2, 110)))

@@ -533,9 +533,13 @@ def collide(contacts, bodies, hulls, parts, broad, playground, ground_enabled, g
     threads share the jobs, with the same result. Returns False when the contact buffers are
     full (nothing of the step has been applied yet)."""
     jobs = broad.pair_count[0] + broad.playground_count[0] + (len(live) if ground_enabled else 0)
-    if threads > 1 and broad.pair_count[0] + broad.playground_count[0] >= PARALLEL_MIN_PAIRS:
-        return collide_shared(contacts, bodies, hulls, parts, broad, playground, ground_enabled,
-                              ground_height, live, jobs)
+    # A part that outgrows its half of the buffers runs again on one thread, not as a full
+    # buffer: a step that grows them runs its detection again, and after bodies woke that is not
+    # the step the serial run takes (the woken are counted once, the static index may rebuild).
+    if (threads > 1 and broad.pair_count[0] + broad.playground_count[0] >= PARALLEL_MIN_PAIRS
+            and collide_shared(contacts, bodies, hulls, parts, broad, playground, ground_enabled,
+                               ground_height, live, jobs)):
+        return True
     count, manifolds = collide_jobs(contacts, bodies, hulls, parts, broad.pair_a, broad.pair_b,
                                     broad.pair_count[0], broad.playground_body,
                                     broad.playground_triangle, broad.playground_count[0],
@@ -552,7 +556,8 @@ def collide_shared(contacts, bodies, hulls, parts, broad, playground, ground_ena
     """collide on two threads: the jobs in two parts of about equal work, the first part's
     manifolds written from the buffers' start, the second's from their middle, then moved down
     behind the first's: the order, and so every later stage, is the serial one. Either thread
-    may run either part (whichever is free first: a late second thread finds both taken)."""
+    may run either part (whichever is free first: a late second thread finds both taken).
+    False, with no contacts, when a part outgrew its half."""
     pairs = broad.pair_count[0] + broad.playground_count[0]
     # A pair's job is about the work of a box on the ground; a ground job of a body well above
     # the ground is a skipped test.
