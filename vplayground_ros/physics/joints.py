@@ -546,6 +546,13 @@ def factor_island(joints, island):
         for r in range(EQUALITY_ROWS):
             if EQUALITY_ROWS * p + r > 0:
                 factor[EQUALITY_ROWS * p + r] = EQUALITY_ROWS * start  # row 0's upper triangle
+    cholesky_factor(factor, n)
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
+def cholesky_factor(factor, n):
+    """factor (n x n, row-major: a symmetric positive definite K's lower triangle, each row's
+    envelope start in row 0's upper triangle, envelope_start) becomes L, K = L L^T, in place."""
     for col in range(n):
         begin_col = envelope_start(factor, col)
         original = factor[col * n + col]
@@ -554,7 +561,8 @@ def factor_island(joints, island):
             diagonal -= factor[col * n + k] * factor[col * n + k]
         if diagonal <= REDUNDANT_PIVOT * original:
             # A redundant row (two hinges of one door on one axis, two fixed joints between the
-            # same bodies): the others already hold what it would. An infinite pivot makes the
+            # same bodies; in S, a motor and a limit of one axis): the others already hold what
+            # it would. An infinite pivot makes the
             # solve give it no impulse; the rest factor as without it.
             factor[col * n + col] = np.inf
             for row in range(col + 1, n):
@@ -884,8 +892,11 @@ def solve_island_alone(velocity, joints, target, impulse, island, sweeps):
         j = joints.islands[ISLAND_JOINTS, first + p]
         lacking[i] = target[j, row] - row_speed(velocity, rows, j, row, joints.links[j, VELOCITY_A],
                                                 joints.links[j, VELOCITY_B])
-        for k in range(count):
-            moved = body_changes(joints, island, bounded[k, 0], bounded[k, 1])
+    for k in range(count):
+        moved = body_changes(joints, island, bounded[k, 0], bounded[k, 1])
+        for i in range(count):
+            p, row = bounded[i, 0], LOWER_ROW + bounded[i, 1]
+            j = joints.islands[ISLAND_JOINTS, first + p]
             speed = 0.0
             for side in range(2):
                 at = place[p, side]
@@ -899,36 +910,17 @@ def solve_island_alone(velocity, joints, target, impulse, island, sweeps):
             coupling[i, k] = speed
     # Start from the answer without bounds, S^-1 times what the rows lack, projected onto the
     # bounds: the sweeps then only settle the rows a bound holds (sweeping from zero, an arm's
-    # rows, coupled across a 13:1 mass ratio, had not settled in 100). S is factored (Cholesky)
-    # in the rows' order, and a row that depends on those before it gets no share of the start
-    # (a motor on a joint at its limit: the same axis; with an inverse of the whole S, such a
-    # pair started at +-1e15 N s).
-    factor = np.zeros((count, count))
-    for c in range(count):
-        for r in range(c, count):
-            total = coupling[r, c]
-            for k in range(c):
-                total -= factor[r, k] * factor[c, k]
-            if r == c:
-                if total <= REDUNDANT_PIVOT * coupling[c, c]:
-                    break  # redundant: its column stays zero
-                factor[c, c] = np.sqrt(total)
-            else:
-                factor[r, c] = total / factor[c, c]
+    # rows, coupled across a 13:1 mass ratio, had not settled in 100). S is factored as K is
+    # (Cholesky, in the rows' order), so a row that depends on those before it gets no share of
+    # the start (a motor on a joint at its limit: the same axis; with an inverse of the whole S,
+    # such a pair started at +-1e15 N s).
+    factor = np.zeros(count * count)  # every row's envelope from column 0 (row 0's upper triangle)
+    for r in range(count):
+        for c in range(r + 1):
+            factor[r * count + c] = coupling[r, c]
+    cholesky_factor(factor, count)
     exact = lacking.copy()
-    for c in range(count):  # L y = lacking, then L^T x = y, redundant rows 0
-        if factor[c, c] == 0.0:
-            exact[c] = 0.0
-            continue
-        for k in range(c):
-            exact[c] -= factor[c, k] * exact[k]
-        exact[c] /= factor[c, c]
-    for c in range(count - 1, -1, -1):
-        if factor[c, c] == 0.0:
-            continue
-        for k in range(c + 1, count):
-            exact[c] -= factor[k, c] * exact[k]
-        exact[c] /= factor[c, c]
+    cholesky_solve(factor, count, exact)
     change = np.empty(count)
     for i in range(count):
         j, row = joints.islands[ISLAND_JOINTS, first + bounded[i, 0]], LOWER_ROW + bounded[i, 1]
