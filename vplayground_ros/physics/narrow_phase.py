@@ -524,6 +524,13 @@ def collide_pieces(hulls, parts, shape, position, rotation, dimensions, half_ext
     return n, (0.0, 0.0, -1.0), key_a, GROUND
 
 
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
+def reaches_ground(awake, aabb_min, body, ground_height):
+    """Whether a body has a ground job to do: awake, its bounds within half the contact margin
+    of the ground (the bounds are grown by the other half)."""
+    return awake[body] and aabb_min[body, 2] <= ground_height + 0.5 * CONTACT_MARGIN
+
+
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def collide(contacts, bodies, hulls, parts, broad, playground, ground_enabled, ground_height, live,
             threads):
@@ -564,15 +571,14 @@ def collide_shared(contacts, bodies, hulls, parts, broad, playground, ground_ena
     near = 0
     if ground_enabled:
         for k in range(len(live)):
-            if bodies.awake[live[k]] and bodies.aabb_min[live[k], 2] <= ground_height + 0.5 * CONTACT_MARGIN:
+            if reaches_ground(bodies.awake, bodies.aabb_min, live[k], ground_height):
                 near += 1
     half = (pairs + near) // 2
     middle = half
     if half > pairs:  # the first part takes ground jobs too, up to its share of the near ones
         middle, seen = pairs, pairs
         while middle < jobs and seen < half:
-            a = live[middle - pairs]
-            if bodies.awake[a] and bodies.aabb_min[a, 2] <= ground_height + 0.5 * CONTACT_MARGIN:
+            if reaches_ground(bodies.awake, bodies.aabb_min, live[middle - pairs], ground_height):
                 seen += 1
             middle += 1
     point_half, manifold_half = len(contacts.body_a) // 2, len(contacts.manifold_start) // 2
@@ -676,7 +682,7 @@ def collide_jobs(contacts, bodies, hulls, parts, pair_a, pair_b, body_pairs, mes
             margin = CONTACT_MARGIN + reach[a]
         else:
             a = live[job - body_pairs - mesh_pairs]
-            if not awake[a] or bodies.aabb_min[a, 2] > ground_height + 0.5 * CONTACT_MARGIN:
+            if not reaches_ground(awake, bodies.aabb_min, a, ground_height):
                 continue
             b, key_b = GROUND, GROUND
             margin = CONTACT_MARGIN + reach[a]
