@@ -27,7 +27,8 @@ def update_bodies(bodies, live, dt, root_size, depth):
         awake = not bodies.frozen[i] and not bodies.immovable[i]
         bodies.awake[i] = awake
         r = bodies.rotation[i]
-        quat_to_matrix(bodies.orientation[i], r)
+        o = bodies.orientation  # (its row as a tuple: a row handed over costs a view a body)
+        quat_to_matrix((o[i, 0], o[i, 1], o[i, 2], o[i, 3]), r)
         inv_i = bodies.inv_inertia_world[i]
         if awake:
             bodies.solver_inv_mass[i] = bodies.inv_mass[i]
@@ -44,7 +45,9 @@ def update_bodies(bodies, live, dt, root_size, depth):
                     inv_i[row, col] = a0 * r[col, 0] + a1 * r[col, 1] + a2 * r[col, 2]
         else:
             bodies.solver_inv_mass[i] = 0.0
-            inv_i[:, :] = 0.0
+            for row in range(3):
+                for col in range(3):
+                    inv_i[row, col] = 0.0
         h = bodies.half_extents[i]
         speed = np.sqrt(velocity[i, 0] ** 2 + velocity[i, 1] ** 2 + velocity[i, 2] ** 2)
         # Surface points sweep at most |w| |h| dt by rotation (h: the bounding box's half extents).
@@ -93,21 +96,22 @@ def quarantine(bodies, i):
 def integrate_velocities(bodies, live, gravity, dt):
     """The gyroscopic term, gravity and the queued external impulses (cleared once applied), for
     the awake bodies among `live` (every awake body is: see pipeline.list_live_bodies)."""
-    velocity = bodies.velocity
+    # Element by element: a body's rows taken as arrays and cleared as slices made this 52 us at
+    # 1,000 bodies instead of 46 (the rest is the gyroscopic step).
+    velocity, inv_i = bodies.velocity, bodies.inv_inertia_world
+    j, l = bodies.external_impulse, bodies.external_angular_impulse
     for k in range(len(live)):
         i = live[k]
         if not bodies.awake[i]:
             continue
         m = bodies.inv_mass[i]
-        inv_i = bodies.inv_inertia_world[i]
         velocity[i, 3], velocity[i, 4], velocity[i, 5] = gyroscopic_step(
-            inv_i, (velocity[i, 3], velocity[i, 4], velocity[i, 5]), dt)
-        j, l = bodies.external_impulse[i], bodies.external_angular_impulse[i]
+            inv_i[i], (velocity[i, 3], velocity[i, 4], velocity[i, 5]), dt)
         for e in range(3):
-            velocity[i, e] += gravity[e] * dt + j[e] * m
-            velocity[i, 3 + e] += inv_i[e, 0] * l[0] + inv_i[e, 1] * l[1] + inv_i[e, 2] * l[2]
-        j[:] = 0.0
-        l[:] = 0.0
+            velocity[i, e] += gravity[e] * dt + j[i, e] * m
+            velocity[i, 3 + e] += inv_i[i, e, 0] * l[i, 0] + inv_i[i, e, 1] * l[i, 1] + inv_i[i, e, 2] * l[i, 2]
+        for e in range(3):
+            j[i, e] = l[i, e] = 0.0
 
 
 # Newton iterations of the gyroscopic step: from w the first is Catto's; the second makes the
@@ -180,5 +184,7 @@ def integrate_positions(bodies, live, dt):
             bodies.position[i, e] += (velocity[i, e] + pseudo[i, e]) * dt
         omega = (velocity[i, 3] + pseudo[i, 3], velocity[i, 4] + pseudo[i, 4],
                  velocity[i, 5] + pseudo[i, 5])
-        integrate_orientation(bodies.orientation[i], omega, dt)
-        pseudo[i, :] = 0.0
+        q = bodies.orientation  # (rows as tuples and element writes: no view a body)
+        q[i, 0], q[i, 1], q[i, 2], q[i, 3] = integrate_orientation((q[i, 0], q[i, 1], q[i, 2], q[i, 3]), omega, dt)
+        for e in range(6):
+            pseudo[i, e] = 0.0

@@ -28,7 +28,7 @@ def quat_to_matrix(q, m):
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def integrate_orientation(q, omega, dt):
-    """q + dt/2 * (omega, 0) * q, renormalised: first order, exact enough at 128 steps/s."""
+    """q + dt/2 * (omega, 0) * q, renormalised (a tuple): first order, exact enough at 128 steps/s."""
     ox, oy, oz = omega[0] * 0.5 * dt, omega[1] * 0.5 * dt, omega[2] * 0.5 * dt
     x, y, z, w = q[0], q[1], q[2], q[3]
     nx = x + ox * w + oy * z - oz * y
@@ -36,7 +36,7 @@ def integrate_orientation(q, omega, dt):
     nz = z + ox * y - oy * x + oz * w
     nw = w - ox * x - oy * y - oz * z
     inv = 1.0 / np.sqrt(nx * nx + ny * ny + nz * nz + nw * nw)
-    q[0], q[1], q[2], q[3] = nx * inv, ny * inv, nz * inv, nw * inv
+    return nx * inv, ny * inv, nz * inv, nw * inv
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
