@@ -166,6 +166,19 @@ def test_a_fast_tumble_keeps_its_energy_and_momentum(shape):
         assert np.linalg.norm(l - momentum) < 0.08 * np.linalg.norm(momentum)
 
 
+@pytest.mark.parametrize("shape", [{"size": [0.5, 0.5, 0.5]}, {"shape": "sphere", "radius": 0.3}])
+def test_a_body_that_turns_about_any_axis_alike_keeps_its_spin_exactly(shape):
+    """A cube's or a sphere's inertia is a multiple of the identity: no gyroscopic torque, so in
+    free flight its angular velocity stays as it was, to the bit, however it is turned (the
+    Newton iterations on the world-frame tensor moved it by its rounding)."""
+    world = World({"gravity": [0, 0, 0], "freezing": {"enabled": False}}, ground=None)
+    omega = [-5.8, 3.8, 5.0]
+    world.add_body({**shape, "mass": 2.0, "rpy": [0.82, -1.38, -2.75], "angular_velocity": omega})
+    for _ in range(4):
+        world.step(64)
+        assert world.state()["angular_velocities"][0].tolist() == omega
+
+
 def test_a_spin_about_the_intermediate_axis_flips():
     """The tennis-racket (Dzhanibekov) effect: spinning about the axis of middle inertia with a
     small disturbance, the body turns over and the spin about that axis changes sign, while a
