@@ -531,11 +531,13 @@ def collision_pass(contacts, bodies, iterations, gravity, threads):
 def collision_pass_with_joints(contacts, joints, bodies, iterations, gravity, threads):
     """collision_pass in a world with joints (worlds without do not hand the joints over:
     each array handed to a call costs it)."""
+    # bool(): with a literal False here and True in the contact pass, Numba compiled
+    # solve_with_joints twice (~11 s of the engine's cold compile).
     solve_with_joints(bodies.velocity, contacts, joints, iterations, contacts.collision_target,
                       contacts.collision_impulse, contacts.collision_friction,
                       joints.row_values[:, :, COLLISION_TARGET],
-                      joints.row_values[:, :, COLLISION_IMPULSE], False, bodies.position, gravity,
-                      threads)
+                      joints.row_values[:, :, COLLISION_IMPULSE], bool(False), bodies.position,
+                      gravity, threads)
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
@@ -569,8 +571,8 @@ def solve_with_joints(velocity, contacts, joints, sweeps, target, normal_impulse
         by_joint = solve_islands_alone(velocity, joints, joint_target, joint_impulse, touched, sweeps)
         if by_joint.any():
             for sweep in range(sweeps):
-                solve_joint_sweep(velocity, joints, joint_target, joint_impulse, sweep % 2 == 1, True,
-                                  by_joint)
+                solve_joint_sweep(velocity, joints, joint_target, joint_impulse, sweep % 2 == 1,
+                                  with_motors, by_joint)
     settle_island_impulses(joints, joint_impulse)
 
 
@@ -921,7 +923,7 @@ def contact_pass_with_joints(contacts, joints, bodies, iterations, gravity, thre
     """contact_pass in a world with joints: their rows in each velocity sweep."""
     solve_with_joints(bodies.velocity, contacts, joints, iterations, contacts.contact_target,
                       contacts.impulse, contacts.friction, joints.row_values[:, :, CONTACT_TARGET],
-                      joints.row_values[:, :, IMPULSE], True, bodies.position, gravity, threads)
+                      joints.row_values[:, :, IMPULSE], bool(True), bodies.position, gravity, threads)
     finish_contact_pass(contacts, bodies, iterations, gravity, threads)
 
 

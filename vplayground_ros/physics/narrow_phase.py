@@ -547,11 +547,13 @@ def collide(contacts, bodies, hulls, parts, broad, playground, ground_enabled, g
             and collide_shared(contacts, bodies, hulls, parts, broad, playground, ground_enabled,
                                ground_height, live, jobs)):
         return True
+    # Typed zeros: literal ones made Numba compile collide_jobs once more than the shared path's.
     count, manifolds = collide_jobs(contacts, bodies, hulls, parts, broad.pair_a, broad.pair_b,
                                     broad.pair_count[0], broad.playground_body,
                                     broad.playground_triangle, broad.playground_count[0],
                                     playground.triangles, playground.normals, ground_enabled,
-                                    ground_height, live, 0, jobs, 0, 0, len(contacts.body_a),
+                                    ground_height, live, np.int64(0), jobs, np.int64(0), np.int64(0),
+                                    len(contacts.body_a),
                                     len(contacts.manifold_start))
     contacts.count[0], contacts.manifold_count[0] = max(count, 0), max(manifolds, 0)
     return count >= 0
