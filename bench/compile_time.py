@@ -14,13 +14,18 @@ final module holds and how many of them came from callees linked in (optimised a
 again) or are the wrappers Numba adds to each kernel for calls from Python and C, at some cost
 to the times.
 
-    python bench/compile_time.py [--top 25] [--modules] [--json out.json] [--keep DIR]
+Where a second core is free the warm-up compiles in helper processes too (jit_cache.
+compile_shares): the kernels listed are then the filling process's alone, and watching them
+slows it (its helpers not); `--wall` times the warm-up unwatched, the figure users wait for.
 
-NUMBA_OPT and other NUMBA_* variables pass through to the subprocess.
+    python bench/compile_time.py [--top 25] [--modules] [--wall] [--json out.json] [--keep DIR]
+
+NUMBA_OPT, VPLAYGROUND_COMPILE_PROCESSES and other variables pass through to the subprocess.
 """
 import argparse
 import json
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -36,7 +41,7 @@ WRAPPERS = ("cpython.", "cfunc.")
 def child(modules):
     """Compiles the engine into the (empty) cache directory that VPLAYGROUND_JIT_CACHE names and
     returns the measurements as a dict."""
-    from numba.core import codegen, config, cpu, event
+    from numba.core import codegen, cpu, event
 
     kernels = defaultdict(lambda: {"specialisations": set(), "inclusive": 0.0, "exclusive": 0.0,
                                    "llvm": 0.0, "function passes": 0.0, "module passes": 0.0,
@@ -146,25 +151,42 @@ def child(modules):
             return original_add(self, ll_module)
         codegen.CPUCodeLibrary.add_llvm_module = add_llvm_module
 
+    return {**timed_warm_up(), "kernels": {name: {**k, "specialisations": sorted(k["specialisations"]),
+                                                  "callers": sorted(k["callers"])}
+                                           for name, k in kernels.items()}}
+
+
+def timed_warm_up():
+    """The engine's import and whole warm-up into the empty cache: wall and CPU seconds (this
+    process's and its helpers', jit_cache.compile_shares), and how many processes compiled."""
+    from numba.core import config
     started, cpu_started = time.perf_counter(), time.process_time()
-    from vplayground_ros.physics import World, jit_cache
+    from vplayground_ros.physics import World, jit_cache, warm_up
     imported = time.perf_counter() - started
     World()  # an empty cache: the whole warm-up (jit_cache.compile_once)
-    wall, cpu = time.perf_counter() - started, time.process_time() - cpu_started
+    wall = time.perf_counter() - started
+    helpers = resource.getrusage(resource.RUSAGE_CHILDREN)
     if not (jit_cache.cache_directory() / jit_cache.COMPLETE_MARKER).exists():
         raise SystemExit("the warm-up did not complete the cache")
-    return {"wall": wall, "cpu": cpu, "import": imported, "numba_opt": config.OPT,
-            "kernels": {name: {**k, "specialisations": sorted(k["specialisations"]),
-                               "callers": sorted(k["callers"])} for name, k in kernels.items()}}
+    return {"wall": wall, "cpu": time.process_time() - cpu_started + helpers.ru_utime + helpers.ru_stime,
+            "import": imported, "numba_opt": config.OPT,
+            "processes": jit_cache.share_processes(warm_up.SHARES)}
 
 
 def report(result, top, modules):
-    kernels = result["kernels"]
-    llvm = sum(k["llvm"] for k in kernels.values())
-    print(f"cold compile (whole warm-up, NUMBA_OPT={result['numba_opt']}): {result['wall']:.1f} s wall, "
+    print(f"cold compile (whole warm-up, NUMBA_OPT={result['numba_opt']}, {result['processes']} "
+          f"process{'es' if result['processes'] > 1 else ''}): {result['wall']:.1f} s wall, "
           f"{result['cpu']:.1f} s CPU ({result['cpu'] / result['wall']:.2f} CPU/wall); import "
-          f"{result['import']:.1f} s; {sum(len(k['specialisations']) for k in kernels.values())} "
-          f"compiles of {len(kernels)} kernels; LLVM {llvm:.1f} s")
+          f"{result['import']:.1f} s")
+    kernels = result.get("kernels")
+    if kernels is None:
+        return
+    if result["processes"] > 1:
+        print("  (the kernels below are the filling process's; its helpers' are not watched, and "
+              "the watching slows it: VPLAYGROUND_COMPILE_PROCESSES=1 lists them all)")
+    llvm = sum(k["llvm"] for k in kernels.values())
+    print(f"  {sum(len(k['specialisations']) for k in kernels.values())} compiles of {len(kernels)} "
+          f"kernels; LLVM {llvm:.1f} s")
     passes = defaultdict(float)
     for k in kernels.values():
         for name, seconds in k["passes"].items():
@@ -208,6 +230,8 @@ def main():
     parser.add_argument("--top", type=int, default=25, help="kernels listed per ranking")
     parser.add_argument("--modules", action="store_true",
                         help="count the final modules' instructions (slows the compile)")
+    parser.add_argument("--wall", action="store_true",
+                        help="only the wall and CPU seconds, the compile not watched kernel by kernel")
     parser.add_argument("--json", help="also write the measurements to this file")
     parser.add_argument("--keep", metavar="DIR",
                         help="compile into DIR (new or empty) and keep it, to run benchmarks on "
@@ -215,14 +239,15 @@ def main():
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
-        json.dump(child(args.modules), sys.stdout)
+        json.dump(timed_warm_up() if args.wall else child(args.modules), sys.stdout)
         return
     if args.keep and Path(args.keep).exists() and any(Path(args.keep).iterdir()):
         parser.error(f"{args.keep} is not empty: a cold compile needs an empty cache")
     with tempfile.TemporaryDirectory(prefix="vplayground-compile-time-") as temporary:
         env = {**os.environ, "VPLAYGROUND_JIT_CACHE": args.keep or temporary,
                "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
-        out = subprocess.run([sys.executable, __file__, "--child"] + (["--modules"] if args.modules else []),
+        out = subprocess.run([sys.executable, __file__, "--child"] + (["--modules"] if args.modules else [])
+                             + (["--wall"] if args.wall else []),
                              env=env, stdout=subprocess.PIPE, check=True, cwd=ROOT)
     result = json.loads(out.stdout)
     if args.json:

@@ -192,9 +192,9 @@ def test_a_complete_cache_is_marked_used_when_found(tmp_path, monkeypatch):
 def test_no_python_code_calls_a_kernel_without_its_python_wrapper():
     """A kernel compiled with no_cpython_wrapper=True (one only other kernels call: its wrapper
     cost 7 % of the cold compile) cannot be called from Python: the call segfaults. So no Python
-    code of the package, the tests or the benchmarks names one outside a kernel: the names each
-    file imports from the engine, or reaches through an engine module it imports, are resolved
-    to the objects themselves."""
+    code of the package, the tests or the benchmarks names one outside a kernel (but to compile
+    it for given types, `kernel.compile`): the names each file imports from the engine, or
+    reaches through an engine module it imports, are resolved to the objects themselves."""
     import ast
     import importlib
 
@@ -252,6 +252,8 @@ def test_no_python_code_calls_a_kernel_without_its_python_wrapper():
                     wrong.append(f"{path.relative_to(root)}:{node.lineno} {node.id}")
 
             def visit_Attribute(self, node):
+                if node.attr == "compile" and isinstance(node.value, ast.Name):
+                    return  # compiling a kernel for given types (warm_up's shares) is no call
                 if isinstance(node.value, ast.Name) and node.value.id in modules:
                     if wrapperless(getattr(modules[node.value.id], node.attr, None)):
                         wrong.append(f"{path.relative_to(root)}:{node.lineno} {node.value.id}.{node.attr}")
@@ -261,4 +263,123 @@ def test_no_python_code_calls_a_kernel_without_its_python_wrapper():
                 pass  # a kernel imported by a kernel module is called by its kernels
 
         Calls().visit(tree)
+    assert wrong == []
+
+
+SHARES_MODULE = """
+import os
+from pathlib import Path
+
+import numba
+
+
+def record(name):
+    Path(numba.config.CACHE_DIR, name + ".ran").write_text(str(os.getpid()))
+
+
+def first():
+    record("first")
+
+
+def second():
+    record("second")
+
+
+def third():
+    record("third")
+
+
+def failing():
+    raise RuntimeError("this share failed")
+"""
+
+
+@pytest.fixture
+def shared_fill(tmp_path, monkeypatch):
+    """A cache directory as use_source_keyed_cache makes it (helpers compute the same one) and
+    stand-in shares a helper process can import: (directory, what each share's process was)."""
+    if not jit_cache._sharing["safe"]:
+        pytest.skip("the cache is filled by one process here")
+    base = tmp_path / "cache"
+    directory = jit_cache.source_keyed_directory(Path(jit_cache.__file__).parent, base)
+    monkeypatch.setattr(numba.config, "CACHE_DIR", str(directory))
+    monkeypatch.setenv("VPLAYGROUND_JIT_CACHE", str(base))
+    monkeypatch.setenv("VPLAYGROUND_COMPILE_PROCESSES", "2")
+    (tmp_path / "stand_in_shares.py").write_text(SHARES_MODULE)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setenv("PYTHONPATH", str(tmp_path))
+
+    def ran():
+        return {p.stem: int(p.read_text()) for p in directory.glob("*.ran")}
+    return directory, ran
+
+
+def test_shares_compile_in_helpers_before_the_warm_up(shared_fill):
+    """The first share runs in the filling process, the next in a helper process of its own
+    (two processes here), one more after them back in the filling process; the warm-up only
+    once all of them are done."""
+    directory, ran = shared_fill
+    before_warm_up = []
+    compile_once(lambda: before_warm_up.append(ran()),
+                 ("stand_in_shares:first", "stand_in_shares:second", "stand_in_shares:third"))
+    assert (directory / COMPLETE_MARKER).exists()
+    processes = before_warm_up[0]
+    assert sorted(processes) == ["first", "second", "third"]
+    assert processes["first"] == processes["third"] == os.getpid() != processes["second"]
+
+
+def test_a_failed_share_leaves_its_kernels_to_the_warm_up(shared_fill, caplog):
+    directory, ran = shared_fill
+    runs = []
+    compile_once(lambda: runs.append(1), ("stand_in_shares:first", "stand_in_shares:failing"))
+    assert runs == [1] and (directory / COMPLETE_MARKER).exists()
+    assert any("stopped (exit 1)" in r.getMessage() for r in caplog.records)
+
+
+def test_a_helper_of_another_engine_copy_compiles_nothing(monkeypatch):
+    """A helper whose engine would fill another cache directory than its parent's (another copy
+    of the engine on its path) stops before its share runs."""
+    monkeypatch.setenv("VPLAYGROUND_SHARE_CACHE", "/elsewhere/0123456789abcdef")
+    with pytest.raises(SystemExit, match="would fill"):
+        jit_cache.run_share("stand_in_shares:first")
+
+
+def test_each_process_numbers_its_compiled_code_apart():
+    """Numba names compiled code after a per-process counter: from 1 in every process, two
+    processes could name different code alike, and a process loading both would run the wrong
+    one. Each process's count starts at a random 62-bit number."""
+    if not jit_cache._sharing["safe"]:
+        pytest.skip("the cache is filled by one process here")
+    script = ("import vplayground_ros.physics; from numba.core.bytecode import FunctionIdentity; "
+              "print(next(FunctionIdentity._unique_ids))")
+    starts = [int(subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                                 check=True).stdout) for _ in range(2)]
+    assert starts[0] != starts[1] and min(starts) > 1_000_000
+
+
+def test_kernel_index_updates_from_several_processes_keep_every_entry(tmp_path):
+    """Numba names a new entry's file as the first one its kernel's index does not list, without
+    a lock: processes adding entries to one index at once took the same file, and an entry then
+    named another's code. Four processes add 100 entries each to one index at the same moment:
+    every entry finds its own data."""
+    if not jit_cache._sharing["safe"]:
+        pytest.skip("the cache is filled by one process here")
+    script = textwrap.dedent(f"""
+        import sys, time
+        import numba
+        import vplayground_ros.physics  # the lock on index updates
+        from numba.core.caching import IndexDataCacheFile
+        numba.config.CACHE_DIR = {str(tmp_path)!r}
+        index = IndexDataCacheFile({str(tmp_path)!r}, "kernel", "stamp")
+        worker, start = int(sys.argv[1]), float(sys.argv[2])
+        time.sleep(max(start - time.time(), 0.0))
+        for k in range(100):
+            index.save((worker, k), ("code of", worker, k))
+    """)
+    start = time.time() + 4.0  # after every process has imported the engine
+    workers = [subprocess.Popen([sys.executable, "-c", script, str(w), str(start)]) for w in range(4)]
+    assert [w.wait(timeout=60) for w in workers] == [0] * 4
+    from numba.core.caching import IndexDataCacheFile
+    index = IndexDataCacheFile(str(tmp_path), "kernel", "stamp")
+    wrong = [(w, k) for w in range(4) for k in range(100) if index.load((w, k)) != ("code of", w, k)]
     assert wrong == []

@@ -20,7 +20,7 @@ from .scene import SceneError, load_world
 from .simulation import Simulation
 
 STATUS_PERIOD = 2.0  # s of wall time between status lines
-STARTING = "starting: Numba loads the engine from its cache, or compiles it (about 2 minutes on a first run)"
+STARTING = "starting: Numba loads the engine from its cache, or compiles it (a minute or two on a first run)"
 
 
 def finite_float(text):

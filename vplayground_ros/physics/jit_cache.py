@@ -5,14 +5,23 @@ calls (in another file) does, and would then run stale machine code. Keying the 
 on a hash of every engine source makes any edit recompile everything once, and an unchanged
 engine start warm (SPEC 8: start to first pose under 5 s).
 
-A cache is filled by one process, start to end (`compile_once`). Numba names compiled code
-after a per-process counter, and a kernel cached by one process may refer to its callees by
-those names: a cache that one process began and another finished (the first interrupted during
-the first compile, minutes long) once held a step that segfaulted in every later process, until
-the directory was deleted (Numba issues #10128, #10486 describe the same names across
-processes). So the first World of a process whose cache is not marked complete takes a lock on
-it, clears what an interrupted process left, compiles the step and the other entry points in
-one go (`warm_up`), and marks it complete; other processes wait for the lock, then load.
+A cache is filled under one process's lock, start to end (`compile_once`): the first World of
+a process whose cache is not marked complete takes a lock on it, clears what an interrupted
+process left, compiles the step and the other entry points (`warm_up`), and marks it complete;
+other processes wait for the lock, then load. Where there are cores to spare, helper processes
+compile shares of the step's call tree meanwhile (`shares`: kernels the step calls, compiled
+into the cache before the warm-up links them in from there).
+
+Two things make kernels that several processes compiled safe to load into one (`share_safely`,
+installed with the cache directory). Numba names compiled code after a per-process counter, so
+two processes could give one name to different code (two specialisations of one kernel), and
+the loader binds every use of a name to its first definition: a cache that one process began
+and another finished once held a step that segfaulted in every later process, until the
+directory was deleted (Numba issues #10128, #10486). The counter here starts at a random 62-bit
+number in each process, as PyTensor does. And Numba picks a new entry's file name in a kernel's
+index as the first unused one, unlocked: two processes adding two specialisations of one
+kernel at once could both take the first, and one index entry would then name the other's
+code. Index updates here hold a lock on the cache directory.
 
 Every engine edit, version or checkout path makes a new directory (~15 MB): each process that
 finds its cache complete marks it used (the marker's time), and a process that has just filled
@@ -20,10 +29,13 @@ a new one removes the directories beside it unused for KEEP_UNUSED_DAYS, always 
 KEEP_NEWEST most recently used (a developer's 44 directories had grown to 661 MB).
 """
 import hashlib
+import importlib
+import itertools
 import logging
 import os
 import re
 import shutil
+import subprocess
 import sys
 import threading
 import time
@@ -35,12 +47,40 @@ except ImportError:  # not POSIX: no lock between processes
     fcntl = None
 
 import numba
-from numba.core import event
+from numba.core import caching, event
+from numba.core.bytecode import FunctionIdentity
 
 
 def use_source_keyed_cache():
     base = os.environ.get("VPLAYGROUND_JIT_CACHE") or Path.home() / ".cache" / "vplayground_ros" / "numba"
     numba.config.CACHE_DIR = str(source_keyed_directory(Path(__file__).parent, Path(base)))
+    share_safely()
+
+
+# What share_safely found: whether kernels compiled by several processes may fill one cache.
+_sharing = {"safe": False}
+INDEX_LOCK = "index.lock"  # in the cache directory: held while a kernel's index is updated
+
+
+def share_safely():
+    """Makes the kernels several processes compile safe to load into one (see the module's
+    note): this process's compiled names numbered from a random start, and Numba's index
+    updates locked against other processes. Only where Numba has the counter and the index
+    class this expects and the locks exist (else the cache is filled by one process alone);
+    once a process."""
+    if _sharing["safe"] or fcntl is None:
+        return
+    save = getattr(caching.IndexDataCacheFile, "save", None)
+    if not isinstance(getattr(FunctionIdentity, "_unique_ids", None), itertools.count) or save is None:
+        return
+    FunctionIdentity._unique_ids = itertools.count(int.from_bytes(os.urandom(8), "little") >> 2)
+
+    def locked_save(index, key, data):
+        with open(Path(numba.config.CACHE_DIR) / INDEX_LOCK, "a") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+            save(index, key, data)
+    caching.IndexDataCacheFile.save = locked_save
+    _sharing["safe"] = True
 
 
 def source_keyed_directory(engine, base):
@@ -100,11 +140,16 @@ CACHE_NAME = re.compile(r"[0-9a-f]{16}")  # source_keyed_directory's names
 _log = logging.getLogger(__name__)
 
 
-def compile_once(warm_up):
+def compile_once(warm_up, shares=()):
     """Makes sure the cache directory is complete before this process steps a world: if it is
     not marked so, under an exclusive lock on it (other processes wait, counted as compiler
     activity), empties it and runs `warm_up` (which compiles the kernels it calls), then marks
-    it complete. Worlds that `warm_up` itself builds pass straight through."""
+    it complete. Worlds that `warm_up` itself builds pass straight through.
+
+    `shares`: "module:function" names of functions that compile parts of what `warm_up` needs
+    (shares of the step's call tree), run first: the first here, the others in helper processes
+    beside it, as many as there are cores to spare (share_processes); `warm_up` then finds
+    their kernels in the cache. A share that fails only leaves its kernels to the warm-up."""
     directory = cache_directory()
     if getattr(_warming, "active", False) or directory in _uncacheable:
         return
@@ -130,8 +175,10 @@ def compile_once(warm_up):
                         fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
                 if (directory / COMPLETE_MARKER).exists():  # another process filled it meanwhile
                     return
-                _log.warning(f"compiling the engine once into {directory} (about 2 minutes on "
-                             f"2 cores); later starts load it in about a second")
+                processes = share_processes(shares)
+                _log.warning(f"compiling the engine once into {directory} ({processes} process"
+                             f"{'es' if processes > 1 else ''}; about 1.5 minutes in two on 2 cores, "
+                             f"2.5 in one); later starts load it in about a second")
                 # What an interrupted process left; also what this one compiled before its first
                 # World (kernels called directly): those load or compile later, as before.
                 for entry in directory.rglob("*"):
@@ -139,6 +186,7 @@ def compile_once(warm_up):
                         entry.unlink()
                 _warming.active = True
                 try:
+                    compile_shares(shares)
                     warm_up()
                 finally:
                     _warming.active = False
@@ -146,6 +194,64 @@ def compile_once(warm_up):
             prune(directory.parent, keep=directory)
         finally:
             _activity.on_end(None)
+
+
+def share_processes(shares):
+    """How many processes compile `shares` side by side: one per core this process may use, up
+    to one per share; 1 where the cache cannot safely take kernels from several processes
+    (share_safely) or VPLAYGROUND_COMPILE_PROCESSES says so."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        cores = os.cpu_count() or 1
+    wanted = os.environ.get("VPLAYGROUND_COMPILE_PROCESSES", "").strip()
+    if wanted.isdigit() and int(wanted) > 0:
+        cores = int(wanted)
+    return max(1, min(cores, len(shares))) if _sharing["safe"] else 1
+
+
+def compile_shares(shares):
+    """Runs the first of `shares` here and each other one in a helper process of its own (this
+    Python, this engine's source, this cache directory), at most share_processes() at a time
+    including this one; waits for the helpers. A helper left when this process is interrupted
+    is stopped."""
+    processes = share_processes(shares)
+    if processes < 2:
+        return
+    engine_root = str(Path(__file__).resolve().parents[2])
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [engine_root, os.environ.get("PYTHONPATH")])),
+           "VPLAYGROUND_SHARE_CACHE": numba.config.CACHE_DIR}
+    helpers = [subprocess.Popen([sys.executable, "-c", f"from {__name__} import run_share; run_share({share!r})"],
+                                env=env, stdin=subprocess.DEVNULL)
+               for share in shares[1:processes]]
+    try:
+        run_share(shares[0])
+        for helper in helpers:
+            if helper.wait() != 0:
+                _log.warning(f"a helper compiling part of the engine stopped (exit {helper.returncode}); "
+                             "this process compiles its part")
+    finally:
+        for helper in helpers:
+            if helper.poll() is None:
+                helper.kill()
+                helper.wait()
+    for share in shares[processes:]:
+        run_share(share)
+
+
+def run_share(share):
+    """Runs one share ("module:function") of a fill (compile_shares): in a helper process, into
+    the cache directory its parent fills, whose lock the parent holds (so the worlds the share
+    builds must not wait for it); a helper that would compile anywhere else stops."""
+    if os.environ.get("VPLAYGROUND_SHARE_CACHE", numba.config.CACHE_DIR) != numba.config.CACHE_DIR:
+        sys.exit(f"a share of the engine's compile would fill {numba.config.CACHE_DIR}, "
+                 f"not {os.environ['VPLAYGROUND_SHARE_CACHE']}")
+    module, function = share.split(":")
+    was, _warming.active = getattr(_warming, "active", False), True
+    try:
+        getattr(importlib.import_module(module), function)()
+    finally:
+        _warming.active = was
 
 
 def mark_used(directory):

@@ -31,6 +31,7 @@ from .playground import EMPTY_PLAYGROUND_ARGS, index_playground, make_playground
 from .queries import WorldQueries
 from .step_context import StepContext, allocate_contact_buffers, kernel_settings, newest_contacts
 from .vehicle_registry import DEFAULT_COMMAND_TIMEOUT, VehicleRegistry
+from .warm_up import SHARES, warm_up
 
 # Bodies farther than this from the world's centre (the playground's middle, else the origin)
 # have left the world (they fell off the edge or were flung away) and are removed, as are bodies
@@ -97,7 +98,7 @@ class World(WorldQueries):
     be asked is in queries.py."""
 
     def __init__(self, settings=None, ground=specs.DEFAULT_GROUND, capacity=64, solver_threads=None):
-        compile_once(warm_up)  # minutes on a first run; nothing once the kernels are cached
+        compile_once(warm_up, SHARES)  # minutes on a first run; nothing once the kernels are cached
         self.settings = specs.validate_settings(settings)
         # Threads the contact solve may use (solver_threads below); not a scene setting: how
         # many cores to give is the host's choice, not the world's.
@@ -636,11 +637,7 @@ class World(WorldQueries):
         counters = np.zeros(5, np.int64)
         done = 0
         while done < n:
-            ctx = StepContext(self._bodies, self._hulls, self._parts, self._playground, self._vehicles.arrays,
-                              self._broad, self._contacts, self._joints.arrays,
-                              kernel_settings(self.settings, self.ground, specs.DEFAULT_GROUND,
-                                              self._root, self._solver_threads),
-                              counters, self._stage_ns, self.profiling)
+            ctx = self.step_context(counters)
             started = time.thread_time()
             steps, status = step_world(n - done, ctx)
             self.engine_cpu_seconds += time.thread_time() - started
@@ -659,6 +656,15 @@ class World(WorldQueries):
         for key, index in (("woken", STAT_WOKEN), ("frozen", STAT_FROZEN), ("pairs", STAT_PAIRS),
                            ("points", STAT_POINTS), ("triangles", STAT_TRIANGLES)):
             self.stats[key] += int(counters[index])
+
+    def step_context(self, counters):
+        """What step_world takes: this world's arrays and settings, `counters` for its
+        statistics (the octree's root fitted: step)."""
+        return StepContext(self._bodies, self._hulls, self._parts, self._playground, self._vehicles.arrays,
+                           self._broad, self._contacts, self._joints.arrays,
+                           kernel_settings(self.settings, self.ground, specs.DEFAULT_GROUND,
+                                           self._root, self._solver_threads),
+                           counters, self._stage_ns, self.profiling)
 
     # ------------------------------------------------------------------ internals
     def _active_slots(self):
@@ -883,39 +889,3 @@ def joint_frame(axis):
     across = np.cross(axis, helper)
     across /= np.linalg.norm(across)
     return np.column_stack([axis, across, np.cross(axis, across)])
-
-
-def warm_up():
-    """Compiles (or loads) the kernels of everything a world does, in this one process
-    (jit_cache.compile_once): a step of every shape on the ground, on a playground and under a
-    car (the step's whole call tree compiles at its first call), ray casts, contacts and the
-    octree's cells."""
-    world = World(capacity=8)
-    world.set_playground(np.array([[-4.0, -4.0, 0.0], [4.0, -4.0, 0.0], [4.0, 4.0, 0.5],
-                                   [-4.0, 4.0, 0.5]]), np.array([[0, 1, 2], [0, 2, 3]]))
-    cube = [[x, y, z] for x in (-0.2, 0.2) for y in (-0.2, 0.2) for z in (-0.2, 0.2)]
-    dumbbell = [{"shape": "sphere", "radius": 0.2, "position": [0.0, 0.0, 0.0]},
-                {"shape": "convex", "points": cube, "position": [0.5, 0.0, 0.0], "rpy": [0.0, 0.0, 0.3]}]
-    for k, shape in enumerate(({"size": [0.5, 0.5, 0.5]}, {"shape": "sphere", "radius": 0.3},
-                               {"shape": "capsule", "radius": 0.2, "length": 0.5},
-                               {"shape": "cylinder", "radius": 0.3, "length": 0.4},
-                               {"shape": "convex", "points": cube}, {"shape": "compound", "parts": dumbbell})):
-        world.add_body({**shape, "position": [1.2 * k - 2.4, 0.0, 1.0 + 0.3 * k]})
-    world.add_vehicle({"name": "car", "position": [0.0, 2.5, 1.0],
-                       "chassis": {"size": [2.0, 1.0, 0.4], "mass": 400.0},
-                       "wheels": [{"mount": [x, y, -0.2], "radius": 0.25}
-                                  for x in (0.7, -0.7) for y in (0.5, -0.5)]})
-    # Each kind of joint, with limits and both motors: the joint rows compile with the step.
-    names = world.body_names()
-    world.add_joint({"type": "revolute", "parent": names[0], "child": names[1], "axis": [0, 1, 0],
-                     "lower": -1.0, "upper": 1.0, "motor": {"mode": "position", "max_effort": 10.0}})
-    world.add_joint({"type": "prismatic", "child": names[2], "lower": -0.5,
-                     "motor": {"mode": "velocity", "target": 0.1}})
-    world.add_joint({"type": "fixed", "parent": names[3], "child": names[4]})
-    world.add_joint({"type": "continuous", "parent": names[4], "child": names[0]})
-    world.step(8)
-    world.joint(world.joint_names()[0])
-    world.cast_rays(np.zeros((2, 3)), np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0]]), 10.0)
-    world.contacts()
-    world.octree_cells()
-    world.state()
