@@ -36,17 +36,18 @@ $(VENV)/pyvenv.cfg: FORCE
 	set -- $(VENV); if [ $$site = true ]; then set -- --system-site-packages $(VENV); fi; \
 	echo "$$exe -m venv $$*"; "$$exe" -m venv "$$@"
 
-# The engine's first compile (jit_cache.compile_once: one process fills the cache, the others
-# wait for it) is one core's work and the interface build mostly another's: the set-up runs
-# them side by side, so that `make test` and `make run` find the engine compiled.
+# The engine's first compile (jit_cache.compile_once: a process and its helpers fill the cache,
+# other processes wait for it) needs only the engine's requirements: the set-up starts it as soon
+# as they are in and installs the ROS wheels and builds the interface packages meanwhile, so that
+# `make test` and `make run` find the engine compiled.
 $(STAMP): setup.py setup.cfg package.xml interfaces/simulation_interfaces/package.xml interfaces/tf2_msgs/package.xml $(VENV)/pyvenv.cfg
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e ".[test]"
-	$(PY) -c "import rclpy" 2>/dev/null || $(PY) -m pip install --quiet -e ".[ros]"
-	@echo "make: compiling the engine (minutes, once) while the interface packages build"; \
+	@echo "make: compiling the engine (a minute or two, once) while the ROS packages install and build"; \
 	$(PY) -c "from vplayground_ros.physics import World; World()" >$(VENV)/engine_compile.log 2>&1 & \
 	engine=$$!; trap 'kill $$engine 2>/dev/null; exit 130' INT TERM; \
-	$(MAKE) --no-print-directory interfaces; built=$$?; \
+	{ $(PY) -c "import rclpy" 2>/dev/null || $(PY) -m pip install --quiet -e ".[ros]"; } \
+		&& $(MAKE) --no-print-directory interfaces; built=$$?; \
 	wait $$engine || { echo "make: the engine did not compile:"; cat $(VENV)/engine_compile.log; exit 1; }; \
 	exit $$built
 	touch $(STAMP)
