@@ -291,6 +291,12 @@ def third():
 
 def failing():
     raise RuntimeError("this share failed")
+
+
+def slow():
+    record("slow")
+    import time
+    time.sleep(120)
 """
 
 
@@ -298,8 +304,7 @@ def failing():
 def shared_fill(tmp_path, monkeypatch):
     """A cache directory as use_source_keyed_cache makes it (helpers compute the same one) and
     stand-in shares a helper process can import: (directory, what each share's process was)."""
-    if not jit_cache._sharing["safe"]:
-        pytest.skip("the cache is filled by one process here")
+    require_sharing()
     base = tmp_path / "cache"
     directory = jit_cache.source_keyed_directory(Path(jit_cache.__file__).parent, base)
     monkeypatch.setattr(numba.config, "CACHE_DIR", str(directory))
@@ -333,7 +338,25 @@ def test_a_failed_share_leaves_its_kernels_to_the_warm_up(shared_fill, caplog):
     runs = []
     compile_once(lambda: runs.append(1), ("stand_in_shares:first", "stand_in_shares:failing"))
     assert runs == [1] and (directory / COMPLETE_MARKER).exists()
-    assert any("stopped (exit 1)" in r.getMessage() for r in caplog.records)
+    assert any("stopped (exit status 1)" in r.getMessage() for r in caplog.records)
+
+
+def test_a_helper_ends_with_the_process_it_helps(shared_fill):
+    """However the filling process ends (an interrupted make, a killed node: no Python code of
+    its runs), its helpers' standard input closes and they stop, not writing on into a cache
+    the next fill clears."""
+    directory, ran = shared_fill
+    directory.mkdir(parents=True)
+    env = {**os.environ, "VPLAYGROUND_SHARE_CACHE": str(directory)}
+    helper = subprocess.Popen([sys.executable, "-c", "from vplayground_ros.physics.jit_cache import helper_main; "
+                               "helper_main('stand_in_shares:slow')"], stdin=subprocess.PIPE, env=env)
+    try:
+        wait_for(lambda: "slow" in ran(), timeout=60.0)
+        helper.stdin.close()  # what the parent's end does
+        assert helper.wait(timeout=10.0) == 1
+    finally:
+        helper.kill()
+        helper.wait()
 
 
 def test_a_helper_of_another_engine_copy_compiles_nothing(monkeypatch):
@@ -348,8 +371,7 @@ def test_each_process_numbers_its_compiled_code_apart():
     """Numba names compiled code after a per-process counter: from 1 in every process, two
     processes could name different code alike, and a process loading both would run the wrong
     one. Each process's count starts at a random 62-bit number."""
-    if not jit_cache._sharing["safe"]:
-        pytest.skip("the cache is filled by one process here")
+    require_sharing()
     script = ("import vplayground_ros.physics; from numba.core.bytecode import FunctionIdentity; "
               "print(next(FunctionIdentity._unique_ids))")
     starts = [int(subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
@@ -360,26 +382,57 @@ def test_each_process_numbers_its_compiled_code_apart():
 def test_kernel_index_updates_from_several_processes_keep_every_entry(tmp_path):
     """Numba names a new entry's file as the first one its kernel's index does not list, without
     a lock: processes adding entries to one index at once took the same file, and an entry then
-    named another's code. Four processes add 100 entries each to one index at the same moment:
-    every entry finds its own data."""
-    if not jit_cache._sharing["safe"]:
-        pytest.skip("the cache is filled by one process here")
+    named another's code (100 of these 400 without the lock). Four processes, each ready with the
+    engine imported, add 100 entries each to one index at the same moment: every entry finds its
+    own data."""
+    require_sharing()
     script = textwrap.dedent(f"""
-        import sys, time
-        import numba
+        import sys
+        from pathlib import Path
         import vplayground_ros.physics  # the lock on index updates
         from numba.core.caching import IndexDataCacheFile
-        numba.config.CACHE_DIR = {str(tmp_path)!r}
         index = IndexDataCacheFile({str(tmp_path)!r}, "kernel", "stamp")
-        worker, start = int(sys.argv[1]), float(sys.argv[2])
-        time.sleep(max(start - time.time(), 0.0))
+        worker = int(sys.argv[1])
+        Path({str(tmp_path)!r}, f"ready{{worker}}").touch()
+        sys.stdin.readline()  # all at once
         for k in range(100):
             index.save((worker, k), ("code of", worker, k))
     """)
-    start = time.time() + 4.0  # after every process has imported the engine
-    workers = [subprocess.Popen([sys.executable, "-c", script, str(w), str(start)]) for w in range(4)]
-    assert [w.wait(timeout=60) for w in workers] == [0] * 4
+    workers = [subprocess.Popen([sys.executable, "-c", script, str(w)], stdin=subprocess.PIPE)
+               for w in range(4)]
+    try:
+        wait_for(lambda: len(list(tmp_path.glob("ready*"))) == 4, timeout=120.0)
+        for w in workers:
+            w.stdin.write(b"go\n")
+            w.stdin.flush()
+        assert [w.wait(timeout=60) for w in workers] == [0] * 4
+    finally:
+        for w in workers:
+            w.kill()
+            w.wait()
     from numba.core.caching import IndexDataCacheFile
     index = IndexDataCacheFile(str(tmp_path), "kernel", "stamp")
     wrong = [(w, k) for w in range(4) for k in range(100) if index.load((w, k)) != ("code of", w, k)]
     assert wrong == []
+
+
+def test_a_kernel_outside_the_engines_cache_saves_beside_its_source(tmp_path, monkeypatch):
+    """Where the engine's cache directory cannot be written, Numba keeps kernels in __pycache__
+    beside their source (README): their index updates lock there, not in the directory that
+    cannot be made."""
+    (tmp_path / "file").write_text("not a directory")
+    monkeypatch.setattr(numba.config, "CACHE_DIR", str(tmp_path / "file" / "0123456789abcdef"))
+    (tmp_path / "toy_kernel.py").write_text("from numba import njit\n\n\n@njit(cache=True)\n"
+                                             "def twice(x):\n    return 2 * x\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    import toy_kernel
+    assert toy_kernel.twice(21) == 42
+    assert list((tmp_path / "__pycache__").glob("toy_kernel.twice-*.nbi"))
+
+
+def require_sharing():
+    """On Linux the cache takes kernels from several processes (share_safely): a Numba whose
+    internals differ from what it expects fails here rather than quietly compiling on one core."""
+    if not sys.platform.startswith("linux"):
+        pytest.skip("the cache is filled by one process here")
+    assert jit_cache._sharing["safe"]

@@ -531,12 +531,12 @@ def collision_pass(contacts, bodies, iterations, gravity, threads):
 def collision_pass_with_joints(contacts, joints, bodies, iterations, gravity, threads):
     """collision_pass in a world with joints (worlds without do not hand the joints over:
     each array handed to a call costs it)."""
-    # bool(): with a literal False here and True in the contact pass, Numba compiled
+    # Typed flags: with a literal False here and True in the contact pass, Numba compiled
     # solve_with_joints twice (~11 s of the engine's cold compile).
     solve_with_joints(bodies.velocity, contacts, joints, iterations, contacts.collision_target,
                       contacts.collision_impulse, contacts.collision_friction,
                       joints.row_values[:, :, COLLISION_TARGET],
-                      joints.row_values[:, :, COLLISION_IMPULSE], bool(False), bodies.position,
+                      joints.row_values[:, :, COLLISION_IMPULSE], np.bool_(False), bodies.position,
                       gravity, threads)
 
 
@@ -923,7 +923,8 @@ def contact_pass_with_joints(contacts, joints, bodies, iterations, gravity, thre
     """contact_pass in a world with joints: their rows in each velocity sweep."""
     solve_with_joints(bodies.velocity, contacts, joints, iterations, contacts.contact_target,
                       contacts.impulse, contacts.friction, joints.row_values[:, :, CONTACT_TARGET],
-                      joints.row_values[:, :, IMPULSE], bool(True), bodies.position, gravity, threads)
+                      joints.row_values[:, :, IMPULSE], np.bool_(True), bodies.position,
+                      gravity, threads)
     finish_contact_pass(contacts, bodies, iterations, gravity, threads)
 
 

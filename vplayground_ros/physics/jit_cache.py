@@ -59,7 +59,7 @@ def use_source_keyed_cache():
 
 # What share_safely found: whether kernels compiled by several processes may fill one cache.
 _sharing = {"safe": False}
-INDEX_LOCK = "index.lock"  # in the cache directory: held while a kernel's index is updated
+INDEX_LOCK = "index.lock"  # beside kernels' indexes: held while one is updated
 
 
 def share_safely():
@@ -76,9 +76,18 @@ def share_safely():
     FunctionIdentity._unique_ids = itertools.count(int.from_bytes(os.urandom(8), "little") >> 2)
 
     def locked_save(index, key, data):
-        with open(Path(numba.config.CACHE_DIR) / INDEX_LOCK, "a") as lock:
-            fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
-            save(index, key, data)
+        # The lock beside the index (where Numba keeps it: this cache directory, or __pycache__
+        # beside a source when that cannot be written); none where none can be taken there.
+        try:
+            lock = open(os.path.join(index._cache_path, INDEX_LOCK), "a")
+        except (AttributeError, OSError, TypeError):
+            return save(index, key, data)
+        with lock:
+            try:
+                fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+            except OSError:  # a file system without locks
+                pass
+            return save(index, key, data)
     caching.IndexDataCacheFile.save = locked_save
     _sharing["safe"] = True
 
@@ -182,7 +191,7 @@ def compile_once(warm_up, shares=()):
                 # What an interrupted process left; also what this one compiled before its first
                 # World (kernels called directly): those load or compile later, as before.
                 for entry in directory.rglob("*"):
-                    if entry.is_file():
+                    if entry.is_file() and entry.name != INDEX_LOCK:  # (another process may hold it)
                         entry.unlink()
                 _warming.active = True
                 try:
@@ -210,39 +219,73 @@ def share_processes(shares):
     return max(1, min(cores, len(shares))) if _sharing["safe"] else 1
 
 
+# A helper still compiling after this long is stopped, and its part left to the warm-up.
+HELPER_TIMEOUT = 1800.0
+
+
 def compile_shares(shares):
     """Runs the first of `shares` here and each other one in a helper process of its own (this
     Python, this engine's source, this cache directory), at most share_processes() at a time
-    including this one; waits for the helpers. A helper left when this process is interrupted
-    is stopped."""
+    including this one, then waits for the helpers (with one process, none: the warm-up
+    compiles everything). A share that fails (or a helper that cannot start) is said in the log
+    and left to the warm-up. A helper ends when this process does,
+    however it ends: it stops when its standard input closes (helper_main)."""
     processes = share_processes(shares)
     if processes < 2:
-        return
-    engine_root = str(Path(__file__).resolve().parents[2])
+        return  # the warm-up compiles it all
+    here, helpers = list(shares), []
+    engine_root = str(Path(os.path.abspath(__file__)).parents[2])
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [engine_root, os.environ.get("PYTHONPATH")])),
            "VPLAYGROUND_SHARE_CACHE": numba.config.CACHE_DIR}
-    helpers = [subprocess.Popen([sys.executable, "-c", f"from {__name__} import run_share; run_share({share!r})"],
-                                env=env, stdin=subprocess.DEVNULL)
-               for share in shares[1:processes]]
     try:
-        run_share(shares[0])
+        for share in shares[1:processes]:
+            try:
+                helpers.append(subprocess.Popen(
+                    [sys.executable, "-c", f"from {__name__} import helper_main; helper_main({share!r})"],
+                    env=env, cwd=engine_root, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL))
+            except OSError as error:
+                _log.warning(f"cannot start a helper compiling part of the engine ({error}); this process "
+                             "compiles it")
+                continue
+            here.remove(share)
+        for share in here:
+            try:
+                run_share(share)
+            except Exception:
+                _log.warning(f"compiling {share} failed; the warm-up compiles what it left", exc_info=True)
         for helper in helpers:
-            if helper.wait() != 0:
-                _log.warning(f"a helper compiling part of the engine stopped (exit {helper.returncode}); "
-                             "this process compiles its part")
+            try:
+                status = helper.wait(timeout=HELPER_TIMEOUT)
+            except subprocess.TimeoutExpired:
+                status = f"still running after {HELPER_TIMEOUT:.0f} s"
+            if status != 0:
+                _log.warning(f"a helper compiling part of the engine stopped (exit status {status}); "
+                             "the warm-up compiles what it left")
     finally:
         for helper in helpers:
             if helper.poll() is None:
                 helper.kill()
-                helper.wait()
-    for share in shares[processes:]:
-        run_share(share)
+            helper.wait()
+            helper.stdin.close()
+
+
+def helper_main(share):
+    """A helper process of compile_shares: runs `share`, and ends at once when its parent
+    closes its standard input (it ended, however: an interrupted make, a killed node), so that
+    no helper goes on writing into a cache the next fill clears."""
+    def parent_gone():
+        while os.read(0, 4096):  # (the file descriptor: a thread left in sys.stdin's buffered
+            pass                 # reader at exit aborts the interpreter)
+        os._exit(1)
+    threading.Thread(target=parent_gone, daemon=True).start()
+    run_share(share)
 
 
 def run_share(share):
-    """Runs one share ("module:function") of a fill (compile_shares): in a helper process, into
-    the cache directory its parent fills, whose lock the parent holds (so the worlds the share
-    builds must not wait for it); a helper that would compile anywhere else stops."""
+    """Runs one share ("module:function") of a fill (compile_shares), into the cache directory
+    being filled, whose lock the filling process holds (so the worlds the share builds must not
+    wait for it). In a helper (VPLAYGROUND_SHARE_CACHE names that directory), an engine that
+    would compile anywhere else (another copy on the helper's path) stops first."""
     if os.environ.get("VPLAYGROUND_SHARE_CACHE", numba.config.CACHE_DIR) != numba.config.CACHE_DIR:
         sys.exit(f"a share of the engine's compile would fill {numba.config.CACHE_DIR}, "
                  f"not {os.environ['VPLAYGROUND_SHARE_CACHE']}")

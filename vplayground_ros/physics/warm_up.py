@@ -2,7 +2,7 @@
 the shares of it that helper processes compile beside it (`SHARES`, jit_cache.compile_shares).
 
 Numba compiles the step's whole call tree at its first call, one kernel after another on one
-core (~3 minutes on 2 cores). A kernel already in the cache is not compiled again: its caller
+core (~2.5 minutes on this machine). A kernel already in the cache is not compiled again: its caller
 loads it and links it in. So the shares compile the largest stages the step calls, with the
 argument types the step hands them, each in a process of its own, and the warm-up then compiles
 the step itself around them. A share whose argument types differ from the step's only compiles
@@ -69,9 +69,8 @@ def query(world):
     world.state()
 
 
-def step_context():
-    """The warm-up world's StepContext, as step_world gets it, and its contact buffers."""
-    world = warm_up_world()
+def step_context(world):
+    """`world`'s StepContext, as step_world gets it, and its contact buffers."""
     world.step(0)  # fits the octree's root; steps nothing
     ctx = world.step_context(np.zeros(5, np.int64))
     return ctx, ctx.contacts.pair[0]
@@ -85,7 +84,7 @@ def types_of(*arguments):
 def compile_solver_and_wheels():
     """The contact solver's stages (pipeline.step_world steps 4 and 6), with joints and without,
     and the cars' wheels (step 5)."""
-    ctx, contacts = step_context()
+    ctx, contacts = step_context(warm_up_world())
     bodies, joints, s = ctx.bodies, ctx.joints, ctx.settings
     drive_vehicles.compile(types_of(ctx.vehicles, bodies, ctx.hulls, ctx.parts, ctx.broad, ctx.playground, s))
     prepare_contacts.compile(types_of(contacts, bodies, s.ground_material, s.gravity, s.dt))
@@ -102,8 +101,9 @@ def compile_solver_and_wheels():
 def compile_detection_and_queries():
     """Collision detection (step_world step 2), then what worlds are asked between steps (their
     own kernels, called from Python)."""
-    ctx, contacts = step_context()
+    world = warm_up_world()
+    ctx, contacts = step_context(world)
     live = ctx.broad.moving_ids[:1]  # list_live_bodies' result: a view of these
     detect.compile(types_of(ctx.bodies, ctx.hulls, ctx.parts, ctx.broad, ctx.playground, contacts,
                             ctx.settings, live, ctx.joints.excluded_pairs))
-    query(warm_up_world())
+    query(world)
