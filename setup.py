@@ -31,7 +31,9 @@ setup(
     extras_require={
         # pybullet for the real robot descriptions its pybullet_data ships (Husky, KUKA iiwa);
         # xacro expands the Husky's $(optenv ...) (urdf_import expands xacro where installed).
-        "test": ["pytest>=7", "hypothesis>=6.80", "websockets>=13", "pybullet>=3.2", "xacro>=2.0"],
+        # pytest-xdist: make test runs the suite on a worker per core (it mostly waits on nodes).
+        "test": ["pytest>=7", "pytest-xdist>=3", "hypothesis>=6.80", "websockets>=13", "pybullet>=3.2",
+                 "xacro>=2.0"],
         "xacro": ["xacro>=2.0"],
         # The ROS 2 Jazzy Python wheels, for machines without a ROS install (make does this).
         "ros": ["ros-jazzy-rclpy[fastrtps]", "ros-jazzy-common-interfaces"],
