@@ -69,9 +69,10 @@ run: $(STAMP)
 	$(VENV)/bin/vplayground $(FOXGLOVE) $(ARGS)
 
 # A worker per core (pytest-xdist): the suite mostly waits on the nodes it starts (4.6 -> 2.3
-# minutes on 2 cores); each worker on a DDS domain of its own (test/conftest.py).
+# minutes on 2 cores); each worker on a DDS domain of its own (test/conftest.py), each test file
+# on one worker in its order (its tests share the file's node, as they do in one process).
 test: $(STAMP)
-	$(PY) -m pytest -q -n auto test
+	$(PY) -m pytest -q -n auto --dist loadfile test
 
 fuzz: $(STAMP)
 	VPLAYGROUND_FUZZ_EXAMPLES=$(FUZZ_EXAMPLES) $(PY) -m pytest -q -p no:logging test/test_fuzz.py

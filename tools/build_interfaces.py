@@ -72,7 +72,8 @@ def build(package, prefix, env):
     with tempfile.TemporaryDirectory(prefix=f"{package}-build-") as directory:
         run(["cmake", "-S", INTERFACES / package, "-B", directory, f"-DCMAKE_INSTALL_PREFIX={prefix}",
              f"-DPython3_EXECUTABLE={sys.executable}", "-DBUILD_TESTING=OFF", "-DCMAKE_BUILD_TYPE=Release",
-             f"-DCMAKE_PROJECT_INCLUDE={FIX_WHEEL_TARGETS}", f"-DPYTHON_HEADER_DIRS={';'.join(header_dirs)}"],
+             f"-DCMAKE_PROJECT_INCLUDE={FIX_WHEEL_TARGETS}", f"-DPYTHON_HEADER_DIRS={';'.join(header_dirs)}",
+             "-DVPLAYGROUND_C_AND_PYTHON_ONLY=ON"],
             log, env)
         run(["cmake", "--build", directory, "--parallel", str(os.cpu_count() or 1)], log, env)
         run(["cmake", "--install", directory], log, env)
