@@ -54,7 +54,7 @@ $(STAMP): setup.py setup.cfg package.xml interfaces/simulation_interfaces/packag
 
 # The interface packages no wheel brings: simulation_interfaces (the standard services, README
 # "The standard simulation services") and tf2_msgs (/tf over ROS). On the PyPI wheels, built
-# from interfaces/ into the venv (~2 min, once); with a ROS install sourced, the distro's
+# from interfaces/ into the venv (~1 min, once); with a ROS install sourced, the distro's
 # packages. Without them the node serves and publishes everything else.
 interfaces: $(VENV)/pyvenv.cfg
 	@if grep -qx "include-system-site-packages = true" $(VENV)/pyvenv.cfg; then \
@@ -68,11 +68,13 @@ FOXGLOVE ?= --foxglove
 run: $(STAMP)
 	$(VENV)/bin/vplayground $(FOXGLOVE) $(ARGS)
 
-# A worker per core (pytest-xdist): the suite mostly waits on the nodes it starts (4.6 -> 2.3
-# minutes on 2 cores); each worker on a DDS domain of its own (test/conftest.py), each test file
-# on one worker in its order (its tests share the file's node, as they do in one process).
+# A worker per core (pytest-xdist; TEST_WORKERS= sets how many, at most 16): the suite mostly
+# waits on the nodes it starts (4.6 -> 2.3 minutes on 2 cores); each worker on a DDS domain of
+# its own (test/conftest.py), each test file on one worker in its order (its tests share the
+# file's node, as they do in one process).
+TEST_WORKERS ?= auto
 test: $(STAMP)
-	$(PY) -m pytest -q -n auto --dist loadfile test
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --maxprocesses 16 --dist loadfile test
 
 fuzz: $(STAMP)
 	VPLAYGROUND_FUZZ_EXAMPLES=$(FUZZ_EXAMPLES) $(PY) -m pytest -q -p no:logging test/test_fuzz.py

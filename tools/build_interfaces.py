@@ -94,7 +94,7 @@ def main():
                  "(apt install cmake g++); the node runs without them")
     prefix = Path(sys.prefix)
     print(f"build_interfaces: building {', '.join(f'{p} {vendored_version(p)}' for p in todo)} into {prefix} "
-          f"(once, ~2 minutes on 2 cores)", flush=True)
+          f"(once, ~1 minute on 2 cores)", flush=True)
     subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", *BUILD_REQUIREMENTS], check=True)
     env = {**os.environ,
            "PATH": f"{prefix / 'bin'}{os.pathsep}{os.environ.get('PATH', '')}",

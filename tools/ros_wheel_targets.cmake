@@ -1,4 +1,4 @@
-# Included into the simulation_interfaces build by tools/build_interfaces.py (CMAKE_PROJECT_INCLUDE).
+# Included into the interface packages' builds by tools/build_interfaces.py (CMAKE_PROJECT_INCLUDE).
 # The ROS 2 wheels export their Python-generator targets with the include directories of the
 # machine that built them (/opt/python/...): CMake refuses to generate with a missing directory.
 # At the end of the configure step, every imported target that names one is pointed at this
