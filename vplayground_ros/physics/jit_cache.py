@@ -21,7 +21,7 @@ directory was deleted (Numba issues #10128, #10486). The counter here starts at 
 number in each process, as PyTensor does. And Numba picks a new entry's file name in a kernel's
 index as the first unused one, unlocked: two processes adding two specialisations of one
 kernel at once could both take the first, and one index entry would then name the other's
-code. Index updates here hold a lock on the cache directory.
+code. Index updates here hold a lock file beside the index.
 
 Every engine edit, version or checkout path makes a new directory (~15 MB): each process that
 finds its cache complete marks it used (the marker's time), and a process that has just filled
@@ -195,7 +195,7 @@ def compile_once(warm_up, shares=()):
                         entry.unlink()
                 _warming.active = True
                 try:
-                    compile_shares(shares)
+                    compile_shares(shares, processes)
                     warm_up()
                 finally:
                     _warming.active = False
@@ -205,14 +205,20 @@ def compile_once(warm_up, shares=()):
             _activity.on_end(None)
 
 
+def usable_cores():
+    """The cores this process may run on (its CPU affinity; every core where the OS does not
+    say)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
+
+
 def share_processes(shares):
     """How many processes compile `shares` side by side: one per core this process may use, up
     to one per share; 1 where the cache cannot safely take kernels from several processes
     (share_safely) or VPLAYGROUND_COMPILE_PROCESSES says so."""
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except AttributeError:  # not Linux
-        cores = os.cpu_count() or 1
+    cores = usable_cores()
     wanted = os.environ.get("VPLAYGROUND_COMPILE_PROCESSES", "").strip()
     if wanted.isdigit() and int(wanted) > 0:
         cores = int(wanted)
@@ -223,14 +229,13 @@ def share_processes(shares):
 HELPER_TIMEOUT = 1800.0
 
 
-def compile_shares(shares):
+def compile_shares(shares, processes):
     """Runs the first of `shares` here and each other one in a helper process of its own (this
-    Python, this engine's source, this cache directory), at most share_processes() at a time
-    including this one, then waits for the helpers (with one process, none: the warm-up
-    compiles everything). A share that fails (or a helper that cannot start) is said in the log
-    and left to the warm-up. A helper ends when this process does,
-    however it ends: it stops when its standard input closes (helper_main)."""
-    processes = share_processes(shares)
+    Python, this engine's source, this cache directory), at most `processes` (share_processes)
+    at a time including this one, then waits for the helpers (with one process, none: the
+    warm-up compiles everything). A share that fails (or a helper that cannot start) is said in
+    the log and left to the warm-up. A helper ends when this process does, however it ends: it
+    stops when its standard input closes (helper_main)."""
     if processes < 2:
         return  # the warm-up compiles it all
     here, helpers = list(shares), []

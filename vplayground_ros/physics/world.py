@@ -4,7 +4,6 @@ Everything here is Python bookkeeping between steps (adding, editing, removing b
 buffers); the physics runs inside `pipeline.step_world`, many steps per call.
 """
 import heapq
-import os
 import re
 import time
 from collections import namedtuple
@@ -19,7 +18,7 @@ from .broad_phase import allocate_broad_phase
 from .constants import CONTACT_MARGIN
 from .contact import index_manifolds
 from .freezing import wake_body
-from .jit_cache import compile_once
+from .jit_cache import compile_once, usable_cores
 from .joint_registry import JointRegistry
 from .joints import ANCHOR, EFFORT, FRAME, POSITION, SPEED, WORLD_SIDE, measure_joints
 from .math3d import (axis_rotation, matrix_to_quaternion, quat_to_matrix, quaternions_to_matrices,
@@ -85,11 +84,7 @@ def mass_key(body, path):
 
 def default_solver_threads():
     """2 where the process may run on two cores and Numba has two threads, else 1."""
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except AttributeError:  # not Linux
-        cores = os.cpu_count() or 1
-    return 2 if min(cores, numba.config.NUMBA_NUM_THREADS) >= 2 else 1
+    return 2 if min(usable_cores(), numba.config.NUMBA_NUM_THREADS) >= 2 else 1
 
 
 class World(WorldQueries):
