@@ -51,3 +51,19 @@ def test_rust_peer_drops_boxes_onto_the_ground(peer_class):
     np.testing.assert_allclose(positions[:, 2], 0.25, atol=0.01)
     np.testing.assert_allclose(positions[:, :2], [b[1][:2] for b in boxes], atol=0.05)
     assert peer.resting_count() == len(boxes)
+
+
+def test_falling_phase_bench_reports_finite_figures(tmp_path):
+    """bench/falling.py (issue 36.2's figures) on small piles: every engine built reports a
+    finite phase, and our figures over each peer's are there."""
+    result = subprocess.run([sys.executable, str(BENCH / "falling.py"), "--boxes", "40", "--seconds", "0.5",
+                             "--runs", "2", "--out", str(tmp_path)], capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr[-2000:]
+    report = json.loads((tmp_path / "falling.json").read_text())
+    assert set(report["piles"]) == {"loose", "dense"}
+    for rows in report["piles"].values():
+        ours = rows["vplayground"]
+        for row in rows.values():
+            assert 0 < row["median_ms"] <= row["p95_ms"] <= row["max_ms"] <= max(row["runs_longest_ms"])
+            assert len(row["runs_longest_ms"]) == 2 and math.isfinite(row["total_ms"])
+        assert {key for key in ours if key.startswith("x_")} == {f"x_{name}" for name in rows if name != "vplayground"}

@@ -1,0 +1,112 @@
+"""Issue 36 point 2 in one run: the falling phase of two piles, this engine on one thread beside
+Rapier and Jolt (bench/peers, where built), as ratios.
+
+The piles (bench/scenes.py): `loose`, issue 20's spread 10-layer drop (the bench's pile, on which
+the engine was tuned), and `dense`, a jittered grid of 0.5 m boxes 0.8 m apart (the second pile,
+not tuned on). The falling phase is the first 2 s (256 steps at 128 Hz), timed step by step on
+each engine's own thread CPU clock, --runs times from the same boxes. A step's figure is its
+fastest over the runs (what the engine needs, not what the machine's other load added), and
+next to it the worst case: the longest step any single run had.
+
+Printed per pile and engine: median, p95 and longest step (ms), the runs' own longest, the
+phase's total; then our figures over each peer's (x), and the issue's goals against Rapier
+(median at most 1x, longest at most 2x).
+
+    python bench/falling.py [--boxes 1000] [--runs 2] [--scenes loose dense] [--out bench/results]
+"""
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+import compare  # noqa: E402
+import scenes  # noqa: E402
+from pile import warm_up  # noqa: E402
+
+PILES = {"loose": scenes.loose_pile, "dense": scenes.pile}
+# Issue 36.2's goals, our figure over Rapier's: (figure, its name, at most).
+GOALS = (("median_ms", "median", 1.0), ("max_ms", "longest", 2.0))
+# CPU s a run may take before it stops (and the bench fails): far above any engine's 2 s here.
+BUDGET_S = 300.0
+
+
+def falling_steps(boxes, make_engine, runs, seconds):
+    """Each run's thread CPU ms per step, (runs, steps), every run from a new engine on `boxes`."""
+    timings = []
+    for _ in range(runs):
+        timing = compare.Timing()
+        if not timing.run(make_engine(boxes), seconds, BUDGET_S):
+            raise RuntimeError("a run stopped early")
+        timings.append(timing.cpu_ms)
+    return np.array(timings)
+
+
+def figures(per_run):
+    """The phase's figures from each step's fastest run, and the worst single run's longest step."""
+    fastest = per_run.min(axis=0)
+    return {"median_ms": float(np.median(fastest)), "p95_ms": float(np.percentile(fastest, 95)),
+            "max_ms": float(fastest.max()), "total_ms": float(fastest.sum()),
+            "runs_longest_ms": [float(run.max()) for run in per_run]}
+
+
+def engines_for(boxes):
+    """(name, maker) of this engine and each Rust peer that is built."""
+    makers = [(compare.Ours.name, compare.Ours)]
+    for peer in (compare.Rapier, compare.Jolt):
+        try:
+            peer(boxes)
+        except compare.PeerMissing:
+            continue
+        makers.append((peer.name, peer))
+    return makers
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--boxes", type=int, default=1000)
+    parser.add_argument("--runs", type=int, default=2, help="falling phases per engine and pile")
+    parser.add_argument("--seconds", type=float, default=compare.FALLING_SECONDS, help="simulated s of the phase")
+    parser.add_argument("--scenes", nargs="+", choices=sorted(PILES), default=["loose", "dense"])
+    parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
+    args = parser.parse_args()
+    if args.runs < 1 or args.boxes < 1 or args.seconds <= 0:
+        parser.error("--runs and --boxes must be at least 1 and --seconds positive")
+    print(compare.rust_peers_status(), flush=True)
+    warm_up()
+    result = {"boxes": args.boxes, "runs": args.runs, "seconds": args.seconds, "solver_threads": compare.SOLVER_THREADS,
+              "time": time.strftime("%Y-%m-%d %H:%M:%S"), "piles": {}}
+    for pile in args.scenes:
+        boxes = PILES[pile](args.boxes)
+        rows = {name: figures(falling_steps(boxes, make, args.runs, args.seconds)) for name, make in engines_for(boxes)}
+        result["piles"][pile] = rows
+        print(f"\n{pile} pile of {args.boxes}, falling phase ({args.seconds:g} s), thread CPU ms a step, "
+              f"each step's fastest of {args.runs} runs:")
+        print(f"  {'engine':<12} {'median':>7} {'p95':>7} {'longest':>8} {'total':>8}  runs' own longest")
+        for name, row in rows.items():
+            print(f"  {name:<12} {row['median_ms']:>7.3f} {row['p95_ms']:>7.3f} {row['max_ms']:>8.3f} "
+                  f"{row['total_ms']:>8.1f}  {', '.join(f'{v:.2f}' for v in row['runs_longest_ms'])}")
+        ours = rows[compare.Ours.name]
+        for name, row in rows.items():
+            if name == compare.Ours.name:
+                continue
+            ratio = {key: ours[key] / row[key] for key in ("median_ms", "p95_ms", "max_ms", "total_ms")}
+            ours["x_" + name] = ratio
+            goals = ""
+            if name == compare.Rapier.name:
+                goals = "; issue 36.2: " + ", ".join(
+                    f"{label} {'met' if ratio[key] <= goal else 'NOT met'} (goal {goal:g}x)"
+                    for key, label, goal in GOALS)
+            print(f"  ours / {name}: median {ratio['median_ms']:.2f}x, p95 {ratio['p95_ms']:.2f}x, "
+                  f"longest {ratio['max_ms']:.2f}x, total {ratio['total_ms']:.2f}x{goals}")
+    args.out.mkdir(parents=True, exist_ok=True)
+    path = args.out / "falling.json"
+    path.write_text(json.dumps(result, indent=2))
+    print(f"\nresults: {path}")
+
+
+if __name__ == "__main__":
+    main()
