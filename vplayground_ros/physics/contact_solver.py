@@ -341,6 +341,16 @@ def solve_selected(velocity, contacts, sweeps, target, normal_impulse, friction,
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH, inline="always")
+def row_speed(rows, c, r, dv0, dv1, dv2, wa0, wa1, wa2, wb0, wb1, wb2):
+    """Relative velocity along row r of point c: d . (v_B - v_A) - arm_A . w_A + arm_B . w_B."""
+    speed = 0.0
+    speed += rows[c, r, DIRECTION] * dv0 - rows[c, r, ARM_A] * wa0 + rows[c, r, ARM_B] * wb0
+    speed += rows[c, r, DIRECTION + 1] * dv1 - rows[c, r, ARM_A + 1] * wa1 + rows[c, r, ARM_B + 1] * wb1
+    speed += rows[c, r, DIRECTION + 2] * dv2 - rows[c, r, ARM_A + 2] * wa2 + rows[c, r, ARM_B + 2] * wb2
+    return speed
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, fastmath=SOLVER_MATH, inline="always")
 def solve_span(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, points, start, end,
                backwards, target, normal_impulse, friction, with_friction):
     """One sweep of sequential impulses over points[start:end] (backwards: from the end). Per
@@ -348,20 +358,24 @@ def solve_span(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, point
     with a non-negative accumulated impulse. A row's relative velocity is d . (v_B - v_A) +
     arm_B . w_B - arm_A . w_A; an impulse j along it changes v by -/+ inv_mass j d and w by -/+
     j turn. Static sides (no inverse mass, so no turn either) are not written: their change is
-    zero, and two threads may share one (the ground). (Inlined into its callers, and the
-    per-point work inlined here: Numba would pay reference counting for each array passed to a
-    call, and the two-thread solve calls this for every stretch of points between waits.)"""
+    zero, and two threads may share one (the ground). The two bodies' velocities are read into
+    locals once a point and written back once: stored into `velocity` between the rows, they
+    made the compiler read the rows again after every store (it cannot tell that the arrays do
+    not overlap). (Inlined into its callers, and the per-point work inlined here: Numba would
+    pay reference counting for each array passed to a call, and the two-thread solve calls this
+    for every stretch of points between waits.)"""
     for k in range(start, end):
         c = points[end - 1 - (k - start)] if backwards else points[k]
         goal = target[c]
         a, b = rows_a[c], rows_b[c]
         m_a, m_b = row_inv_mass[c, 0], row_inv_mass[c, 1]
+        va0, va1, va2, wa0, wa1, wa2 = (velocity[a, 0], velocity[a, 1], velocity[a, 2],
+                                        velocity[a, 3], velocity[a, 4], velocity[a, 5])
+        vb0, vb1, vb2, wb0, wb1, wb2 = (velocity[b, 0], velocity[b, 1], velocity[b, 2],
+                                        velocity[b, 3], velocity[b, 4], velocity[b, 5])
         if with_friction:
-            v1 = v2 = 0.0
-            for e in range(3):
-                dv, wa, wb = velocity[b, e] - velocity[a, e], velocity[a, 3 + e], velocity[b, 3 + e]
-                v1 += rows[c, 1, DIRECTION + e] * dv - rows[c, 1, ARM_A + e] * wa + rows[c, 1, ARM_B + e] * wb
-                v2 += rows[c, 2, DIRECTION + e] * dv - rows[c, 2, ARM_A + e] * wa + rows[c, 2, ARM_B + e] * wb
+            v1 = row_speed(rows, c, 1, vb0 - va0, vb1 - va1, vb2 - va2, wa0, wa1, wa2, wb0, wb1, wb2)
+            v2 = row_speed(rows, c, 2, vb0 - va0, vb1 - va1, vb2 - va2, wa0, wa1, wa2, wb0, wb1, wb2)
             old1, old2 = friction[c, 0], friction[c, 1]
             new1, new2 = old1 - row_mass[c, 1] * v1, old2 - row_mass[c, 2] * v2
             magnitude = np.sqrt(new1 * new1 + new2 * new2)
@@ -371,29 +385,38 @@ def solve_span(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, point
                 new2 *= limit / magnitude
             friction[c, 0], friction[c, 1] = new1, new2
             d1, d2 = new1 - old1, new2 - old2
-            for e in range(3):
-                linear = rows[c, 1, DIRECTION + e] * d1 + rows[c, 2, DIRECTION + e] * d2
-                if m_a != 0.0:
-                    velocity[a, e] -= m_a * linear
-                    velocity[a, 3 + e] -= rows[c, 1, TURN_A + e] * d1 + rows[c, 2, TURN_A + e] * d2
-                if m_b != 0.0:
-                    velocity[b, e] += m_b * linear
-                    velocity[b, 3 + e] += rows[c, 1, TURN_B + e] * d1 + rows[c, 2, TURN_B + e] * d2
-        vn = 0.0
-        for e in range(3):
-            vn += (rows[c, 0, DIRECTION + e] * (velocity[b, e] - velocity[a, e])
-                   - rows[c, 0, ARM_A + e] * velocity[a, 3 + e] + rows[c, 0, ARM_B + e] * velocity[b, 3 + e])
+            linear0 = rows[c, 1, DIRECTION] * d1 + rows[c, 2, DIRECTION] * d2
+            linear1 = rows[c, 1, DIRECTION + 1] * d1 + rows[c, 2, DIRECTION + 1] * d2
+            linear2 = rows[c, 1, DIRECTION + 2] * d1 + rows[c, 2, DIRECTION + 2] * d2
+            if m_a != 0.0:
+                va0, va1, va2 = va0 - m_a * linear0, va1 - m_a * linear1, va2 - m_a * linear2
+                wa0 -= rows[c, 1, TURN_A] * d1 + rows[c, 2, TURN_A] * d2
+                wa1 -= rows[c, 1, TURN_A + 1] * d1 + rows[c, 2, TURN_A + 1] * d2
+                wa2 -= rows[c, 1, TURN_A + 2] * d1 + rows[c, 2, TURN_A + 2] * d2
+            if m_b != 0.0:
+                vb0, vb1, vb2 = vb0 + m_b * linear0, vb1 + m_b * linear1, vb2 + m_b * linear2
+                wb0 += rows[c, 1, TURN_B] * d1 + rows[c, 2, TURN_B] * d2
+                wb1 += rows[c, 1, TURN_B + 1] * d1 + rows[c, 2, TURN_B + 1] * d2
+                wb2 += rows[c, 1, TURN_B + 2] * d1 + rows[c, 2, TURN_B + 2] * d2
+        vn = row_speed(rows, c, 0, vb0 - va0, vb1 - va1, vb2 - va2, wa0, wa1, wa2, wb0, wb1, wb2)
         old = normal_impulse[c]
         new = max(old + row_mass[c, 0] * (goal - vn), 0.0)
         normal_impulse[c] = new
         d = new - old
-        for e in range(3):
-            if m_a != 0.0:
-                velocity[a, e] -= m_a * d * rows[c, 0, DIRECTION + e]
-                velocity[a, 3 + e] -= d * rows[c, 0, TURN_A + e]
-            if m_b != 0.0:
-                velocity[b, e] += m_b * d * rows[c, 0, DIRECTION + e]
-                velocity[b, 3 + e] += d * rows[c, 0, TURN_B + e]
+        if m_a != 0.0:
+            velocity[a, 0] = va0 - m_a * d * rows[c, 0, DIRECTION]
+            velocity[a, 1] = va1 - m_a * d * rows[c, 0, DIRECTION + 1]
+            velocity[a, 2] = va2 - m_a * d * rows[c, 0, DIRECTION + 2]
+            velocity[a, 3] = wa0 - d * rows[c, 0, TURN_A]
+            velocity[a, 4] = wa1 - d * rows[c, 0, TURN_A + 1]
+            velocity[a, 5] = wa2 - d * rows[c, 0, TURN_A + 2]
+        if m_b != 0.0:
+            velocity[b, 0] = vb0 + m_b * d * rows[c, 0, DIRECTION]
+            velocity[b, 1] = vb1 + m_b * d * rows[c, 0, DIRECTION + 1]
+            velocity[b, 2] = vb2 + m_b * d * rows[c, 0, DIRECTION + 2]
+            velocity[b, 3] = wb0 + d * rows[c, 0, TURN_B]
+            velocity[b, 4] = wb1 + d * rows[c, 0, TURN_B + 1]
+            velocity[b, 5] = wb2 + d * rows[c, 0, TURN_B + 2]
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
@@ -698,25 +721,27 @@ def view_speed(view, k, r, start, u):
 def shock_point(u, k, c, view, target, mu, impulse, friction, shock, shock_friction):
     """One support point of a sweep: the friction circle on the total friction, then the
     normal row on the total. Returns the upper body's new velocity and the largest velocity
-    change a row made."""
+    change a row made. (The point's one-sided impulses are stored last, after every read:
+    a store between them made the compiler read again what it had read before.)"""
+    shock0, shock1, shock2 = shock[c], shock_friction[c, 0], shock_friction[c, 1]
+    contact_impulse = impulse[c]
     v1 = view_speed(view, k, 1, view[k, 1, BIAS], u)
     v2 = view_speed(view, k, 2, view[k, 2, BIAS], u)
-    old1 = friction[c, 0] + shock_friction[c, 0]
-    old2 = friction[c, 1] + shock_friction[c, 1]
+    old1 = friction[c, 0] + shock1
+    old2 = friction[c, 1] + shock2
     new1 = old1 - view[k, 1, MASS] * v1
     new2 = old2 - view[k, 2, MASS] * v2
     magnitude = np.sqrt(new1 * new1 + new2 * new2)
     # Until this sweep's normal row has run, the total is negative where last step's one-sided
     # impulse (the warm start) outweighs this step's contact pass: no friction then (a negative
     # limit turned the friction round and kept its size).
-    limit = mu[c] * max(impulse[c] + shock[c], 0.0)
+    total = contact_impulse + shock0
+    limit = mu[c] * max(total, 0.0)
     if magnitude > limit:
         new1 *= limit / magnitude
         new2 *= limit / magnitude
     d1, d2 = new1 - old1, new2 - old2
     largest = max(abs(d1) * view[k, 1, INV_MASS], abs(d2) * view[k, 2, INV_MASS])
-    shock_friction[c, 0] += d1
-    shock_friction[c, 1] += d2
     u0, u1, u2, u3, u4, u5 = u
     u0 += view[k, 1, PUSH_LINEAR + 0] * d1 + view[k, 2, PUSH_LINEAR + 0] * d2
     u1 += view[k, 1, PUSH_LINEAR + 1] * d1 + view[k, 2, PUSH_LINEAR + 1] * d2
@@ -725,10 +750,10 @@ def shock_point(u, k, c, view, target, mu, impulse, friction, shock, shock_frict
     u4 += view[k, 1, PUSH_ANGULAR + 1] * d1 + view[k, 2, PUSH_ANGULAR + 1] * d2
     u5 += view[k, 1, PUSH_ANGULAR + 2] * d1 + view[k, 2, PUSH_ANGULAR + 2] * d2
     vn = view_speed(view, k, 0, view[k, 0, BIAS], (u0, u1, u2, u3, u4, u5))
-    total = impulse[c] + shock[c]
     d = max(total + view[k, 0, MASS] * (target[c] - vn), 0.0) - total
     largest = max(largest, abs(d) * view[k, 0, INV_MASS])
-    shock[c] += d
+    shock_friction[c, 0], shock_friction[c, 1] = shock1 + d1, shock2 + d2
+    shock[c] = shock0 + d
     return ((u0 + view[k, 0, PUSH_LINEAR + 0] * d, u1 + view[k, 0, PUSH_LINEAR + 1] * d,
              u2 + view[k, 0, PUSH_LINEAR + 2] * d, u3 + view[k, 0, PUSH_ANGULAR + 0] * d,
              u4 + view[k, 0, PUSH_ANGULAR + 1] * d, u5 + view[k, 0, PUSH_ANGULAR + 2] * d), largest)
