@@ -619,16 +619,16 @@ class World(WorldQueries):
         new_second = (self.step_count + n) // rate != self.step_count // rate
         if refreeze or new_second:
             self._unchecked[:] = True
-        else:
-            b = self._bodies
-            self._unchecked |= ~(b.frozen | b.immovable)  # the bodies this call moves
         if n > 0 and self.resting_shortcut and not self.profiling:  # (stage timers: compiled)
             started = time.thread_time()
             if resting_steps(self._bodies, self._broad, self._vehicles.arrays, self._contacts, n):
                 self.engine_cpu_seconds += time.thread_time() - started
                 self.time += n * dt
                 self.step_count += n
-                return
+                return  # every body frozen or immovable: this call moved none
+        if not (refreeze or new_second):
+            b = self._bodies
+            self._unchecked |= ~(b.frozen | b.immovable)  # the bodies this call moves
         counters = np.zeros(5, np.int64)
         done = 0
         while done < n:
