@@ -35,22 +35,24 @@ BUDGET_S = 300.0
 
 
 def falling_steps(boxes, make_engine, runs, seconds):
-    """Each run's thread CPU ms per step, (runs, steps), every run from a new engine on `boxes`."""
-    timings = []
+    """Each run's thread CPU ms per step, (runs, steps), every run from a new engine on `boxes`,
+    and what the runs warned of (a peer's errors, a peer on more than one thread)."""
+    timings, warnings = [], []
     for _ in range(runs):
         timing = compare.Timing()
         if not timing.run(make_engine(boxes), seconds, BUDGET_S):
             raise RuntimeError("a run stopped early")
         timings.append(timing.cpu_ms)
-    return np.array(timings)
+        warnings += [w for w in timing.warnings if w not in warnings]
+    return np.array(timings), warnings
 
 
-def figures(per_run):
-    """The phase's figures from each step's fastest run, and the worst single run's longest step."""
+def figures(per_run, warnings):
+    """The phase's figures from each step's fastest run, and each run's own longest step."""
     fastest = per_run.min(axis=0)
     return {"median_ms": float(np.median(fastest)), "p95_ms": float(np.percentile(fastest, 95)),
             "max_ms": float(fastest.max()), "total_ms": float(fastest.sum()),
-            "runs_longest_ms": [float(run.max()) for run in per_run]}
+            "runs_longest_ms": [float(run.max()) for run in per_run], "warnings": warnings}
 
 
 def engines_for(boxes):
@@ -73,22 +75,23 @@ def main():
     parser.add_argument("--scenes", nargs="+", choices=sorted(PILES), default=["loose", "dense"])
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
     args = parser.parse_args()
-    if args.runs < 1 or args.boxes < 1 or args.seconds <= 0:
-        parser.error("--runs and --boxes must be at least 1 and --seconds positive")
+    if args.runs < 1 or args.boxes < 1 or round(args.seconds * compare.RATE) < 1:
+        parser.error(f"--runs and --boxes must be at least 1 and --seconds at least one step (1/{compare.RATE} s)")
     print(compare.rust_peers_status(), flush=True)
     warm_up()
     result = {"boxes": args.boxes, "runs": args.runs, "seconds": args.seconds, "solver_threads": compare.SOLVER_THREADS,
               "time": time.strftime("%Y-%m-%d %H:%M:%S"), "piles": {}}
     for pile in args.scenes:
         boxes = PILES[pile](args.boxes)
-        rows = {name: figures(falling_steps(boxes, make, args.runs, args.seconds)) for name, make in engines_for(boxes)}
+        rows = {name: figures(*falling_steps(boxes, make, args.runs, args.seconds)) for name, make in engines_for(boxes)}
         result["piles"][pile] = rows
         print(f"\n{pile} pile of {args.boxes}, falling phase ({args.seconds:g} s), thread CPU ms a step, "
               f"each step's fastest of {args.runs} runs:")
         print(f"  {'engine':<12} {'median':>7} {'p95':>7} {'longest':>8} {'total':>8}  runs' own longest")
         for name, row in rows.items():
             print(f"  {name:<12} {row['median_ms']:>7.3f} {row['p95_ms']:>7.3f} {row['max_ms']:>8.3f} "
-                  f"{row['total_ms']:>8.1f}  {', '.join(f'{v:.2f}' for v in row['runs_longest_ms'])}")
+                  f"{row['total_ms']:>8.1f}  {', '.join(f'{v:.2f}' for v in row['runs_longest_ms'])}"
+                  + "".join(f"; {warning}" for warning in row["warnings"]))
         ours = rows[compare.Ours.name]
         for name, row in rows.items():
             if name == compare.Ours.name:

@@ -184,13 +184,15 @@ class SimulatorNode(Node):
                                      COMMAND_QOS if sub.key == "cmd_vel" else QOS["reliable_10"])
         self._command_type = interface_class(next(sub.type for sub in table if sub.key == "cmd_vel"))
         self._commands = {}  # absolute topic -> subscription of a robot's (a namespaced cmd_vel, a URDF robot's commands)
-        self._follow_robots()
         # Robots come and go with the snapshot's vehicles and URDF robots: the simulation thread
         # wakes the executor when those change. (A timer looking 4 times a second cost ~0.3 % of
         # a core in a world at rest: each wake rebuilds the executor's wait set of every service.)
+        # Watched before the first look, so a robot that comes in between (a Foxglove client's
+        # spawn, served already) is either seen by it or triggers the next.
         self._robots_seen = (runtime.sim.snapshot.vehicle_specs, runtime.sim.snapshot.robot_specs)
         self._robots_changed = self.create_guard_condition(self._follow_robots)
         runtime.sim.add_listener(self._watch_robots)
+        self._follow_robots()
         missing = []
         # The default group runs one callback at a time and holds it across an await: what
         # runs aside gets a group that lets everything else through meanwhile.

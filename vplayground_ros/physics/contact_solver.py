@@ -359,7 +359,8 @@ def solve_span(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, point
     arm_B . w_B - arm_A . w_A; an impulse j along it changes v by -/+ inv_mass j d and w by -/+
     j turn. Static sides (no inverse mass, so no turn either) are not written: their change is
     zero, and two threads may share one (the ground). The two bodies' velocities are read into
-    locals once a point and written back once: stored into `velocity` between the rows, they
+    locals once a point and written back once (they are two rows: the broad phase pairs no body
+    with itself, and only the ground is the static row): stored into `velocity` between the rows, they
     made the compiler read the rows again after every store (it cannot tell that the arrays do
     not overlap). (Inlined into its callers, and the per-point work inlined here: Numba would
     pay reference counting for each array passed to a call, and the two-thread solve calls this
