@@ -277,25 +277,29 @@ def join_levels(fine, fine_level, coarse, coarse_level, kind, aabb_min, aabb_max
         # Within one index and level, each unordered pair of a cell's entries once.
         first = max(cursor, e + 1) if kind == MOVING_MOVING and shift == 0 else cursor
         i = fine_ids[e]
+        # i's flags and bounds in locals: read in the loop, they were read again after each pair
+        # stored (the compiler cannot tell pair_a from the arrays it reads).
+        awake_i, static_i = awake[i], static_indexed[i]
+        lo0, lo1, lo2 = aabb_min[i, 0], aabb_min[i, 1], aabb_min[i, 2]
+        hi0, hi1, hi2 = aabb_max[i, 0], aabb_max[i, 1], aabb_max[i, 2]
         for k in range(first, c1):
             if coarse_keys[k] != ancestor:
                 break
             j = coarse_ids[k]
             if kind == MOVING_MOVING:
-                if not (awake[i] or awake[j]):
+                if not (awake_i or awake[j]):
                     continue
             elif kind == MOVING_STATIC:
-                if not (awake[i] and static_indexed[j]):
+                if not (awake_i and static_indexed[j]):
                     continue
-            elif not (static_indexed[i] and awake[j]):
+            elif not (static_i and awake[j]):
                 continue
-            if not (aabb_min[i, 0] <= aabb_max[j, 0] and aabb_min[j, 0] <= aabb_max[i, 0]
-                    and aabb_min[i, 1] <= aabb_max[j, 1] and aabb_min[j, 1] <= aabb_max[i, 1]
-                    and aabb_min[i, 2] <= aabb_max[j, 2] and aabb_min[j, 2] <= aabb_max[i, 2]):
+            if not (lo0 <= aabb_max[j, 0] and aabb_min[j, 0] <= hi0 and lo1 <= aabb_max[j, 1]
+                    and aabb_min[j, 1] <= hi1 and lo2 <= aabb_max[j, 2] and aabb_min[j, 2] <= hi2):
                 continue
-            corner = morton(cell_coordinate(max(aabb_min[i, 0], aabb_min[j, 0]), root_min[0], size, cells),
-                            cell_coordinate(max(aabb_min[i, 1], aabb_min[j, 1]), root_min[1], size, cells),
-                            cell_coordinate(max(aabb_min[i, 2], aabb_min[j, 2]), root_min[2], size, cells))
+            corner = morton(cell_coordinate(max(lo0, aabb_min[j, 0]), root_min[0], size, cells),
+                            cell_coordinate(max(lo1, aabb_min[j, 1]), root_min[1], size, cells),
+                            cell_coordinate(max(lo2, aabb_min[j, 2]), root_min[2], size, cells))
             if fine_base + corner != key:
                 continue
             if count >= len(pair_a):

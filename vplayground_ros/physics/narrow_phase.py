@@ -241,7 +241,7 @@ def reduce_manifold(points, depths, n, normal, keep):
     return count
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
 def box_box(pa, ra, ha, pb, rb, hb, margin, poly_a, poly_b, out_point, out_depth):
     """Manifold of boxes A and B: returns (point count, normal A -> B)."""
     kind, index, separation, normal = box_box_axis(pa, ra, ha, pb, rb, hb, margin)
