@@ -120,7 +120,7 @@ def box_box_axis(pa, ra, ha, pb, rb, hb, margin):
     return 0, i, best_a, (ra[0][i] * sign, ra[1][i] * sign, ra[2][i] * sign)
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
 def incident_box_face(p, r, h, normal, out):
     """Writes to out the 4 corners (in order around it) of the face of box (p, r, h) most
     anti-parallel to `normal`, the reference normal pointing at this box."""
@@ -155,7 +155,7 @@ def keep_below(poly, n, origin, normal, margin, out_point, out_depth):
     return kept
 
 
-@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
 def clip_to_box_face(pr, rr, hr, face_axis, normal, poly_a, n, poly_b, margin, out_point,
                      out_depth):
     """Clips the incident polygon in poly_a (n world points) to the side planes of the reference
@@ -243,7 +243,9 @@ def reduce_manifold(points, depths, n, normal, keep):
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
 def box_box(pa, ra, ha, pb, rb, hb, margin, poly_a, poly_b, out_point, out_depth):
-    """Manifold of boxes A and B: returns (point count, normal A -> B)."""
+    """Manifold of boxes A and B: returns (point count, normal A -> B). (Inlined into its
+    callers, with the face clipping it calls: as calls handing over the scratch arrays they took
+    ~15 % of a pile's narrow phase.)"""
     kind, index, separation, normal = box_box_axis(pa, ra, ha, pb, rb, hb, margin)
     if kind < 0:
         return 0, normal
