@@ -4,10 +4,11 @@ few seconds. The overhead is everything the node process does beyond the engine'
 (snapshots, messages, bag, ROS, callbacks): the process's CPU time minus the CPU time its
 simulation thread spent inside the compiled step over the same interval (/diagnostics
 `engine_cpu_s`), as % of one core. Also per thread (the node runs under named_node.py, which
-gives the Python threads' names to the OS), the time from starting the process to the first
-~/bodies/poses message (warm Numba cache), and the bag's bytes per simulated second. With
---foxglove the built-in Foxglove server runs too, with a WebSocket client subscribed to every
-channel (foxglove_viewer.py, in a process of its own as a viewer is). With --awake the pile
+gives the Python threads' names to the OS) with how often each thread slept and was woken, the
+time from starting the process to the first ~/bodies/poses message (warm Numba cache), and the
+bag's bytes per simulated second. With --foxglove the built-in Foxglove server runs too, with a
+WebSocket client subscribed to every channel (foxglove_viewer.py, in a process of its own as a
+viewer is). With --awake the pile
 never freezes (freezing off, 2 s after the drop): the boxes jostle in contact all along, so
 every pose, marker, transform and contact changes each round.
 
@@ -66,6 +67,23 @@ def thread_cpu_seconds(pid):
         except (FileNotFoundError, ProcessLookupError):
             continue
     return seconds
+
+
+def thread_wakes(pid):
+    """{thread name: the times the threads of that name went to sleep and were woken (voluntary
+    context switches, /proc)}: an idle node's cost on a VM follows these more than its work (a
+    thread's first ~100 us after a sleep run many times slower than hot)."""
+    wakes = {}
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            name = (task / "comm").read_text().strip()
+            status = (task / "status").read_text()
+        except (FileNotFoundError, ProcessLookupError):
+            continue
+        switches = next(int(line.split()[1]) for line in status.splitlines()
+                        if line.startswith("voluntary_ctxt_switches"))
+        wakes[name] = wakes.get(name, 0) + switches
+    return wakes
 
 
 def settled_scene(boxes, path):
@@ -179,13 +197,14 @@ def measure(args, workspace):
             rclpy.spin_once(client, timeout_sec=0.05)
         values = diagnostic_values(latest["diag"])
         return (time.perf_counter(), cpu_seconds(f"/proc/{node.pid}/stat"), thread_cpu_seconds(node.pid),
+                thread_wakes(node.pid),
                 {key: float(values[key]) for key in ("simulation_thread_cpu_s", "engine_cpu_s", "time")},
                 float(values["achieved_real_time_factor"]), values)
-    wall0, cpu0, threads0, node0, _, _ = sample()
+    wall0, cpu0, threads0, wakes0, node0, _, _ = sample()
     end = time.perf_counter() + args.seconds
     while time.perf_counter() < end:
         rclpy.spin_once(client, timeout_sec=0.05)
-    wall1, cpu1, threads1, node1, rtf, values = sample()
+    wall1, cpu1, threads1, wakes1, node1, rtf, values = sample()
     foxglove_frames = None
     if foxglove:
         foxglove.stdin.close()
@@ -201,6 +220,8 @@ def measure(args, workspace):
     simulation_thread = node1["simulation_thread_cpu_s"] - node0["simulation_thread_cpu_s"]
     threads = {name: percent(seconds - threads0.get(name, 0.0)) for name, seconds in threads1.items()}
     threads = {name: share for name, share in threads.items() if share > 0}  # idle middleware threads left out
+    wakes = {name: round((count - wakes0.get(name, 0)) / wall) for name, count in wakes1.items()}
+    wakes = {name: rate for name, rate in wakes.items() if rate > 0}
     result = {"boxes": int(values["frozen"]) + int(values["active"]), "frozen_at_start": frozen_at_start,
               "frozen_at_end": int(values["frozen"]), "foxglove": args.foxglove, "seconds": round(wall, 1),
               "process_cpu_percent": percent(process), "engine_cpu_percent": percent(engine),
@@ -208,6 +229,8 @@ def measure(args, workspace):
               "simulation_thread_percent": percent(simulation_thread),
               "simulation_thread_beyond_engine_percent": percent(simulation_thread - engine),
               "threads_percent": dict(sorted(threads.items(), key=lambda item: -item[1])),
+              "wakes_per_second": sum(wakes.values()),
+              "threads_wakes_per_second": dict(sorted(wakes.items(), key=lambda item: -item[1])),
               "achieved_rtf": rtf, "simulated_seconds": round(node1["time"] - node0["time"], 2),
               "start_to_first_pose_s": round(first_pose[0], 2) if first_pose else None,
               "bag_bytes_per_sim_second": round(bag.stat().st_size / max(node1["time"], 1e-9)),
