@@ -8,9 +8,8 @@ gives the Python threads' names to the OS) with how often each thread slept and 
 time from starting the process to the first ~/bodies/poses message (warm Numba cache), and the
 bag's bytes per simulated second. With --foxglove the built-in Foxglove server runs too, with a
 WebSocket client subscribed to every channel (foxglove_viewer.py, in a process of its own as a
-viewer is). With --awake the pile
-never freezes (freezing off, 2 s after the drop): the boxes jostle in contact all along, so
-every pose, marker, transform and contact changes each round.
+viewer is). With --awake the pile never freezes (freezing off, 2 s after the drop): the boxes
+jostle in contact all along, so every pose, marker, transform and contact changes each round.
 
     python bench/node_overhead.py [--boxes 1000] [--seconds 20] [--foxglove] [--awake] [--scene PATH]
                                   [--param NAME:=VALUE ...]
