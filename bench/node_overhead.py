@@ -55,34 +55,25 @@ def cpu_seconds(stat_path):
     return (int(fields[11]) + int(fields[12])) / CLOCK_TICKS
 
 
-def thread_cpu_seconds(pid):
-    """{thread name: CPU seconds of the threads of that name}; threads that end meanwhile are
-    skipped (their time stays in the process's)."""
-    seconds = {}
+def thread_counters(pid):
+    """{thread name: (CPU seconds, wakes)} summed over the threads of that name, the wakes being
+    the times they went to sleep and were woken (voluntary context switches): on a VM an idle
+    node's cost follows these more than its work (a thread's first ~100 us after a sleep run many
+    times slower than hot). Threads that end meanwhile are skipped (their CPU time stays in the
+    process's)."""
+    counters = {}
     for task in Path(f"/proc/{pid}/task").iterdir():
         try:
             name = (task / "comm").read_text().strip()
-            seconds[name] = seconds.get(name, 0.0) + cpu_seconds(task / "stat")
-        except (FileNotFoundError, ProcessLookupError):
-            continue
-    return seconds
-
-
-def thread_wakes(pid):
-    """{thread name: the times the threads of that name went to sleep and were woken (voluntary
-    context switches, /proc)}: an idle node's cost on a VM follows these more than its work (a
-    thread's first ~100 us after a sleep run many times slower than hot)."""
-    wakes = {}
-    for task in Path(f"/proc/{pid}/task").iterdir():
-        try:
-            name = (task / "comm").read_text().strip()
+            seconds = cpu_seconds(task / "stat")
             status = (task / "status").read_text()
         except (FileNotFoundError, ProcessLookupError):
             continue
-        switches = next(int(line.split()[1]) for line in status.splitlines()
-                        if line.startswith("voluntary_ctxt_switches"))
-        wakes[name] = wakes.get(name, 0) + switches
-    return wakes
+        wakes = next(int(line.split()[1]) for line in status.splitlines()
+                     if line.startswith("voluntary_ctxt_switches"))
+        cpu, woken = counters.get(name, (0.0, 0))
+        counters[name] = (cpu + seconds, woken + wakes)
+    return counters
 
 
 def settled_scene(boxes, path):
@@ -187,23 +178,23 @@ def measure(args, workspace):
         rclpy.spin_once(client, timeout_sec=0.05)
 
     def sample():
-        """At the arrival of a fresh /diagnostics: wall time, the process's and its threads' CPU
-        seconds, and the node's own figures (read as it sent them, so both cover one interval)."""
+        """At the arrival of a fresh /diagnostics: wall time, the process's CPU seconds, its
+        threads' CPU seconds and wakes, and the node's own figures (read as it sent them, so both
+        cover one interval)."""
         previous, deadline = latest.get("diag"), time.perf_counter() + 10
         while latest.get("diag") is previous:
             if time.perf_counter() > deadline:
                 raise RuntimeError(f"no /diagnostics from the node for 10 s (exit code {node.poll()})")
             rclpy.spin_once(client, timeout_sec=0.05)
         values = diagnostic_values(latest["diag"])
-        return (time.perf_counter(), cpu_seconds(f"/proc/{node.pid}/stat"), thread_cpu_seconds(node.pid),
-                thread_wakes(node.pid),
+        return (time.perf_counter(), cpu_seconds(f"/proc/{node.pid}/stat"), thread_counters(node.pid),
                 {key: float(values[key]) for key in ("simulation_thread_cpu_s", "engine_cpu_s", "time")},
                 float(values["achieved_real_time_factor"]), values)
-    wall0, cpu0, threads0, wakes0, node0, _, _ = sample()
+    wall0, cpu0, threads0, node0, _, _ = sample()
     end = time.perf_counter() + args.seconds
     while time.perf_counter() < end:
         rclpy.spin_once(client, timeout_sec=0.05)
-    wall1, cpu1, threads1, wakes1, node1, rtf, values = sample()
+    wall1, cpu1, threads1, node1, rtf, values = sample()
     foxglove_frames = None
     if foxglove:
         foxglove.stdin.close()
@@ -217,9 +208,9 @@ def measure(args, workspace):
     process = cpu1 - cpu0
     engine = node1["engine_cpu_s"] - node0["engine_cpu_s"]
     simulation_thread = node1["simulation_thread_cpu_s"] - node0["simulation_thread_cpu_s"]
-    threads = {name: percent(seconds - threads0.get(name, 0.0)) for name, seconds in threads1.items()}
+    threads = {name: percent(seconds - threads0.get(name, (0.0, 0))[0]) for name, (seconds, _) in threads1.items()}
     threads = {name: share for name, share in threads.items() if share > 0}  # idle middleware threads left out
-    wakes = {name: round((count - wakes0.get(name, 0)) / wall) for name, count in wakes1.items()}
+    wakes = {name: round((count - threads0.get(name, (0.0, 0))[1]) / wall) for name, (_, count) in threads1.items()}
     wakes = {name: rate for name, rate in wakes.items() if rate > 0}
     result = {"boxes": int(values["frozen"]) + int(values["active"]), "frozen_at_start": frozen_at_start,
               "frozen_at_end": int(values["frozen"]), "foxglove": args.foxglove, "seconds": round(wall, 1),
