@@ -134,9 +134,14 @@ class RustPeer:
     the final positions and how many bodies sleep. Z up, SI units."""
     program = None
 
+    @classmethod
+    def built(cls):
+        """Whether bench/peers/build.sh has built this peer's program."""
+        return (PEER_PROGRAMS / cls.program).exists()
+
     def __init__(self, boxes, sleeping=True):
         self.path = PEER_PROGRAMS / self.program
-        if not self.path.exists():
+        if not self.built():
             raise PeerMissing(self.path)
         self.boxes, self.sleeping = boxes, sleeping
         self.final_positions, self.asleep = None, None
@@ -186,7 +191,7 @@ class Jolt(RustPeer):
 
 def rust_peers_status():
     """A line saying which Rust peers will run, and why any will not."""
-    missing = [peer.program for peer in (Rapier, Jolt) if not (PEER_PROGRAMS / peer.program).exists()]
+    missing = [peer.program for peer in (Rapier, Jolt) if not peer.built()]
     if not missing:
         return "Rust peers: Rapier and Jolt (bench/peers)"
     why = ("cargo is not installed" if shutil.which("cargo") is None

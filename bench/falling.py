@@ -55,18 +55,6 @@ def figures(per_run, warnings):
             "runs_longest_ms": [float(run.max()) for run in per_run], "warnings": warnings}
 
 
-def engines_for(boxes):
-    """(name, maker) of this engine and each Rust peer that is built."""
-    makers = [(compare.Ours.name, compare.Ours)]
-    for peer in (compare.Rapier, compare.Jolt):
-        try:
-            peer(boxes)
-        except compare.PeerMissing:
-            continue
-        makers.append((peer.name, peer))
-    return makers
-
-
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--boxes", type=int, default=1000)
@@ -83,7 +71,8 @@ def main():
               "time": time.strftime("%Y-%m-%d %H:%M:%S"), "piles": {}}
     for pile in args.scenes:
         boxes = PILES[pile](args.boxes)
-        rows = {name: figures(*falling_steps(boxes, make, args.runs, args.seconds)) for name, make in engines_for(boxes)}
+        engines = [compare.Ours] + [peer for peer in (compare.Rapier, compare.Jolt) if peer.built()]
+        rows = {engine.name: figures(*falling_steps(boxes, engine, args.runs, args.seconds)) for engine in engines}
         result["piles"][pile] = rows
         print(f"\n{pile} pile of {args.boxes}, falling phase ({args.seconds:g} s), thread CPU ms a step, "
               f"each step's fastest of {args.runs} runs:")
