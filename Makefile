@@ -1,8 +1,8 @@
 # make run  : set up .venv and run the simulator node on the built-in default scene
 # make test : set up .venv and run the whole test suite (a worker per core)
 # make bench: this engine against Rapier, Jolt, PyBullet and MuJoCo, and the node's overhead; then the
-#             falling phase of two piles beside Rapier and Jolt (minutes; not in make test; the Rust
-#             peers build first, bench-peers, and are skipped without cargo)
+#             falling phase of two piles beside Rapier and Jolt, on one thread and on two (minutes;
+#             not in make test; the Rust peers build first, bench-peers, and are skipped without cargo)
 # make fuzz : the hostile-input tests with FUZZ_EXAMPLES (default 5000) per property, randomised
 # make soak : the node under steady traffic for DURATION seconds (default 1200), a Foxglove client
 #             subscribed to everything (SOAK_ARGS= drops it); memory, RTF, late ticks
@@ -91,7 +91,7 @@ bench-peers:
 bench: $(STAMP) bench-peers
 	$(PY) -m pip install --quiet -e ".[bench]"
 	$(PY) bench/compare.py
-	$(PY) bench/falling.py
+	$(PY) bench/falling.py --threads 2
 
 clean:
 	rm -rf $(VENV) build *.egg-info

@@ -12,7 +12,7 @@ if ! command -v cargo >/dev/null; then
     exit 1
 fi
 status=0
-for peer in rapier_bench jolt_bench; do
+for peer in rapier_bench rapier_parallel_bench jolt_bench; do
     nice -n 10 cargo build --release --locked --quiet -j "${JOBS:-2}" -p "$peer" \
         || { echo "bench/peers: $peer did not build; compare.py goes on without it" >&2; status=1; }
 done

@@ -1,6 +1,7 @@
 //! Jolt (5.0.0, through joltc-sys's JoltC) on a bench scene: default PhysicsSettings and body
-//! settings, one collision step per update, a thread-pool job system with no worker threads (its
-//! jobs run on the calling thread), Jolt's default combine rules (friction: the geometric mean;
+//! settings, one collision step per update, a thread-pool job system with the scene's `threads`
+//! less one worker threads (the calling thread runs jobs too while it waits on them: with none,
+//! everything runs on it), Jolt's default combine rules (friction: the geometric mean;
 //! restitution: the larger).
 //!
 //! JoltC cannot set the gravity, and Jolt's default is 9.81 m/s^2 along -Y: the scene (Z up) is
@@ -107,7 +108,7 @@ fn main() {
         JPC_FactoryInit();
         JPC_RegisterTypes();
         let temp_allocator = JPC_TempAllocatorImpl_new(TEMP_ALLOCATOR_BYTES);
-        let job_system = JPC_JobSystemThreadPool_new3(MAX_JOBS, MAX_BARRIERS, 0);
+        let job_system = JPC_JobSystemThreadPool_new3(MAX_JOBS, MAX_BARRIERS, scene.threads as i32 - 1);
         let layers = JPC_BroadPhaseLayerInterface_new(null(), JPC_BroadPhaseLayerInterfaceFns {
             GetNumBroadPhaseLayers: Some(broad_phase_layer_count),
             GetBroadPhaseLayer: Some(broad_phase_layer_of),
@@ -153,6 +154,6 @@ fn main() {
 
         let positions = ids.iter().map(|&id| scene_vector(JPC_BodyInterface_GetPosition(bodies, id))).collect();
         let asleep = ids.iter().filter(|&&id| !JPC_BodyInterface_IsActive(bodies, id)).count();
-        Report::new("jolt 5.0.0 (joltc-sys 0.3.1)".into(), timing, setup_s, positions, asleep, errors).print();
+        Report::new(format!("jolt 5.0.0 (joltc-sys 0.3.1), threads: {}", scene.threads), timing, setup_s, positions, asleep, errors).print();
     }
 }

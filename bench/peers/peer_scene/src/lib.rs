@@ -48,8 +48,15 @@ pub struct Scene {
     pub sleeping: bool,
     /// CPU seconds after which the run stops early (as compare.py's own engines do).
     pub budget_s: f64,
+    /// Threads the engine may step on, the calling one included (1 unless the scene asks).
+    #[serde(default = "one_thread")]
+    pub threads: usize,
     pub ground: Ground,
     pub boxes: Vec<SceneBox>,
+}
+
+fn one_thread() -> usize {
+    1
 }
 
 #[derive(Serialize)]

@@ -1,6 +1,7 @@
 //! Rapier on a bench scene: IntegrationParameters::default() with the scene's time step, the
 //! default features (no "parallel": one thread), Rapier's default friction and restitution
-//! combine rules (the average of the two colliders').
+//! combine rules (the average of the two colliders'). Built as rapier_parallel_bench too, with
+//! Rapier's "parallel" feature: it then steps on the scene's `threads` (a rayon pool of that many).
 use peer_scene::{read_scene, timed_steps, Report};
 use rapier3d::prelude::*;
 use std::time::Instant;
@@ -11,6 +12,11 @@ const GROUND_HALF_THICKNESS: f32 = 0.5;
 
 fn main() {
     let scene = read_scene();
+    #[cfg(feature = "parallel")]
+    rapier3d::rayon::ThreadPoolBuilder::new().num_threads(scene.threads).build_global()
+        .expect("the rayon pool is built once, before anything uses it");
+    #[cfg(not(feature = "parallel"))]
+    assert!(scene.threads == 1, "rapier_bench steps on one thread (rapier_parallel_bench takes `threads`)");
     let built = Instant::now();
     let mut world = PhysicsWorld::new();
     world.gravity = Vector::from(scene.gravity);
@@ -38,5 +44,6 @@ fn main() {
 
     let positions = handles.iter().map(|&h| world.bodies[h].translation().into()).collect();
     let asleep = handles.iter().filter(|&&h| world.bodies[h].is_sleeping()).count();
-    Report::new(format!("rapier3d {}", rapier3d::VERSION), timing, setup_s, positions, asleep, Vec::new()).print();
+    let threads = if cfg!(feature = "parallel") { format!(", parallel, threads: {}", scene.threads) } else { String::new() };
+    Report::new(format!("rapier3d {}{threads}", rapier3d::VERSION), timing, setup_s, positions, asleep, Vec::new()).print();
 }
