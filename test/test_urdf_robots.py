@@ -195,6 +195,37 @@ def test_an_effort_command_pushes_with_that_effort():
     assert velocity[0] == pytest.approx(-10.0, rel=1e-6) and -300.0 <= effort[0] < 0.0
 
 
+def test_a_refused_command_leaves_a_trajectory_running_and_an_ended_one_holds():
+    """A command refused for any of its joints (a NaN, an unknown joint) changes nothing: the
+    trajectory it named a joint of goes on to its end and holds there (it had been dropped before
+    the check, its motor's target moving on at the trajectory's speed for ever). A trajectory
+    ended early (RobotControl.hold, as when a point cannot be taken) holds the joint where it is."""
+    world = load_world({"version": 1, "settings": {"gravity": [0, 0, 0]}, "robots": [{"name": "kuka", "urdf": KUKA}]})
+    control = RobotControl()
+    joint = ARM_JOINTS[0]
+
+    def run_for(seconds):
+        for _ in range(round(seconds * 16)):
+            control.before_batch(world)
+            world.step(8)
+        return world.joint_states(["kuka." + joint])
+
+    control.follow(world, "kuka", [joint], None, [2.0], [[1.0]], None)
+    run_for(1.0)
+    with pytest.raises(ValueError, match="not finite"):
+        control.command(world, "kuka", "position", [joint, ARM_JOINTS[1]], [0.0, float("nan")])
+    with pytest.raises(ValueError, match="no_such_joint"):
+        control.command(world, "kuka", "position", [joint, "no_such_joint"], [0.0, 0.0])
+    position, velocity, _ = run_for(3.0)
+    assert position[0] == pytest.approx(1.0, abs=math.radians(0.2)) and abs(velocity[0]) < 1e-3
+    control.follow(world, "kuka", [joint], None, [2.0], [[0.0]], None)
+    moving = run_for(1.0)[0][0]
+    assert 0.2 < moving < 0.8
+    control.hold(world, "kuka", [joint])
+    position, velocity, _ = run_for(2.0)
+    assert position[0] == pytest.approx(moving, abs=0.02) and abs(velocity[0]) < 1e-3
+
+
 def test_a_trajectory_is_followed_within_a_degree(run):
     """A joint_trajectory_controller-style trajectory (positions and velocities at 0.1 s) of a
     sine at 0.5 Hz on every joint, followed on the simulation's clock in the node's batches."""

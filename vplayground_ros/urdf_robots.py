@@ -509,11 +509,11 @@ class RobotControl:
     def command(self, world, name, kind, joints, values, velocities=None, mimicking=False):
         """Motors of `joints` (URDF names) to `values`: position targets (with `velocities` as
         their feed-forward), velocities or efforts. A command for a joint ends the trajectory
-        that moved it; a joint that mimics another takes none (`mimicking`: before_batch's)."""
+        that moved it; a joint that mimics another takes none (`mimicking`: before_batch's). A
+        command refused (any of its joints) changes nothing: trajectories go on."""
         self._attend(world)
         spec = self.robot(world, name)
         entities, mimics = spec["model"].joint_names, spec["model"].mimics
-        self.commanded[name] = spec["id"]
         motors = {}
         for k, joint in enumerate(joints):
             entity = entities.get(joint)
@@ -540,8 +540,24 @@ class RobotControl:
                 motors[entity] = {"mode": "velocity" if effort > 0.0 else "none",
                                   "target": math.copysign(speed, value), "velocity": 0.0,
                                   "max_effort": effort if effort > 0.0 else max_effort, "max_speed": max_speed}
-            self.trajectories.pop((name, joint), None)
         world.drive_joints(motors)
+        self.commanded[name] = spec["id"]
+        for joint in joints:
+            self.trajectories.pop((name, joint), None)
+
+    def hold(self, world, name, joints):
+        """Ends the trajectories of `joints` with their motors holding where the joints are (a
+        target left moving at a trajectory's velocity would move on for ever)."""
+        for joint in joints:
+            self.trajectories.pop((name, joint), None)
+        entities = self.robot(world, name)["model"].joint_names
+        present = [joint for joint in joints if joint in entities]
+        if present:
+            positions = world.joint_states([entities[joint] for joint in present])[0]
+            try:
+                self.command(world, name, "position", present, positions, np.zeros(len(present)))
+            except ValueError as error:  # a joint's state gone non-finite
+                log.warning("%s: %s not held: %s", name, ", ".join(present), error)
 
     def follow(self, world, name, joints, start, times, positions, velocities):
         """Follows a trajectory of `joints` from `start` (simulated s; None: now)."""
@@ -625,6 +641,7 @@ class RobotControl:
                 self.command(world, name, "position", joints, positions[columns], velocities[columns])
             except ValueError as error:  # a point the joint's motor cannot take: the trajectory ends
                 log.warning("%s: trajectory of %s abandoned: %s", name, ", ".join(joints), error)
+                self.hold(world, name, joints)
                 done = True
             if not done:
                 for joint in joints:
