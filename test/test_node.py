@@ -451,15 +451,28 @@ def test_the_turning_cars_imu_yaw_rate_agrees_with_odometry(ros):
 
 
 def test_clicked_point_drops_a_box_and_initialpose_teleports_the_car(ros):
+    """A click drops a box, one outside the world is refused, and /rosout says which of the two
+    happened to each (rclpy refuses a log call site whose severity changes: the second click
+    had been reported as a malformed message)."""
+    from rcl_interfaces.msg import Log
+    logs = []
+    ros.client.create_subscription(Log, "/rosout", logs.append, 100)
     before = set(ros.sim.snapshot.names)
     click = ros.client.create_publisher(PointStamped, "clicked_point", 10)
     msg = PointStamped()
     msg.header.frame_id = "world"
-    msg.point.x, msg.point.y = -10.0, 5.0
+    msg.point.x = 3000.0
     assert wait_for(lambda: click.get_subscription_count() > 0)
+    click.publish(msg)
+    assert wait_for(lambda: any(log.level == Log.WARN and "clicked_point: INVALID_POSE" in log.msg for log in logs)), \
+        [log.msg for log in logs]
+    msg.point.x, msg.point.y = -10.0, 5.0
     click.publish(msg)
     assert wait_for(lambda: len(set(ros.sim.snapshot.names) - before) == 1)
     name = (set(ros.sim.snapshot.names) - before).pop()
+    assert wait_for(lambda: any(log.level == Log.INFO and log.msg.endswith(f"clicked_point: RESULT_OK: {name}")
+                                for log in logs)), [log.msg for log in logs]
+    assert not any("malformed" in log.msg for log in logs)
     assert ros.sim.world.body(name)["size"] == [0.5, 0.5, 0.5]
     teleport = ros.client.create_publisher(PoseWithCovarianceStamped, "initialpose", 10)
     pose = PoseWithCovarianceStamped()

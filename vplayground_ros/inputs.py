@@ -186,7 +186,12 @@ class Inputs:
         height = self.parameters["click_spawn_height"]
         spec = yaml.safe_dump({"size": [size] * 3, "position": [float(p[0]), float(p[1]), float(p[2] + height + size / 2)]})
         ok, message = self.requests.spawn(spec)
-        (self.log.info if ok else self.log.warning)(f"clicked_point: {message}")
+        # One call per severity: rclpy refuses a call site whose severity changes (and the
+        # handler then logged "malformed message ignored" instead of what happened).
+        if ok:
+            self.log.info(f"clicked_point: {message}")
+        else:
+            self.log.warning(f"clicked_point: {message}")
 
     def initial_pose(self, msg):
         """Teleports the robot in the root namespace, unless a localiser owns its pose
