@@ -413,6 +413,31 @@ def test_a_sensor_may_not_publish_on_a_topic_of_the_node_or_a_robot(run, topic):
     assert not ok and "odd_imu.topic:" in message and "already" in message, message
 
 
+@pytest.mark.parametrize("name, topic, owner", [
+    ("bodies", "/vplayground/bodies/markers", "the node's ~/bodies/markers"),
+    ("scene", "/vplayground/scene/markers", "the node's ~/scene/markers"),
+    ("contacts", "/vplayground/contacts/markers", "the node's ~/contacts/markers"),
+    ("car-b", "/vplayground/car_b/ground_truth", "car_b's ground_truth"),  # two names, one topic token
+])
+def test_a_robot_may_not_publish_on_the_nodes_topics_or_another_robots(run, name, topic, owner):
+    """A car's own topics are ~/<name>/ground_truth, command and markers: a car named after one
+    of the node's drawing topics had published its markers on them (two streams on one topic,
+    each replacing the other's drawing), and two names with one topic token shared theirs.
+    Refused on spawn (the world unchanged) and in a scene file, naming both."""
+    other = {**CAR, "name": "car_b", "position": [0, 10, 1.6]}
+    runtime, _ = run({**SCENE, "vehicles": [CAR, other]}, "--start-paused")
+    def entities():
+        return runtime.sim.call(lambda world: (list(world.body_names()), list(world.vehicle_names())))
+    before = entities()
+    ok, message = runtime.requests.spawn(json.dumps({**CAR, "name": name, "namespace": "third",
+                                                     "position": [0, 20, 1.6]}))
+    assert not ok and f"{name}.name: {topic} is {owner} already" in message, message
+    assert entities() == before
+    with pytest.raises(ValueError, match=f"{name}.name: {topic} is {owner} already"):
+        load_world({**SCENE, "vehicles": [CAR, other, {**CAR, "name": name, "namespace": "third",
+                                                         "position": [0, 20, 1.6]}]})
+
+
 def test_a_sensor_frame_may_not_be_a_robots_frame_nor_a_robot_land_on_one(run):
     other = {**CAR, "name": "car_b", "position": [0, 10, 1.6]}
     runtime, _ = run({**SCENE, "vehicles": [CAR, other]}, "--start-paused")

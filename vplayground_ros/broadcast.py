@@ -865,37 +865,47 @@ def drove(tracker, truth, velocity, seconds):
 
 
 def check_sensors(sensor_specs, robots, robot_specs=()):
-    """The sensors' topics and frames against each other's, the robots' (vehicles; URDF robots
-    in `robot_specs`, World.robot_specs) and the node's (SpecError naming the sensor's key)."""
-    check_sensor_topics(sensor_specs, robots, robot_specs)
+    """The robots' and sensors' topics against each other's and the node's (check_topics), and
+    the sensors' frames against each other's and the robots' (SpecError naming the key)."""
+    check_topics(sensor_specs, robots, robot_specs)
     check_sensor_frames(sensor_specs, robots, robot_specs)
 
 
-def check_sensor_topics(sensor_specs, robots, robot_specs=()):
-    """Refuses a sensor whose topic another sensor, a robot or the node publishes on, or the node
-    subscribes to (a second type on one name: the node's /tf with an Imu in it), naming both;
-    `robots`: robots.Robot of the world's vehicles. Names compared as the root namespace
-    resolves them: a node's namespace or remap moves them all alike."""
-    from .inputs import SUBSCRIPTIONS  # (inputs imports the requests, which import this module)
+def check_topics(sensor_specs, robots, robot_specs=()):
+    """Refuses a robot or a sensor with a topic that the node, an earlier robot (in the World's
+    order) or another sensor publishes on, or the node subscribes to (a second type on one name:
+    the node's /tf with an Imu in it), naming both. `robots`: robots.Robot of the world's
+    vehicles, whose own topics under ~/<name> are where the node's are (a car named `bodies`
+    published its markers on the node's ~/bodies/markers), and which two names ('car.b',
+    'car_b') would share; `robot_specs`: the URDF robots (World.robot_specs). Names compared
+    as the root namespace resolves them: a node's namespace or remap moves them all alike."""
+    from .inputs import SUBSCRIPTIONS, URDF_ROBOT_INPUTS  # (inputs imports the requests, which import this module)
     from .physics.specs import SpecError
     taken = {resolve(t.name): f"the node's {t.name}" for t in TOPICS}
-    taken.update({resolve(s.name): f"the node's subscription {s.name}" for s in SUBSCRIPTIONS})
+    # The node's cmd_vel is the root namespace's robot's (when there is one).
+    taken.update({resolve(s.name): f"the node's subscription {s.name}" for s in SUBSCRIPTIONS if s.key != "cmd_vel"})
+
+    def claim(name, owner, path, hint=""):
+        if name in taken:
+            raise SpecError(path, f"{name} is {taken[name]} already{hint}")
+        taken[name] = owner
     for r in robots:
-        taken.update({t.name: f"{r.name}'s {which}" for which, t in robot_topics(r).items()})
-        taken[resolve(r.topic("cmd_vel"))] = f"{r.name}'s cmd_vel"
-    from .inputs import URDF_ROBOT_INPUTS
+        for which, t in robot_topics(r).items():
+            claim(t.name, f"{r.name}'s {which}", f"{r.name}.name" if t.name.startswith(resolve("~/")) else
+                  f"{r.name}.namespace", " (another name or namespace for the robot)")
+        claim(resolve(r.topic("cmd_vel")), f"{r.name}'s cmd_vel", f"{r.name}.namespace")
     for spec in robot_specs:
         prefix = namespace_prefix(spec["namespace"])
         suffixes = ["joint_states", "robot_description", *(s.name for s in URDF_ROBOT_INPUTS)]
         suffixes += ["cmd_vel", "odom"] if spec.get("drive") else []
-        taken.update({resolve(prefix + suffix): f"{spec['name']}'s {suffix}" for suffix in suffixes})
+        for suffix in suffixes:
+            claim(resolve(prefix + suffix), f"{spec['name']}'s {suffix}", f"{spec['name']}.namespace")
+    taken.setdefault(resolve("cmd_vel"), "the node's subscription cmd_vel")
     carriers = {**link_carriers(robot_specs), **{robot.name: robot for robot in robots}}
     for spec in sensor_specs:
         for topic in sensor_messages.topics(spec, carriers.get(spec["parent"])):
-            name = resolve(topic.name)
-            if name in taken:
-                raise SpecError(f"{spec['name']}.topic", f"{name} is {taken[name]} already (give the sensor a `topic`)")
-            taken[name] = f"the sensor {spec['name']}'s"
+            claim(resolve(topic.name), f"the sensor {spec['name']}'s", f"{spec['name']}.topic",
+                  " (give the sensor a `topic`)")
 
 
 def robot_topics(robot, resolve_name=resolve):
