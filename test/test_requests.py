@@ -83,6 +83,10 @@ def test_edit_pose_twist_and_properties(requests):
 
 @pytest.mark.parametrize("payload, code", [
     ("{entity: nobody, mass: 1}", "RESULT_NOT_FOUND:"),
+    # A missing entity is that, whatever the keys: not a key the body keys' list lacks.
+    ("{entity: nobody, rate: 20}", "RESULT_NOT_FOUND: no entity named nobody"),
+    ("{entity: nobody, state: {pose: {position: [0, .inf, 0]}}}", "RESULT_NOT_FOUND: no entity named nobody"),
+    ("{entity: a, rate: 20}", "RESULT_OPERATION_FAILED: a.rate: unknown key"),
     ("{mass: 1}", "RESULT_OPERATION_FAILED: edit.entity"),
     ("{entity: a, state: {pose: {position: [0, .inf, 0]}}}", "INVALID_POSE:"),
     ("{entity: a, mass: 2, size: [1, 0, 1]}", "RESULT_OPERATION_FAILED: a.size[1]"),
@@ -93,6 +97,13 @@ def test_bad_edits_are_coded_and_change_nothing(requests, payload, code):
     ok, message = requests.edit(payload)
     assert not ok and message.startswith(code), message
     assert unchanged(requests, before)
+
+
+def test_a_removed_sensor_is_not_found_by_an_edit(requests):
+    assert requests.spawn("{name: tmp_imu, type: imu, parent: world}")[0]
+    assert requests.edit("{entity: tmp_imu, rate: 20}")[0]
+    assert requests.remove("{entity: tmp_imu}")[0]
+    assert requests.edit("{entity: tmp_imu, rate: 20}") == (False, "RESULT_NOT_FOUND: no entity named tmp_imu")
 
 
 def test_remove_by_name_filter_and_all(requests):

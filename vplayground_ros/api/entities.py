@@ -288,7 +288,17 @@ class EntityRequests:
         if not isinstance(name, str):
             raise RequestError(FAILED, "edit.entity: the name of the entity to edit is missing")
         label = name if specs.NAME_PATTERN.fullmatch(name) else specs.quote(name)  # for messages
-        if self.sim.call(lambda world: sensor_named(world, name) is not None):
+
+        def kind(world):
+            if sensor_named(world, name) is not None:
+                return "sensor"
+            return "body" if robot_spec(world, name) is not None or name in world.body_names() else None
+        # What it is decides which keys it takes: an entity that is not there is that, not a
+        # key its kind would refuse (the body keys' list, for a sensor's `rate`).
+        found = self.sim.call(kind)
+        if found is None:
+            raise RequestError(NOT_FOUND, f"no entity named {label}")
+        if found == "sensor":
             frames = self.frames()
             return self.sim.call(lambda world: self._edit_sensor(world, name, request, frames))
         state = as_mapping(request.pop("state", {}) or {}, "edit.state")
