@@ -1,6 +1,7 @@
 """The subscription handlers (SPEC 6.2), ROS-free: messages as the Foxglove server's JSON gives them."""
 import json
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -98,3 +99,16 @@ def test_initialpose_in_base_link_turns_with_the_car(inputs):
     moved = world.body("car")
     assert np.allclose(moved["position"][:2], car[:2] + [0, 2])
     assert np.allclose(np.abs(moved["quaternion"]), [0, 0, 1, 0], atol=1e-9)  # facing -x
+
+
+def test_an_initialpose_quaternion_of_any_length_is_its_direction(inputs):
+    """A quaternion so long that its squares overflow is a direction all the same (numpy's
+    overflow warning had gone to raw stderr, and the orientation was the identity)."""
+    world = inputs.sim.world
+    pose = {"position": {"x": 3.0, "y": 0.0, "z": 0.0}, "orientation": {"x": 0, "y": 0, "z": 1e308, "w": 1e308}}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        inputs.handle("initial_pose", message(header={"frame_id": "world"}, pose={"pose": pose}))
+    assert not inputs.log.warnings()
+    yaw = math.pi / 2  # z = w: a quarter turn
+    assert np.allclose(np.abs(world.body("car")["quaternion"]), [0, 0, math.sin(yaw / 2), math.cos(yaw / 2)], atol=1e-9)

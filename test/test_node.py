@@ -322,6 +322,8 @@ def test_parameters_accepted_and_rejected(ros):
     assert ros.set_parameter("freezing.time", 1.0, ParameterType.PARAMETER_DOUBLE).successful
     assert wait_for(lambda: ros.sim.world.settings["freezing"]["time"] == 1.0)
     assert ros.set_parameter("steps_per_second", 128, ParameterType.PARAMETER_INTEGER).successful
+    result = ros.set_parameter("use_sim_time", True, ParameterType.PARAMETER_BOOL)  # rclpy's, on every node
+    assert not result.successful and result.reason.startswith("use_sim_time: this node is the time source"), result.reason
 
 
 def test_foxglove_server_shares_the_ros_graph(ros):

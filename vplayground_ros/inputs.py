@@ -211,7 +211,8 @@ class Inputs:
         if not (np.all(np.isfinite(p)) and np.all(np.isfinite(q))):
             self.log.warning(f"initialpose ignored: the pose is not finite ({p}, {q})")
             return
-        norm = float(np.linalg.norm(q))
+        largest = max(abs(v) for v in q)  # scaled first: the norm of (0, 0, 0, 1e308) overflows
+        norm = float(np.linalg.norm([v / largest for v in q])) * largest if largest > 0.0 else 0.0
         q = [v / norm for v in q] if norm > 0.0 else [0.0, 0.0, 0.0, 1.0]  # no orientation: the frame's
         frames = self.frames()
 

@@ -310,6 +310,9 @@ class SimulatorNode(Node):
     def _on_parameters(self, parameters):
         if getattr(self._copying, "active", False):  # values Parameters has already taken
             return SetParametersResult(successful=True)
+        if any(p.name == "use_sim_time" for p in parameters):  # rclpy's own, declared by every node
+            return SetParametersResult(successful=False, reason="use_sim_time: this node is the time source "
+                                                                "(it publishes /clock): it takes no other")
         self._from_rclpy.active = True
         try:
             ok, reason = self.runtime.parameters.set({p.name: plain(p.value) for p in parameters})
