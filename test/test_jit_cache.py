@@ -122,6 +122,21 @@ def test_each_copy_of_the_engine_has_a_cache_of_its_own(tmp_path):
     assert jit_cache.source_keyed_directory(copies[0], base) not in (first, second)
 
 
+def test_each_cpu_target_has_a_cache_of_its_own(tmp_path):
+    """Numba keys each kernel on the CPU it was compiled for: a process compiling for another
+    one (NUMBA_CPU_NAME, or another machine on a shared home directory) found a cache marked
+    complete and compiled every kernel again inside it, one by one."""
+    def directory(**env):
+        code = "import numba; import vplayground_ros.physics; print(numba.config.CACHE_DIR)"
+        run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                             env={**os.environ, "VPLAYGROUND_JIT_CACHE": str(tmp_path), **env})
+        assert run.returncode == 0, run.stderr[-2000:]
+        return run.stdout.strip()
+    host, generic = directory(), directory(NUMBA_CPU_NAME="generic")
+    assert Path(host).parent == Path(generic).parent == tmp_path and host != generic
+    assert directory() == host
+
+
 def test_every_kernel_is_cached_free_of_the_gil_and_without_a_c_wrapper():
     """The engine's kernels are @njit(cache=True, nogil=True, no_cfunc_wrapper=True) (see
     physics/__init__): a kernel left out of the cache would compile in every process, and the

@@ -49,6 +49,7 @@ except ImportError:  # not POSIX: no lock between processes
 import numba
 from numba.core import caching, event
 from numba.core.bytecode import FunctionIdentity
+from numba.core.registry import cpu_target
 
 
 def use_source_keyed_cache():
@@ -94,15 +95,20 @@ def share_safely():
 
 def source_keyed_directory(engine, base):
     """The cache directory under `base` of the engine whose sources are in `engine`: keyed on
-    every source, Numba's and Python's versions (a cache marked complete holds one compiler's
-    code), and where the engine lies. Numba files a kernel under a hash of its source file's
-    full path, so two copies of one engine (two checkouts, a colcon install beside its source)
-    sharing a directory shared its complete marker but not the kernels: the second copy then
-    compiled kernel by kernel, in whichever processes came first. (The path as Numba takes it:
-    absolute, symbolic links kept.)"""
+    every source, Numba's and Python's versions and the CPU the code is compiled for (a cache
+    marked complete holds one compiler's code for one target), and where the engine lies.
+    Numba files a kernel under a hash of its source file's full path, so two copies of one
+    engine (two checkouts, a colcon install beside its source) sharing a directory shared its
+    complete marker but not the kernels: the second copy then compiled kernel by kernel, in
+    whichever processes came first. Numba keys each kernel on its target too (CPU name and
+    features, NUMBA_CPU_NAME's or the host's), so a home directory shared by two kinds of CPU,
+    or a process with NUMBA_CPU_NAME set, likewise found the marker and compiled everything
+    again kernel by kernel, unlocked. (The path as Numba takes it: absolute, symbolic links
+    kept.)"""
     engine = Path(os.path.abspath(engine))
     sources = sorted(engine.rglob("*.py"))  # the shapes/ package too
-    digest = hashlib.sha256(f"{numba.__version__} {sys.version} {engine}".encode()
+    target = cpu_target.target_context.codegen().magic_tuple()  # (triple, CPU name, features)
+    digest = hashlib.sha256(f"{numba.__version__} {sys.version} {target} {engine}".encode()
                             + b"".join(str(p.relative_to(engine)).encode() + p.read_bytes() for p in sources))
     return base / digest.hexdigest()[:16]
 
