@@ -56,12 +56,26 @@ def test_spawn_one_and_a_list_all_or_nothing(requests):
     ("42", "RESULT_OPERATION_FAILED: spawn must be a mapping"),
     ("{mass: .nan}", "RESULT_OPERATION_FAILED: spawn.mass: must be finite"),
     ("{wheels: []}", "RESULT_OPERATION_FAILED: spawn.chassis: missing"),
+    # Aliases that multiply the text (a 10,000-point hull repeated by 400 bodies: 40 KB of text,
+    # 4 million values), or a compound that contains itself.
+    ("- &b {shape: convex, position: [0, 0, 5], points: &p [" + ", ".join(["[0, 0, 0], [1, 0, 0], [0, 1, 0]"] * 3333)
+     + ", [0, 0, 1]]}\n" + "- {shape: convex, position: [0, 0, 5], points: *p}\n" * 400,
+     "RESULT_OPERATION_FAILED: request is not valid YAML/JSON: its aliases expand it to more than"),
+    ("&a {shape: compound, parts: [*a]}",
+     "RESULT_OPERATION_FAILED: request is not valid YAML/JSON: an alias is inside the node it names"),
 ])
 def test_bad_spawns_are_coded_and_change_nothing(requests, payload, code):
     before = snapshot(requests.sim.world)
     ok, message = requests.spawn(payload)
     assert not ok and message.startswith(code), message
     assert unchanged(requests, before)
+
+
+def test_aliases_that_do_not_multiply_the_text_are_yaml_as_usual(requests):
+    ok, message = requests.spawn("[{name: d, size: &s [1, 2, 1], static_friction: &f 0.9},"
+                                 " {name: e, size: *s, static_friction: *f, position: [0, 5, 1]}]")
+    assert ok, message
+    assert requests.sim.world.body("e")["size"] == [1.0, 2.0, 1.0]
 
 
 def test_spawn_with_renaming(requests):

@@ -198,3 +198,19 @@ def test_numbers_in_exponent_form_are_numbers(tmp_path):
     path.write_text("version: 1\nbodies:\n  - {name: heavy, mass: 1e4, size: [2E0, 1e0, 5e-1], position: [0, 0, 1]}\n")
     world = load_world(path)
     assert world.body("heavy")["mass"] == 1e4 and world.body("heavy")["size"] == [2.0, 1.0, 0.5]
+
+
+@pytest.mark.parametrize("text, fragment", [
+    ("version: 1\nbodies:\n  - &a {shape: compound, parts: [*a]}\n", "an alias is inside the node it names"),
+    ("version: 1\nbodies:\n  - &b {name: b}\n" + "  - *b\n" * 100 + "x: &l [" + "0, " * 5000 + "0]\ny: [" +
+     ", ".join(["*l"] * 200) + "]\n", "its aliases expand it to more than"),
+])
+def test_yaml_aliases_that_build_more_than_the_text_are_refused(tmp_path, text, fragment):
+    """A scene's size limit bounds its work only while the text is what it holds: aliases may
+    repeat what is written (a material, a size), not multiply it (a thousand-value list
+    repeated 200 times), nor put a node inside itself (a compound that is its own part
+    recursed without end)."""
+    path = tmp_path / "aliases.yaml"
+    path.write_text(text)
+    with pytest.raises(SceneError, match=f"aliases.yaml: not valid YAML: {fragment}"):
+        load_world(path)

@@ -49,6 +49,68 @@ class YamlLoader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):
 YamlLoader.add_implicit_resolver("tag:yaml.org,2002:float",
                                  re.compile(r"^[-+]?[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"), list("-+0123456789"))
 
+# Written out, a document holds at most about one value per character; its aliases may repeat
+# what it holds up to this many times that, beyond a small document's allowance.
+ALIAS_EXPANSION = 2
+ALIAS_ALLOWANCE = 10_000
+
+
+class YamlExpansion(yaml.YAMLError):
+    """A YAML document whose aliases build far more than its text holds, or a structure that
+    contains itself."""
+
+
+def load_yaml(text):
+    """YAML text (size-capped by the caller) as plain data, refusing aliases that multiply it:
+    the text's limit is what bounds a scene's or a request's work, and an alias to a list of
+    100,000 points repeated by 10,000 bodies (810 KB of text) had built 10^9 values (an hour and
+    ~190 GB), and one that contains itself (`&a {parts: [*a]}`) recursed without end."""
+    loader = YamlLoader(text)
+    try:
+        node = loader.get_single_node()
+        if node is not None and "*" in text:  # an alias starts with '*'
+            check_aliases(node, ALIAS_EXPANSION * len(text) + ALIAS_ALLOWANCE)
+        return None if node is None else loader.construct_document(node)
+    finally:
+        loader.dispose()
+
+
+def check_aliases(root, limit):
+    """Counts the nodes of the document as its aliases expand it (each node once where it is
+    written, again wherever an alias repeats it), up to `limit`; YamlExpansion beyond it, or
+    for a node inside itself. Iterative: a document may nest a thousand levels deep."""
+    sizes = {}      # id(node) -> nodes it expands to, itself included
+    open_ = set()   # nodes being counted (their children are): met again, a node inside itself
+    stack = [(root, False)]
+    while stack:
+        node, counted = stack.pop()
+        key = id(node)
+        if counted:
+            children = node.value if isinstance(node, yaml.SequenceNode) else [
+                part for pair in node.value for part in pair]
+            sizes[key] = 1 + sum(sizes[id(child)] for child in children)
+            open_.discard(key)
+            if sizes[key] > limit:
+                raise YamlExpansion(f"its aliases expand it to more than {limit:,} values, more than its "
+                                    f"{limit // ALIAS_EXPANSION:,} characters could hold written out: write "
+                                    "the values out, or repeat fewer")
+            continue
+        if key in sizes:
+            continue
+        if key in open_:
+            raise YamlExpansion("an alias is inside the node it names (a structure that contains itself)")
+        if isinstance(node, yaml.ScalarNode):
+            sizes[key] = 1
+            continue
+        open_.add(key)
+        stack.append((node, True))
+        children = node.value if isinstance(node, yaml.SequenceNode) else [part for pair in node.value for part in pair]
+        for child in children:
+            if id(child) in open_:
+                raise YamlExpansion("an alias is inside the node it names (a structure that contains itself)")
+            if id(child) not in sizes:
+                stack.append((child, False))
+
 log = logging.getLogger(__name__)
 
 
@@ -102,7 +164,7 @@ def read_scene(path_or_dict):
     except ValueError as error:  # UnicodeDecodeError is a ValueError too
         raise SceneError(f"{path}: {str(error)[:200]}") from None
     try:
-        data = yaml.load(text, Loader=YamlLoader)
+        data = load_yaml(text)
     except yaml.YAMLError as error:
         raise SceneError(f"{path}: not valid YAML: {error}") from None
     except (ValueError, RecursionError) as error:  # e.g. an integer of more than 4,300 digits

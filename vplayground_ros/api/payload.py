@@ -6,7 +6,7 @@ import json
 import yaml
 
 from ..physics import specs
-from ..scene import YamlLoader
+from ..scene import load_yaml
 from .results import FAILED, INVALID_POSE, RequestError
 
 MAX_PAYLOAD = 1 << 20  # bytes of YAML a request may carry
@@ -24,7 +24,7 @@ def parse(text, what="request"):
                 return json.loads(text)  # JSON, what programs send: ~50x faster than YAML
             except json.JSONDecodeError:
                 pass  # flow-style YAML such as {name: a}
-        return yaml.load(text, Loader=YamlLoader)
+        return load_yaml(text)
     except yaml.YAMLError as error:
         raise RequestError(FAILED, f"{what} is not valid YAML/JSON: {str(error)[:300]}") from None
     except RecursionError:
