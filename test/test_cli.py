@@ -6,6 +6,7 @@ import threading
 import pytest
 
 from vplayground_ros import cli
+from vplayground_ros.runtime import Runtime
 from vplayground_ros.scene import load_world
 from vplayground_ros.simulation import Simulation
 from helpers import wait_for
@@ -171,3 +172,18 @@ def test_ros_arguments_without_a_node_are_said_to_be_ignored(tmp_path):
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     assert "--ros-args -p duration:=5.0: ignored, no ROS node runs here (--no-ros)" in done.stderr
+
+
+def test_a_duration_beyond_a_countable_run_is_refused(capsys):
+    """1e308 s passed the finite-number check and ended the physics thread: its step count
+    (duration x steps per second) overflowed. The option and the parameter's override alike."""
+    with pytest.raises(SystemExit) as refused:
+        cli.parse_args(["--duration", "1e308", "--no-record"])
+    assert refused.value.code == 2
+    assert "--duration must be > 0 and at most 1e+09 s" in capsys.readouterr().err
+    options = cli.parse_args(["--no-record"])
+    runtime = Runtime(Simulation(load_world(SCENE), real_time_factor=0.0), options, logging.getLogger("test_cli"))
+    for value in (1e308, -5.0):
+        with pytest.raises(ValueError, match="duration"):
+            runtime.parameters.override({"duration": value})
+    assert runtime.parameters["duration"] == 0.0

@@ -15,6 +15,7 @@ import threading
 import time
 from pathlib import Path
 
+from .parameters import MAX_DURATION
 from .resources import find_shared
 from .scene import SceneError, load_world
 from .simulation import Simulation
@@ -58,8 +59,8 @@ def parse_args(argv):
     parser.add_argument("--record-split-size", type=int, default=0, metavar="BYTES",
                         help="continue the bag in a new file past this size (0 = one file)")
     args = parser.parse_args(argv)
-    if args.duration is not None and args.duration <= 0:
-        parser.error("--duration must be > 0")
+    if args.duration is not None and not 0 < args.duration <= MAX_DURATION:
+        parser.error(f"--duration must be > 0 and at most {MAX_DURATION:g} s")
     if args.real_time_factor < 0:
         parser.error("--real-time-factor must be >= 0")
     if args.record_split_size < 0:

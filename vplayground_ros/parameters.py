@@ -65,6 +65,11 @@ def reset_scope(value, path):
     return scope
 
 
+# The longest run a duration may ask for, s (about 31 years): a step count, duration x steps per
+# second, stays an integer (1e308 s had ended the physics thread with an overflow).
+MAX_DURATION = 1e9
+
+
 @dataclass(frozen=True)
 class ParameterSpec:
     name: str
@@ -96,7 +101,8 @@ def parameter_table(settings, options, scene_directories, max_bodies, solver_thr
           "simulated seconds per wall-clock second; 0 = as fast as possible", "float", 0, 1000),
         P("start_paused", bool(options.start_paused), "start paused (~/pause false to play)", "bool", read_only=True),
         P("duration", float(options.duration or 0.0),
-          "stop after this much simulated time, s (0 = run until stopped)", "float", read_only=True),
+          "stop after this much simulated time, s (0 = run until stopped)", "float", 0.0, MAX_DURATION,
+          read_only=True),
         setting("gravity", [float(v) for v in s["gravity"]], "gravity vector, m/s^2, world frame", "float[3]"),
         setting("steps_per_second", int(s["steps_per_second"]), "physics steps per simulated second", "int"),
         setting("resolve_iterations", int(s["resolve_iterations"]),
