@@ -908,6 +908,13 @@ def test_a_mesh_of_millions_of_triangles_is_refused_before_parsing(tmp_path):
     mesh.write_bytes(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf " + b" ".join([b"1", b"2", b"3"] * (count // 3 + 1)) + b"\n")
     with pytest.raises(SceneError, match="triangles"):
         load_world({"version": 1, "playground": {"mesh": str(mesh)}})
+    # So do faces indented, or on classic Mac OS line ends: counted in the text too (they had
+    # been parsed, then refused by their number: "has 1000000 triangles, more than").
+    for faces in (b" f 1 2 3\n", b"\tf\t1 2 3\n", b"f 1 2 3\r"):
+        line_end = faces[-1:]
+        mesh.write_bytes(line_end.join([b"v 0 0 0", b"v 1 0 0", b"v 0 1 0", b""]) + faces * count)
+        with pytest.raises(SceneError, match=f"has more than the {MAX_PLAYGROUND_TRIANGLES} triangles allowed"):
+            load_world({"version": 1, "playground": {"mesh": str(mesh)}})
 
 
 def test_a_mesh_outside_the_scene_directories_is_refused(harness, tmp_path_factory):

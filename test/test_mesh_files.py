@@ -87,3 +87,13 @@ def test_broken_trimesh_formats_are_refused_naming_the_file(tmp_path, suffix, da
     with pytest.raises(SceneError) as error:
         load_world({"version": 1, "playground": {"mesh": str(path)}})
     assert str(error.value).startswith(f"<scene>: playground.mesh: mesh {path}") and problem in str(error.value)
+
+
+@pytest.mark.parametrize("index", [1 << 63, 1 << 100])
+def test_a_vertex_number_beyond_any_file_is_refused_in_words(tmp_path, index):
+    """A face corner of 2^63 or more overflowed the reader's 64-bit corner array (OverflowError
+    out of a spawn or a scene load) instead of being refused as the missing vertex it names."""
+    path = tmp_path / "far.obj"
+    path.write_bytes(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 " + str(index).encode() + b"\n")
+    with pytest.raises(SceneError, match=f"far.obj: line 4: the face refers to vertex {index}, more than any file"):
+        load_world({"version": 1, "playground": {"mesh": str(path)}})

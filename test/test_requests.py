@@ -168,6 +168,21 @@ def test_load_and_save_scene(requests, tmp_path):
     assert requests.sim.world is before
 
 
+def test_names_longer_than_the_system_takes_are_refused_in_words(requests, tmp_path):
+    """A file name of more than 255 bytes made the system's refusal (ENAMETOOLONG) escape from
+    the file checks: an internal error from load_scene and save_scene, a bare OSError from a
+    spawn of a mesh or a URDF by that name."""
+    requests.scene_directories = [tmp_path]
+    long_name = str(tmp_path / ("a" * 300 + ".yaml"))
+    result, message = requests.load_scene(long_name)
+    assert result == MAP_DOES_NOT_EXIST and "a name in it is longer than 255 bytes" in message, message
+    ok, message = requests.save_scene(long_name)
+    assert not ok and "a name in it is longer than 255 bytes" in message, message
+    for spawn in ({"shape": "convex", "mesh": "a" * 300 + ".obj"}, {"urdf": "a" * 300 + ".urdf"}):
+        ok, message = requests.spawn(json.dumps(spawn))
+        assert not ok and "not found" in message and "Errno" not in message, message
+
+
 def test_get_entity_and_features(requests):
     ok, text = requests.get_entity("{entity: b}")
     entity = yaml.safe_load(text)

@@ -18,6 +18,8 @@ from .physics.specs import quote
 # parameter-space vertices, object and group names, smoothing, materials, lines and points.
 OBJ_SKIPPED = frozenset({b"vt", b"vn", b"vp", b"o", b"g", b"s", b"usemtl", b"mtllib", b"l", b"p"})
 OBJ_VERTEX_NUMBERS = (3, 4, 6)  # x y z; x y z w; x y z r g b (a colour, as MeshLab writes)
+# Vertex numbers beyond this are in no file (a vertex a line), nor fit the corners' 64-bit integers.
+MAX_VERTEX_NUMBER = 1 << 62
 
 
 class MeshError(ValueError):
@@ -90,6 +92,8 @@ def read_obj(data):
                 face = checked_face(face, fields, number, vertex_count)
             top = max(face)
             if top > highest:
+                if top > MAX_VERTEX_NUMBER:  # (nor could the array of corners hold it)
+                    raise MeshError(f"line {number}: the face refers to vertex {top}, more than any file holds")
                 highest, highest_line = top, number
             if len(face) == 3:
                 corners.extend(face)

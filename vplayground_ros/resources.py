@@ -7,6 +7,15 @@ from pathlib import Path
 PACKAGE = "vplayground_ros"
 
 
+def is_file(path):
+    """Path.is_file, and False too where the system refuses the name (a component longer than
+    it allows: Path.is_file raises that one)."""
+    try:
+        return Path(path).is_file()
+    except OSError:
+        return False
+
+
 def share_directories():
     """Candidate share roots, most specific first: a ROS install (ament_index), a source tree
     (editable install, tests), then pip's data_files under the interpreter's prefix or the
@@ -31,6 +40,6 @@ def find_shared(relative):
     """Path of a shared file such as 'config/default_scene.yaml', or None."""
     for root in share_directories():
         candidate = root / relative
-        if candidate.is_file():
+        if is_file(candidate):
             return candidate
     return None

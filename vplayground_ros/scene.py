@@ -19,7 +19,7 @@ from .physics import World
 from .physics import specs
 from .physics.math3d import rpy_to_quat
 from .physics.math3d import quaternions_to_matrices
-from .resources import find_shared
+from .resources import find_shared, is_file
 from .robots import validate_robot, world_robots
 from .sensors import validate_sensors
 from .urdf_robots import (ENTRY_KEYS, VEHICLE_ENTRY_KEYS, add_robot_entry, check_against_model, description_source,
@@ -195,7 +195,7 @@ def resolve_mesh(name, base, directories=None, key="playground.mesh", shared_fol
         return shared
     candidate = Path(name)
     tried = [candidate] if candidate.is_absolute() else [base / candidate]
-    if tried[0].is_file():
+    if is_file(tried[0]):
         if directories is not None and not inside(tried[0], directories):
             raise MissingMesh(key, f"mesh file {specs.quote(name)} resolves outside the allowed directories")
         return tried[0]
@@ -217,14 +217,22 @@ def inside(path, directories):
         return False
 
 
+# A face statement: `f` at the start of a line (after blanks, which .obj allows), its corners.
+OBJ_FACE = re.compile(rb"^[ \t]*f[ \t]([^\r\n]*)", re.MULTILINE)
+
+
 def count_obj_triangles(data, path, key):
     """Triangles an .obj's faces make once fanned (a face of n corners is n - 2), counted from
-    the raw bytes so a file of millions is refused before they are parsed one by one."""
-    if data.count(b"\nf ") + data.count(b"\nf\t") > MAX_PLAYGROUND_TRIANGLES:
+    the raw bytes so a file of millions is refused before they are parsed one by one (faces
+    indented or on classic Mac OS line ends as well: they had been parsed, 6 million of them in
+    8 s and 440 MB, before their count was refused)."""
+    if data.count(b"\nf ") + data.count(b"\nf\t") > MAX_PLAYGROUND_TRIANGLES:  # the usual form, at once
         raise specs.SpecError(key, f"mesh {path} has more than the "
                                                  f"{MAX_PLAYGROUND_TRIANGLES} triangles allowed")
+    if b"\n" not in data:  # line ends as obj_text reads them
+        data = data.replace(b"\r", b"\n")
     triangles = 0
-    for match in re.finditer(rb"^f[ \t]([^\n]*)", data, re.MULTILINE):
+    for match in OBJ_FACE.finditer(data):
         triangles += max(0, len(match.group(1).split()) - 2)
         if triangles > MAX_PLAYGROUND_TRIANGLES:
             raise specs.SpecError(key, f"mesh {path} has more than the "

@@ -24,6 +24,7 @@ import numpy as np
 from .physics import specs
 from .physics.math3d import axis_rotation, matrix_to_quaternion, quaternions_to_matrices, rpy_to_quat
 from .physics.shapes.convex import MAX_HULL_POINTS
+from .resources import is_file
 from .scene import read_mesh
 from .urdf_robots import is_description_text
 
@@ -141,7 +142,7 @@ def resolve_mesh_file(filename, where, label, link):
         path = Path(filename[len("file://"):] if filename.startswith("file://") else filename)
         candidates = [path if path.is_absolute() else folder / path]
     for candidate in candidates:
-        if candidate.is_file():
+        if is_file(candidate):
             if where.directories is not None and not any(
                     candidate.resolve().is_relative_to(Path(d).resolve()) for d in where.directories):
                 raise UrdfError(f"{label}: link {link!r}: mesh {filename!r} is outside the allowed directories "

@@ -11,6 +11,7 @@ from ..resources import find_shared
 from .results import FAILED, RequestError
 
 MAX_PATH = 4096  # characters of a scene path (PATH_MAX)
+MAX_NAME = 255   # bytes of one of its names (NAME_MAX): the system refuses longer ones
 SCENE_SUFFIXES = (".yaml", ".yml")  # ~/save_scene with overwrite never replaces anything else
 
 
@@ -57,6 +58,8 @@ def confine(raw, what, directories, suffixes=SCENE_SUFFIXES, kind="scene files")
         resolved = (Path.cwd() / raw).resolve()
     except (OSError, ValueError, RuntimeError) as error:  # too long, unencodable, a link loop
         raise RequestError(FAILED, f"{what}: cannot resolve {specs.quote(raw)}: {error}") from None
+    if any(len(os.fsencode(name)) > MAX_NAME for name in resolved.parts):
+        raise RequestError(FAILED, f"{what}: {specs.quote(raw)}: a name in it is longer than {MAX_NAME} bytes")
     roots = allowed_directories(directories)
     if not any(resolved.is_relative_to(root) for root in roots):
         raise RequestError(FAILED, f"{what}: {specs.quote(raw)} resolves to {specs.quote(str(resolved))}, "
