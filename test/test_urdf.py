@@ -149,10 +149,62 @@ ARM = """<robot name="arm">
     (ARM.format(mass=1, kind="revolute").replace('<box size="0.2 0.2 0.2"/>', '<mesh filename="gone.stl"/>'),
      "link 'base': mesh 'gone.stl' not found"),
     ("<robot", "not a URDF robot yourdfpy can read"),
+    # Numbers the physics cannot take, refused naming the element (numpy's and LAPACK's errors
+    # had come out: a shape mismatch, "Eigenvalues did not converge").
+    (ARM.format(mass=1, kind="revolute").replace('<axis xyz="0 1 0"/>', '<axis xyz="0 1"/>'),
+     "joint 'shoulder': axis 0 1 is not three finite numbers"),
+    (ARM.format(mass=1, kind="revolute").replace('<axis xyz="0 1 0"/>', '<axis xyz="0 nan 1"/>'),
+     "joint 'shoulder': axis 0 nan 1 is not three finite numbers"),
+    (ARM.format(mass=1, kind="revolute").replace('izz="0.001"', 'izz="nan"'),
+     "link 'upper': its inertial's inertia or origin is not finite"),
+    (ARM.format(mass=1, kind="revolute").replace('<mass value="1"/>', '<origin xyz="inf 0 0"/><mass value="1"/>'),
+     "link 'upper': its inertial's inertia or origin is not finite"),
 ])
 def test_bad_descriptions_name_the_link_or_joint(text, message):
     with pytest.raises(UrdfError, match=re.escape(message)):
         robot_model(text, "arm")
+
+
+@pytest.mark.parametrize("scale, mesh, message", [
+    ("1 1 1", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n", "mesh 'part.obj' has no volume"),
+    ("0 0 0", None, "mesh 'part.obj': scale 0 0 0 is not three finite numbers, none zero"),
+    ("1 1", None, "mesh 'part.obj': scale 1 1 is not three finite numbers, none zero"),
+    ("nan 1 1", None, "mesh 'part.obj': scale nan 1 1 is not three finite numbers, none zero"),
+])
+def test_bad_collision_meshes_name_the_link_and_mesh(tmp_path, scale, mesh, message):
+    """A flat collision mesh (qhull's whole report had come out of a spawn as an internal
+    error) or a scale of the wrong size, zero or NaN."""
+    (tmp_path / "part.obj").write_text(mesh or "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\n")
+    path = tmp_path / "arm.urdf"
+    path.write_text(ARM.format(mass=1, kind="revolute").replace(
+        '<box size="0.2 0.2 0.2"/>', f'<mesh filename="part.obj" scale="{scale}"/>'))
+    with pytest.raises(UrdfError, match=re.escape(f"link 'base': {message}")):
+        robot_model(str(path), "arm")
+
+
+def test_descriptions_in_any_declared_encoding_load(tmp_path):
+    """The XML declaration's encoding is the file's (`<?xml ... encoding="utf-8"?>`, as URDF
+    exporters write, had made every such description unreadable: the XML reader refuses text
+    that declares one); a file in another encoding without a declaration is refused in words,
+    and so is one larger than a scene may be."""
+    arm = ARM.format(mass=1, kind="revolute").replace('name="upper"', 'name="über"').replace(
+        'link="upper"', 'link="über"')
+    plain = robot_model(arm, "arm")
+    for encoding in ("utf-8", "ISO-8859-1", "UTF-16"):
+        path = tmp_path / f"{encoding}.urdf"
+        path.write_bytes(f'<?xml version="1.0" encoding="{encoding}"?>\n{arm}'.encode(encoding))
+        model = robot_model(str(path), "arm")
+        assert model.bodies == plain.bodies and model.joint_names == plain.joint_names
+    assert robot_model(f'<?xml version="1.0" encoding="utf-8"?>{arm}', "arm").bodies == plain.bodies  # as text
+    path = tmp_path / "latin.urdf"
+    path.write_bytes(arm.encode("ISO-8859-1"))
+    with pytest.raises(UrdfError, match=r"latin.urdf: byte \d+ is not utf-8 text \(a file in another encoding says"):
+        robot_model(str(path), "arm")
+    path = tmp_path / "huge.urdf"
+    with open(path, "wb") as stream:
+        stream.truncate((16 << 20) + 1)
+    with pytest.raises(UrdfError, match="huge.urdf: the description has 16777217 bytes, more than the 16777216 allowed"):
+        robot_model(str(path), "arm")
 
 
 def test_xacro_without_the_package_is_refused_clearly(monkeypatch):

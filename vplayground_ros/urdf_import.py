@@ -12,6 +12,7 @@ A file is read with yourdfpy; xacro (`.xacro`, or `$(...)`/`${...}` in a .urdf) 
 when the xacro package is installed, else refused saying so. Everything is checked before the
 World is touched: what is wrong names the file and the link or joint.
 """
+import codecs
 import logging
 import math
 import os
@@ -25,7 +26,7 @@ from .physics import specs
 from .physics.math3d import axis_rotation, matrix_to_quaternion, quaternions_to_matrices, rpy_to_quat
 from .physics.shapes.convex import MAX_HULL_POINTS
 from .resources import is_file
-from .scene import read_mesh
+from .scene import read_capped, read_mesh
 from .urdf_robots import is_description_text
 
 # What a robot description becomes: body specs (the root's first), joint specs, each link's body
@@ -64,6 +65,31 @@ class MissingMesh(UrdfError):
     """A mesh the description names is not found."""
 
 
+# A description file is read whole: at most this (a scene's limit; a robot of hundreds of links
+# is ~1 MB of XML).
+MAX_DESCRIPTION_BYTES = 16 << 20
+XML_DECLARATION = re.compile(r"^\ufeff?\s*<\?xml\b[^>]*?\?>")
+DECLARED_ENCODING = re.compile(rb"^\s*<\?xml\b[^>]*?encoding\s*=\s*[\"']([A-Za-z][A-Za-z0-9._-]*)[\"']")
+
+
+def xml_text(data, label):
+    """XML bytes as text: UTF-16 after its byte-order mark, else in the encoding its declaration
+    names, else UTF-8 (a byte-order mark removed)."""
+    declared = DECLARED_ENCODING.match(data)
+    if data.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
+        encoding = "utf-16"
+    else:
+        encoding = declared.group(1).decode("ascii") if declared else "utf-8-sig"
+    try:
+        return data.decode(encoding)
+    except LookupError:
+        raise UnreadableUrdf(f"{label}: its XML declaration names the encoding {encoding!r}, which is "
+                             "not one Python knows") from None
+    except UnicodeDecodeError as error:
+        hint = "" if declared else " (a file in another encoding says which in <?xml ... encoding=\"...\"?>)"
+        raise UnreadableUrdf(f"{label}: byte {error.start} is not {encoding.removesuffix('-sig')} text{hint}") from None
+
+
 def read_description(source, label, allow_xacro=True):
     """The URDF text of `source` (a path, or the text itself when it starts with '<'), xacro
     expanded (unless not `allow_xacro`: xacro reads environment variables and any file, so a
@@ -74,10 +100,16 @@ def read_description(source, label, allow_xacro=True):
     else:
         path = Path(source)
         try:
-            text = path.read_text(encoding="utf-8")
-        except OSError as error:
-            raise UnreadableUrdf(f"{label}: cannot read it: {error.strerror or error}") from None
-        folder = path.resolve().parent
+            data = read_capped(path, MAX_DESCRIPTION_BYTES, "description")
+        except ValueError as error:
+            raise UnreadableUrdf(f"{label}: {error}") from None
+        text, folder = xml_text(data, label), path.resolve().parent
+    # Text now: an XML declaration naming an encoding is left out, since the XML reader refuses
+    # text that has one (a description with the common `<?xml ... encoding="utf-8"?>` could
+    # not be loaded at all).
+    declaration = XML_DECLARATION.match(text)
+    if declaration is not None and "encoding" in declaration.group(0):
+        text = text[declaration.end():]
     if Path(str(source)).suffix == ".xacro" or re.search(r"\$[({]", text):
         if not allow_xacro:
             raise UnreadableUrdf(f"{label}: it uses xacro, which is expanded only for scenes given on the command "
@@ -152,12 +184,19 @@ def resolve_mesh_file(filename, where, label, link):
                     f"{', '.join(str(c) for c in candidates) or 'no package folder'})")
 
 
-def hull_points(vertices):
+def hull_points(vertices, what="the mesh"):
     """At most MAX_HULL_POINTS points whose convex hull stands for a collision mesh: its hull's
     vertices, thinned by farthest-point sampling when there are more (the hull of the kept ones
-    lies inside the mesh's, by at most the gaps between them)."""
-    from scipy.spatial import ConvexHull
-    points = np.asarray(vertices, dtype=np.float64)[ConvexHull(vertices).vertices]
+    lies inside the mesh's, by at most the gaps between them). UrdfError (naming `what`) for
+    a mesh with no volume: flat, a line, fewer than 4 points (qhull's own report had come out
+    of a spawn as an internal error)."""
+    from scipy.spatial import ConvexHull, QhullError
+    try:
+        hull = ConvexHull(vertices)
+    except (QhullError, ValueError):
+        raise UrdfError(f"{what} has no volume (flat, a line or fewer than 4 points): a collision mesh "
+                        "needs one") from None
+    points = np.asarray(vertices, dtype=np.float64)[hull.vertices]
     if len(points) <= MAX_HULL_POINTS:
         return points
     kept = [int(np.argmax(np.linalg.norm(points - points.mean(axis=0), axis=1)))]
@@ -187,9 +226,33 @@ def collision_part(collision, pose, where, label, link):
             vertices, _ = read_mesh(path, f"link {link!r} mesh")
         except ValueError as error:
             raise UrdfError(f"{label}: {error}") from None
-        scale = geometry.mesh.scale if geometry.mesh.scale is not None else 1.0
-        return {**part, "shape": "convex", "points": hull_points(np.asarray(vertices) * scale).tolist()}
+        scale = mesh_scale(geometry.mesh, f"{label}: link {link!r}: mesh {geometry.mesh.filename!r}")
+        return {**part, "shape": "convex", "points": hull_points(
+            np.asarray(vertices) * scale, f"{label}: link {link!r}: mesh {geometry.mesh.filename!r}").tolist()}
     raise UrdfError(f"{label}: link {link!r}: a collision element without a geometry")
+
+
+def mesh_scale(mesh, what):
+    """A mesh element's scale: three finite numbers, none zero (or 1 when it gives none)."""
+    if mesh.scale is None:
+        return 1.0
+    scale = np.asarray(mesh.scale, dtype=np.float64).reshape(-1)
+    if scale.shape != (3,) or not np.all(np.isfinite(scale)) or not np.all(scale != 0.0):
+        raise UrdfError(f"{what}: scale {' '.join(f'{v:g}' for v in scale)} is not three finite numbers, "
+                        "none zero")
+    return scale
+
+
+def joint_axis(joint, label):
+    """A joint's axis in its frame as written (x when it gives none): three finite numbers, not
+    all zero (`<axis xyz="0 1"/>` had come out as numpy's shape mismatch)."""
+    axis = np.asarray(joint.axis if joint.axis is not None else (1.0, 0.0, 0.0), dtype=np.float64).reshape(-1)
+    if axis.shape != (3,) or not np.all(np.isfinite(axis)):
+        raise UrdfError(f"{label}: joint {joint.name!r}: axis {' '.join(f'{v:g}' for v in axis)} is not three "
+                        "finite numbers")
+    if not np.linalg.norm(axis) > 0.0:
+        raise UrdfError(f"{label}: joint {joint.name!r}: its axis has no length")
+    return axis
 
 
 def link_inertial(link, label):
@@ -202,6 +265,8 @@ def link_inertial(link, label):
     mass = float(inertial.mass)
     frame = origin(inertial)
     tensor = np.asarray(inertial.inertia if inertial.inertia is not None else np.zeros((3, 3)), dtype=np.float64)
+    if not (np.all(np.isfinite(tensor)) and np.all(np.isfinite(frame))):  # (eigvalsh fails to converge on them)
+        raise UrdfError(f"{label}: link {link.name!r}: its inertial's inertia or origin is not finite")
     tensor = frame[:3, :3] @ tensor @ frame[:3, :3].T
     moments = np.linalg.eigvalsh(0.5 * (tensor + tensor.T))
     if not (math.isfinite(mass) and mass > 0.0):
@@ -332,9 +397,7 @@ def robot_model(source, name, position=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), fix
         if joint.type == "fixed":
             continue
         frame = world_pose[joint.parent] @ origin(joint)
-        axis = np.asarray(joint.axis if joint.axis is not None else (1.0, 0.0, 0.0), dtype=np.float64)
-        if not np.linalg.norm(axis) > 0.0:
-            raise UrdfError(f"{label}: joint {joint.name!r}: its axis has no length")
+        axis = joint_axis(joint, label)
         axis = frame[:3, :3] @ axis / np.linalg.norm(axis)
         moved = float(joint_positions.get(joint.name, 0.0))
         # The child's anchor: where the joint's origin went (along the axis for a prismatic).
@@ -416,8 +479,8 @@ def link_visuals(robot, where, label):
                 except (UrdfError, ValueError) as error:
                     log.warning("%s (the link is drawn without it)", error)
                     continue
-                scale = geometry.mesh.scale if geometry.mesh.scale is not None else 1.0
-                mesh = meshes[path] * scale
+                mesh = meshes[path] * mesh_scale(geometry.mesh, f"{label}: link {link.name!r}: visual mesh "
+                                                                f"{geometry.mesh.filename!r}")
                 triangles += len(mesh)
                 if triangles > MAX_VISUAL_TRIANGLES:
                     log.warning("%s: more than %d visual triangles: link %r and the rest drawn without meshes",
@@ -435,11 +498,8 @@ def joint_motion(joint, value, label):
     continuous) or a slide along it (prismatic)."""
     if value == 0.0 or joint.type == "fixed":
         return np.eye(4)
-    axis = np.asarray(joint.axis if joint.axis is not None else (1.0, 0.0, 0.0), dtype=np.float64)
-    length = np.linalg.norm(axis)
-    if not length > 0.0:
-        raise UrdfError(f"{label}: joint {joint.name!r}: its axis has no length")
-    axis = axis / length
+    axis = joint_axis(joint, label)
+    axis = axis / np.linalg.norm(axis)
     motion = np.eye(4)
     if joint.type == "prismatic":
         motion[:3, 3] = value * axis
