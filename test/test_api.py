@@ -40,6 +40,8 @@ def world():
     ({"mass": 5e-324}, "body.mass: must be >= 1e-09"),
     ({"density": 0}, "body.density: must be > 0"),
     ({"density": 1e-300}, "body.density: the body's mass 1e-300 kg is below 1e-09 kg"),
+    # A mass that density gives is a mass too: saved as `mass`, 8e12 kg had made a scene unloadable.
+    ({"size": [2, 2, 2], "density": 1e12}, "body.density: the body's mass 8e+12 kg is more than 1e+12 kg"),
     ({"shape": "sphere", "radius": 1e-300}, "body.radius: must be >= 0.0005"),
     ({"shape": "cylinder", "length": 1e-30}, "body.length: must be >= 0.001 for a cylinder"),
     ({"shape": "convex", "points": [[0, 0, 0], [1e-30, 0, 0], [0, 1e-30, 0], [0, 0, 1e-30]]},
@@ -66,6 +68,7 @@ def test_bad_spawn_raises_and_changes_nothing(world, spec, fragment):
     ({"size": [1, -1, 1]}, "a.size[1]: must be >= 0.001"),
     ({"mass": 0}, "a.mass: must be >= 1e-09"),
     ({"density": 1e-300}, "a.density: the body's mass 1e-300 kg is below 1e-09 kg"),
+    ({"size": [100, 100, 100], "density": 2e6}, "a.density: the body's mass 2e+12 kg is more than"),
     ({"name": "c"}, "a.name: unknown key"),
     ({"position": [0, 0, float("nan")]}, "a.position[2]: must be finite"),
 ])

@@ -38,7 +38,7 @@ MAX_SIZE = 1.0e4       # m: larger boxes break the octree's and the solver's sca
 # is not resolved anyway, and its inertia (mass x size^2) nears the floating-point floor.
 MIN_SIZE = 1.0e-3
 MIN_MASS = 1.0e-9      # kg: a body's least mass, given or density x volume (1/m must stay finite)
-MAX_MASS = 1.0e12      # kg: the most a `mass` key may give
+MAX_MASS = 1.0e12      # kg: a body's most mass, given or density x volume (saved as its `mass`)
 MAX_COORDINATE = 1.0e6  # m
 MAX_SPEED = 1.0e4      # m/s, rad/s
 MAX_POINTS = 100_000   # of a convex body's `points`, before its hull is taken
@@ -476,11 +476,12 @@ MassProperties = namedtuple("MassProperties", "mass inv_mass inv_inertia")
 def mass_properties(solid, mass, path):
     """Mass (kg), its inverse and the inverse inertia (3, 3, body frame) of `solid` (shapes.Solid) weighing
     `mass`, all computed before a body is written: a SpecError naming `path` (the key the mass
-    came from) unless the mass is finite and at least MIN_MASS and the inertia is
+    came from) unless the mass is finite, within MIN_MASS and MAX_MASS, and the inertia is
     positive definite with a finite inverse."""
-    if not (math.isfinite(mass) and mass >= MIN_MASS):
+    if not (math.isfinite(mass) and MIN_MASS <= mass <= MAX_MASS):
         problem = ("is not positive" if not mass > 0.0 else "is not finite" if not math.isfinite(mass)
-                   else f"is below {MIN_MASS:g} kg")
+                   else f"is below {MIN_MASS:g} kg" if mass < MIN_MASS
+                   else f"is more than {MAX_MASS:g} kg (a scene saves it as its mass, which may not be)")
         raise SpecError(path, f"the body's mass {mass:g} kg {problem}")
     inertia = mass * solid.unit_inertia
     with np.errstate(all="ignore"):
