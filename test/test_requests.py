@@ -60,7 +60,7 @@ def test_spawn_one_and_a_list_all_or_nothing(requests):
     # 4 million values), or a compound that contains itself.
     ("- &b {shape: convex, position: [0, 0, 5], points: &p [" + ", ".join(["[0, 0, 0], [1, 0, 0], [0, 1, 0]"] * 3333)
      + ", [0, 0, 1]]}\n" + "- {shape: convex, position: [0, 0, 5], points: *p}\n" * 400,
-     "RESULT_OPERATION_FAILED: request is not valid YAML/JSON: its aliases expand it to more than"),
+     "RESULT_OPERATION_FAILED: request is not valid YAML/JSON: its aliases expand its 130,455 characters to more than"),
     ("&a {shape: compound, parts: [*a]}",
      "RESULT_OPERATION_FAILED: request is not valid YAML/JSON: an alias is inside the node it names"),
 ])

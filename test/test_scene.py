@@ -203,7 +203,7 @@ def test_numbers_in_exponent_form_are_numbers(tmp_path):
 @pytest.mark.parametrize("text, fragment", [
     ("version: 1\nbodies:\n  - &a {shape: compound, parts: [*a]}\n", "an alias is inside the node it names"),
     ("version: 1\nbodies:\n  - &b {name: b}\n" + "  - *b\n" * 100 + "x: &l [" + "0, " * 5000 + "0]\ny: [" +
-     ", ".join(["*l"] * 200) + "]\n", "its aliases expand it to more than"),
+     ", ".join(["*l"] * 200) + "]\n", "its aliases expand its [0-9,]+ characters to more than"),
 ])
 def test_yaml_aliases_that_build_more_than_the_text_are_refused(tmp_path, text, fragment):
     """A scene's size limit bounds its work only while the text is what it holds: aliases may

@@ -106,11 +106,7 @@ def main(argv=None):
     recorder = None
     if options.record is not None:
         from .recorder import Recorder
-        try:
-            recorder = Recorder(options.record, options.record_split_size)
-        except OSError as error:
-            print(f"vplayground: cannot record to {options.record}: {error.strerror or error}", file=sys.stderr)
-            return 2
+        recorder = Recorder(options.record, options.record_split_size)  # its `error` says if it cannot write
     sim = Simulation(world, real_time_factor=options.real_time_factor,
                      start_paused=options.start_paused, duration=options.duration)
     stop = threading.Event()
@@ -241,7 +237,9 @@ def run_until_stopped(sim, options, recorder, ros_args, stop, deaths):
         log.info(f"{options.scene}: {len(sim.world.body_names())} bodies; real-time factor "
                  f"{speed:g}{f', {duration:g} s' if duration > 0 else ''}; "
                  f"{'ROS node' if node else 'no ROS node'}; "
-                 f"{'recording to ' + str(options.record) if recorder else 'not recording'}")
+                 f"{'recording to ' + str(options.record) if recorder and recorder.error is None else 'not recording'}")
+        if recorder is not None and recorder.error is not None:  # the run goes on without a bag (issue 16.1)
+            log.error(f"bag: cannot record: {recorder.error}; the simulation runs on without one")
         if server is not None:
             log.info(f"Foxglove: open connection to {server.url} (Foxglove WebSocket), then load "
                      f"{find_shared('config/foxglove_layout.json') or 'config/foxglove_layout.json'}")

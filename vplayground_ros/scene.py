@@ -69,16 +69,17 @@ def load_yaml(text):
     try:
         node = loader.get_single_node()
         if node is not None and "*" in text:  # an alias starts with '*'
-            check_aliases(node, ALIAS_EXPANSION * len(text) + ALIAS_ALLOWANCE)
+            check_aliases(node, ALIAS_EXPANSION * len(text) + ALIAS_ALLOWANCE, len(text))
         return None if node is None else loader.construct_document(node)
     finally:
         loader.dispose()
 
 
-def check_aliases(root, limit):
-    """Counts the nodes of the document as its aliases expand it (each node once where it is
-    written, again wherever an alias repeats it), up to `limit`; YamlExpansion beyond it, or
-    for a node inside itself. Iterative: a document may nest a thousand levels deep."""
+def check_aliases(root, limit, characters):
+    """Counts the nodes of the document (of `characters`) as its aliases expand it (each node
+    once where it is written, again wherever an alias repeats it), up to `limit`; YamlExpansion
+    beyond it, or for a node inside itself. Iterative: a document may nest a thousand levels
+    deep."""
     sizes = {}      # id(node) -> nodes it expands to, itself included
     open_ = set()   # nodes being counted (their children are): met again, a node inside itself
     stack = [(root, False)]
@@ -91,9 +92,9 @@ def check_aliases(root, limit):
             sizes[key] = 1 + sum(sizes[id(child)] for child in children)
             open_.discard(key)
             if sizes[key] > limit:
-                raise YamlExpansion(f"its aliases expand it to more than {limit:,} values, more than its "
-                                    f"{limit // ALIAS_EXPANSION:,} characters could hold written out: write "
-                                    "the values out, or repeat fewer")
+                raise YamlExpansion(f"its aliases expand its {characters:,} characters to more than {limit:,} "
+                                    "values (twice what they could hold written out, and 10,000): write the "
+                                    "values out, or repeat fewer")
             continue
         if key in sizes:
             continue
