@@ -506,6 +506,17 @@ def test_duration_and_sigterm_stop_cleanly():
     assert "stopped:" in output
 
 
+def test_ros_arguments_rcl_cannot_parse_are_refused_in_words(tmp_path):
+    """rcl's refusal of --ros-args (a rule without :=, a missing params file) had come out as a
+    traceback from rclpy.init."""
+    for args in (["-p", "foo"], ["--params-file", str(tmp_path / "none.yaml")]):
+        refused = run_console("--no-record", "--duration", "1", "--ros-args", *args)
+        output, _ = refused.communicate(timeout=120)
+        assert refused.returncode == 2, output
+        assert f"vplayground: cannot start: --ros-args {' '.join(args)}: failed to initialize rcl" in output, output
+        assert "Traceback" not in output, output
+
+
 def test_a_ros_override_of_what_only_the_command_line_sets_is_refused():
     """The scene (like the bag and the Foxglove port) is opened before the node exists: a
     --ros-args -p override of it read back but acted nowhere. Refused, naming the option."""

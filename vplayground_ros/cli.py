@@ -209,7 +209,13 @@ def run_until_stopped(sim, options, recorder, ros_args, stop, deaths):
 
         from .node import SimulatorNode
         profile = use_middleware_profile()
-        rclpy.init(args=["vplayground", *ros_args], signal_handler_options=SignalHandlerOptions.NO)
+        try:
+            rclpy.init(args=["vplayground", *ros_args], signal_handler_options=SignalHandlerOptions.NO)
+        except RuntimeError as error:  # rcl refusing the arguments (RCLError): its reason, not a traceback
+            print(f"vplayground: cannot start: {' '.join(ros_args)}: {str(error).split(', at ')[0]}", file=sys.stderr)
+            if recorder is not None:
+                recorder.close()
+            return 2
         node = SimulatorNode()
         log = node.get_logger()
         if profile is not None:
