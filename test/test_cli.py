@@ -187,3 +187,13 @@ def test_a_duration_beyond_a_countable_run_is_refused(capsys):
         with pytest.raises(ValueError, match="duration"):
             runtime.parameters.override({"duration": value})
     assert runtime.parameters["duration"] == 0.0
+
+
+@pytest.mark.parametrize("size", ["-1", "1", "65535"])
+def test_a_split_size_below_a_chunk_is_refused(capsys, size):
+    """1 byte had written a bag file per chunk, thousands in two simulated seconds."""
+    with pytest.raises(SystemExit) as refused:
+        cli.parse_args(["--record-split-size", size])
+    assert refused.value.code == 2
+    assert "--record-split-size must be 0 (one file) or at least 65536 bytes" in capsys.readouterr().err
+    assert cli.parse_args(["--record-split-size", "65536"]).record_split_size == 65536

@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 
 from .parameters import MAX_DURATION
+from .recorder import MIN_CHUNK_SIZE
 from .resources import find_shared
 from .scene import SceneError, load_world
 from .simulation import Simulation
@@ -63,8 +64,10 @@ def parse_args(argv):
         parser.error(f"--duration must be > 0 and at most {MAX_DURATION:g} s")
     if args.real_time_factor < 0:
         parser.error("--real-time-factor must be >= 0")
-    if args.record_split_size < 0:
-        parser.error("--record-split-size must be >= 0")
+    if args.record_split_size < 0 or 0 < args.record_split_size < MIN_CHUNK_SIZE:
+        # (1 byte had written a file per chunk, thousands a second)
+        parser.error(f"--record-split-size must be 0 (one file) or at least {MIN_CHUNK_SIZE} bytes (the bag's "
+                     "smallest chunk)")
     if args.foxglove is not None and not 0 <= args.foxglove <= 65535:
         parser.error("--foxglove PORT must be in 0..65535")
     if args.no_record:

@@ -65,6 +65,7 @@ PROFILE = "ros2"
 # 1,000-body pile that never rests, the same size and 10 % less CPU. Foxglove's decoder
 # (@mcap/support's wasm zstd) reads them; zstd-codec, a 16 MB heap, cannot.
 CHUNK_SIZE = 16 * 1024 * 1024
+MIN_CHUNK_SIZE = 64 * 1024  # and the smallest split size (--record-split-size)
 # What a crash (kill -9) loses is the chunk being filled: it is written once full or once its
 # first message is this old (wall-clock s), so at most ~4 s of the default scene (~5 MB), ~1.4 s
 # of 1,000 bodies (~11 MB/s of snapshots).
@@ -298,7 +299,7 @@ class Recorder:
         self.split_size = split_size
         # Splits are decided on the file's size, which grows a chunk at a time: chunks well
         # below the split size (each file's index is dropped when it is finished anyway).
-        self.chunk_size = min(CHUNK_SIZE, max(64 * 1024, split_size // 4)) if split_size else CHUNK_SIZE
+        self.chunk_size = min(CHUNK_SIZE, max(MIN_CHUNK_SIZE, split_size // 4)) if split_size else CHUNK_SIZE
         self.bytes_written = 0   # over all files
         self.dropped = 0
         self.error = None        # the first failure (disk full, unwritable path); then nothing is written
