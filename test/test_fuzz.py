@@ -925,10 +925,11 @@ def test_a_mesh_outside_the_scene_directories_is_refused(harness, tmp_path_facto
     scene.write_text(yaml.safe_dump({"version": 1, "playground": {"mesh": str(elsewhere / "copy.obj")}}))
     result, message = harness.requests.load_scene(str(scene))
     assert result == api.INVALID_MAP_DATA and "outside" in message, message
-    # The package's own meshes stay usable by name.
-    scene.write_text(yaml.safe_dump({"version": 1, "playground": {"mesh": "playground.obj"}}))
-    result, message = harness.requests.load_scene(str(scene))
-    assert result == api.MAP_SUCCESS, message
+    # The package's own meshes stay usable by name, and by their absolute path (as README says).
+    for name in ("playground.obj", str(mesh)):
+        scene.write_text(yaml.safe_dump({"version": 1, "playground": {"mesh": name}}))
+        result, message = harness.requests.load_scene(str(scene))
+        assert result == api.MAP_SUCCESS, message
     default = find_shared("config/default_scene.yaml")
     result, message = harness.requests.load_scene(str(default))  # config/ is not listed here
     assert result == api.MAP_DOES_NOT_EXIST and "outside the scene directories" in message, message

@@ -197,7 +197,7 @@ def resolve_mesh(name, base, directories=None, key="playground.mesh", shared_fol
     candidate = Path(name)
     tried = [candidate] if candidate.is_absolute() else [base / candidate]
     if is_file(tried[0]):
-        if directories is not None and not inside(tried[0], directories):
+        if directories is not None and not inside(tried[0], directories) and not is_shared(tried[0], shared_folder):
             raise MissingMesh(key, f"mesh file {specs.quote(name)} resolves outside the allowed directories")
         return tried[0]
     if not candidate.is_absolute() and ".." not in candidate.parts:  # (no way out of the folder)
@@ -207,6 +207,16 @@ def resolve_mesh(name, base, directories=None, key="playground.mesh", shared_fol
         tried.append(Path(f"<package>/{shared_folder}") / name)
     raise MissingMesh(key, f"mesh file {specs.quote(name)} not found (looked in: "
                            f"{', '.join(str(p) for p in tried)})")
+
+
+def is_shared(path, shared_folder):
+    """Whether `path` is one of the package's own files in `shared_folder` (readable by any path
+    to it, as by its name)."""
+    shared = find_shared(f"{shared_folder}/{Path(path).name}")
+    try:
+        return shared is not None and shared.resolve() == Path(path).resolve()
+    except (OSError, RuntimeError):
+        return False
 
 
 def inside(path, directories):
