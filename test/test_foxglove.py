@@ -21,7 +21,7 @@ from foxglove_client import OLD_SUBPROTOCOL, SUBPROTOCOL, URL_IN_LOG, FoxgloveCl
 from foxglove_js import needs_node, run_script
 from helpers import wait_for
 
-from vplayground_ros.foxglove_front import MAX_VIEWERS
+from vplayground_ros.foxglove_front import MAX_VIEWERS, HandshakeError, read_head
 
 NS = "/vplayground"
 TOPICS = {
@@ -590,3 +590,53 @@ def test_a_urdf_robot_spawned_over_the_socket_takes_joint_commands_from_a_client
         assert error < 2e-3
     finally:
         assert client.call(f"{NS}/remove", {"load_namespace": "{entity: sock_arm}"}).success
+
+
+def test_a_handshake_trickled_a_byte_at_a_time_ends_at_its_deadline():
+    """The handshake's time is for the whole HTTP head: a peer sending a byte every 0.2 s (each
+    read well within the timeout) had held its viewer's place for as long as it went on."""
+    ours, theirs = socket.socketpair()
+    stop = threading.Event()
+
+    def trickle():
+        while not stop.wait(0.2):
+            try:
+                theirs.send(b"G")
+            except OSError:
+                return
+    threading.Thread(target=trickle, daemon=True).start()
+    try:
+        ours.settimeout(30.0)
+        started = time.monotonic()
+        with pytest.raises(HandshakeError, match="no whole HTTP head within 1 s"):
+            read_head(ours, 1.0)
+        assert time.monotonic() - started < 5.0  # (not a measure of speed: it ended, where it had not)
+        assert ours.gettimeout() == 30.0
+    finally:
+        stop.set()
+        ours.close()
+        theirs.close()
+
+
+def test_a_client_flooding_garbage_leaves_the_others_connected_and_the_log_short(server, client):
+    """Each undecodable message had been a status to every client and a log line: 5,000 of them
+    from one client filled a bystander's queue until the sdk dropped the bystander, and the
+    log with 5,000 lines. Now a few of each kind in a while, then how many were held back."""
+    url, output = server
+    bystander = FoxgloveClient(url)
+    try:
+        assert bystander.wait(lambda: "/clock" in bystander.channels)
+        bystander.subscribe("/clock")
+        channel = client.advertise("/cmd_vel", "cdr", "geometry_msgs/msg/Twist")
+        logged_before = sum("undecodable message ignored" in line for line in output)
+        for _ in range(3000):
+            client.publish(channel, b"\x00\x01")
+        count = len(bystander.frames["/clock"])
+        assert bystander.wait(lambda: len(bystander.frames["/clock"]) > count + 10)  # still served
+        assert bystander.connected
+        garbage = [s for s in bystander.statuses if "undecodable message ignored" in s["message"]]
+        assert 1 <= len(garbage) <= 5 * 2  # a window or two of the burst
+        logged = sum("undecodable message ignored" in line for line in output) - logged_before
+        assert 1 <= logged <= 5 * 2
+    finally:
+        bystander.close()

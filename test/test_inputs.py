@@ -9,6 +9,7 @@ import pytest
 from test_requests import CAR_SCENE
 from vplayground_ros.api import Requests
 from vplayground_ros.broadcast import resolve
+from vplayground_ros import throttle
 from vplayground_ros.inputs import Inputs, from_json
 from vplayground_ros.parameters import FRAMES, frames
 from vplayground_ros.robots import robot
@@ -112,3 +113,30 @@ def test_an_initialpose_quaternion_of_any_length_is_its_direction(inputs):
     assert not inputs.log.warnings()
     yaw = math.pi / 2  # z = w: a quarter turn
     assert np.allclose(np.abs(world.body("car")["quaternion"]), [0, 0, math.sin(yaw / 2), math.cos(yaw / 2)], atol=1e-9)
+
+
+def test_a_flood_of_refused_inputs_is_logged_a_few_lines_at_a_time(inputs):
+    """Anyone on the domain may send a thousand NaN commands a second: each had been a log
+    line. A few of each input's warnings go out in a while; the next after it says how many
+    were held back. A refusal too large for a float (a JSON integer of 400 digits) is a
+    malformed message, not a simulator error."""
+    nan = {"linear": {"x": float("nan"), "y": 0, "z": 0}, "angular": {"x": 0, "y": 0, "z": 0}}
+    for _ in range(200):
+        inputs.handle("cmd_vel", from_json(json.dumps(nan)))
+    assert 1 <= len(inputs.log.warnings()) <= throttle.BURST
+    huge = from_json('{"header": {"frame_id": "world"}, "point": {"x": 1' + "0" * 400 + ', "y": 0, "z": 0}}')
+    inputs.handle("clicked_point", huge)
+    assert "clicked_point: malformed message ignored" in inputs.log.warnings()[-1]
+    assert inputs.sim.fault_count == 0
+
+
+def test_a_throttle_lets_a_burst_through_then_counts_what_it_holds_back():
+    now = [0.0]
+    gate = throttle.Throttle(period=10.0, burst=3, clock=lambda: now[0])
+    assert [gate.admit("a") for _ in range(5)] == [0, 0, 0, None, None]
+    assert gate.admit("b") == 0  # kinds apart
+    now[0] = 9.9
+    assert gate.admit("a") is None
+    now[0] = 10.0
+    assert gate.admit("a") == 3  # the window over: the three held back are told with the next
+    assert throttle.held_note(3) == " (3 more like it in the 10 s before were not logged)"

@@ -51,16 +51,31 @@ class HandshakeError(Exception):
     """A peer's handshake the relay cannot pass on; the text goes back in an HTTP 400."""
 
 
-def read_head(sock):
-    """(HTTP head up to and without its blank line, the bytes read after it)."""
+def read_head(sock, timeout):
+    """(HTTP head up to and without its blank line, the bytes read after it), all of it within
+    `timeout` s (HandshakeError after: a peer sending a byte every few seconds had held its
+    place for as long as it liked, each read within the timeout); the socket's own timeout is
+    left as it was."""
     data = b""
-    while b"\r\n\r\n" not in data:
-        if len(data) > HANDSHAKE_LIMIT:
-            raise HandshakeError("HTTP head too large")
-        chunk = sock.recv(4096)
-        if not chunk:
-            raise HandshakeError("connection closed during the handshake")
-        data += chunk
+    deadline = time.monotonic() + timeout
+    previous = sock.gettimeout()
+    try:
+        while b"\r\n\r\n" not in data:
+            if len(data) > HANDSHAKE_LIMIT:
+                raise HandshakeError("HTTP head too large")
+            left = deadline - time.monotonic()
+            if left <= 0.0:
+                raise HandshakeError(f"no whole HTTP head within {timeout:g} s")
+            sock.settimeout(left)
+            try:
+                chunk = sock.recv(4096)
+            except TimeoutError:
+                raise HandshakeError(f"no whole HTTP head within {timeout:g} s") from None
+            if not chunk:
+                raise HandshakeError("connection closed during the handshake")
+            data += chunk
+    finally:
+        sock.settimeout(previous)
     head, rest = data.split(b"\r\n\r\n", 1)
     return head, rest
 
@@ -139,7 +154,7 @@ def with_metadata(payload, metadata):
 def refuse(sock, status, text, drain=False):
     """An HTTP error answer with `text` as its body; a peer already gone is ignored. With
     `drain` (on the viewer's own thread), what the peer still sends is read and dropped, up to
-    DRAIN_LIMIT bytes or DRAIN_TIMEOUT: closing a socket with unread bytes resets the
+    DRAIN_LIMIT bytes or DRAIN_TIMEOUT in all: closing a socket with unread bytes resets the
     connection, and the peer lost the answer (an HTTP head over HANDSHAKE_LIMIT got a reset)."""
     body = f"{text}\n".encode()
     try:
@@ -147,9 +162,10 @@ def refuse(sock, status, text, drain=False):
                      b"Content-Length: %d\r\n\r\n" % (status, len(body)) + body)
         if drain:
             sock.shutdown(socket.SHUT_WR)
-            sock.settimeout(DRAIN_TIMEOUT)
+            deadline = time.monotonic() + DRAIN_TIMEOUT
             drained = 0
-            while drained < DRAIN_LIMIT:
+            while drained < DRAIN_LIMIT and time.monotonic() < deadline:
+                sock.settimeout(max(deadline - time.monotonic(), 1e-3))
                 chunk = sock.recv(65536)
                 if not chunk:
                     break
@@ -243,7 +259,7 @@ class ProtocolFront:
         try:
             viewer.settimeout(REFUSE_READ_TIMEOUT)
             try:
-                read_head(viewer)
+                read_head(viewer, REFUSE_READ_TIMEOUT)
             except (OSError, HandshakeError):
                 pass  # silent, gone or not HTTP: the answer goes out all the same
             refuse(viewer, BUSY, BUSY_TEXT)
@@ -257,14 +273,14 @@ class ProtocolFront:
         sdk = None
         try:
             viewer.settimeout(HANDSHAKE_TIMEOUT)
-            head, early = read_head(viewer)
+            head, early = read_head(viewer, HANDSHAKE_TIMEOUT)
             lines = head.split(b"\r\n")
             subprotocol = choose_subprotocol(lines)
             sdk = socket.create_connection(self.upstream, timeout=HANDSHAKE_TIMEOUT)
             with self._lock:
                 self.connections.update((viewer, sdk))
             sdk.sendall(upstream_request(lines) + early)
-            response, rest = read_head(sdk)
+            response, rest = read_head(sdk, HANDSHAKE_TIMEOUT)
             response_lines = response.split(b"\r\n")
             upgraded = response_lines[0].split(b" ")[1:2] == [b"101"]
             if upgraded:

@@ -24,6 +24,7 @@ from foxglove.websocket import Capability, StatusLevel
 from .foxglove_front import ProtocolFront
 from .inputs import TWIST, TWIST_STAMPED, from_cdr, from_json, subscriptions
 from .interfaces import decoder, encode, schema
+from .throttle import Throttle, held_note
 
 DEFAULT_PORT = 8765
 # The message definitions every channel and service uses are Jazzy's (interfaces.py); viewers
@@ -45,7 +46,8 @@ logging.getLogger("foxglove.websocket").setLevel(logging.WARNING)
 # What a client does wrong (drops its connection, sends garbage, fails its handshake) the sdk
 # logs as ERROR, a line each: anyone on the network could fill the log. Such lines are debug.
 CLIENT_FAULTS = ("Error receiving from client", "Connection reset without closing handshake", "Invalid message from",
-                 "attempted to subscribe to unknown channel", "handshake failed")
+                 "attempted to subscribe to unknown channel", "handshake failed",
+                 "Received message for unknown channel")
 
 
 class ClientFaultsAreDebug(logging.Filter):
@@ -84,6 +86,7 @@ class FoxgloveServer:
         self.watched_parameters = set()  # names some client subscribed to updates of
         self._setting = threading.local()  # .names: a Foxglove client's set, on this thread
         self._lock = threading.Lock()
+        self._throttle = Throttle()  # of _warn: a client may send garbage as fast as it likes
         try:
             self.server = foxglove.start_server(
                 name="vplayground", host="127.0.0.1", port=0, context=self.context,
@@ -213,7 +216,7 @@ class FoxgloveServer:
             return
         if sub is None:
             self._warn(f"{channel.topic}: the simulator does not subscribe to it "
-                       f"(it takes {', '.join(sorted(self.inputs))})")
+                       f"(it takes {', '.join(sorted(self.inputs))})", "advertise")
             return
         if channel.encoding == "json":
             decode = from_json
@@ -224,11 +227,12 @@ class FoxgloveServer:
             advertised = (channel.schema_name or sub.type).replace("/msg/", "/")
             kind = next((k for k in kinds if k.replace("/msg/", "/") == advertised), None)
             if kind is None:
-                self._warn(f"{channel.topic}: expected {' or '.join(kinds)}, the client advertises {channel.schema_name}")
+                self._warn(f"{channel.topic}: expected {' or '.join(kinds)}, the client advertises {channel.schema_name}",
+                           "advertise")
                 return
             decode = lambda data, kind=kind: from_cdr(kind, data)  # noqa: E731
         else:
-            self._warn(f"{channel.topic}: encoding {channel.encoding!r} not supported (cdr or json)")
+            self._warn(f"{channel.topic}: encoding {channel.encoding!r} not supported (cdr or json)", "advertise")
             return
         with self._lock:
             self.client_channels[(client.id, channel.id)] = (sub.key, decode, topic)
@@ -245,7 +249,7 @@ class FoxgloveServer:
         try:
             message = decode(data)
         except Exception as error:  # a client's bytes must never reach the loop as an exception
-            self._warn(f"{key}: undecodable message ignored ({type(error).__name__}: {error})")
+            self._warn(f"{key}: undecodable message ignored ({type(error).__name__}: {error})", ("undecodable", key))
             return
         self.runtime.inputs.handle(key, message, topic)
 
@@ -261,7 +265,7 @@ class FoxgloveServer:
         finally:
             self._setting.names = set()
         if not ok:
-            self._warn(f"parameters refused: {reason}")
+            self._warn(f"parameters refused: {reason}", "parameters")
         store = self.runtime.parameters
         return [self._parameter(name) for name in changes if name in store.specs]
 
@@ -291,6 +295,11 @@ class FoxgloveServer:
         if watched:
             self.server.publish_parameter_values([self._parameter(name) for name in watched])
 
-    def _warn(self, text):
-        self.runtime.log.warning(f"foxglove: {text}")
-        self.server.publish_status(text, StatusLevel.Warning)
+    def _warn(self, text, kind):
+        """A warning to the log and a status to the clients (every one of them: the sdk has no
+        status for one client), a few of each `kind` in a while (throttle.py)."""
+        held = self._throttle.admit(kind)
+        if held is not None:
+            text += held_note(held, self._throttle.period)
+            self.runtime.log.warning(f"foxglove: {text}")
+            self.server.publish_status(text, StatusLevel.Warning)

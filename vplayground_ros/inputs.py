@@ -17,6 +17,7 @@ from .parameters import frames as frame_names
 from .physics.math3d import rpy_to_quat
 from .physics.specs import MAX_COORDINATE
 from .sensors import pose_matrix
+from .throttle import ThrottledLog
 
 Subscription = namedtuple("Subscription", "key name type")
 TWIST, TWIST_STAMPED = "geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped"
@@ -74,7 +75,7 @@ class Inputs:
         self.sim = sim
         self.requests = requests
         self.parameters = parameters
-        self.log = log
+        self.log = ThrottledLog(log)  # anyone on the domain (or a Foxglove client) sends inputs
         self.robots = robots
         self.urdf_robots = urdf_robots
         self.control = control
@@ -108,7 +109,7 @@ class Inputs:
                 self.handlers[key](msg)
             else:
                 self.robot_command(key, msg, topic)
-        except (AttributeError, TypeError, ValueError) as error:
+        except (AttributeError, TypeError, ValueError, OverflowError) as error:  # (an integer past a float's range)
             self.log.warning(f"{key}: malformed message ignored ({error})")
         except TimeoutError as error:
             self.log.warning(f"{key} ignored: {error}")
