@@ -517,6 +517,15 @@ def test_ros_arguments_rcl_cannot_parse_are_refused_in_words(tmp_path):
         assert "Traceback" not in output, output
 
 
+def test_an_override_of_a_parameter_the_node_does_not_have_is_said():
+    """rclpy takes `-p steps_per_secnd:=200` and nothing uses it: a typo had been silent."""
+    run = run_console("--no-record", "--duration", "1", "--real-time-factor", "0",
+                      "--ros-args", "-p", "steps_per_secnd:=200")
+    output, _ = run.communicate(timeout=120)
+    assert run.returncode == 0, output
+    assert "--ros-args -p steps_per_secnd: no such parameter of this node, ignored" in output, output
+
+
 def test_a_ros_override_of_what_only_the_command_line_sets_is_refused():
     """The scene (like the bag and the Foxglove port) is opened before the node exists: a
     --ros-args -p override of it read back but acted nowhere. Refused, naming the option."""

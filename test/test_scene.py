@@ -214,3 +214,16 @@ def test_yaml_aliases_that_build_more_than_the_text_are_refused(tmp_path, text, 
     path.write_text(text)
     with pytest.raises(SceneError, match=f"aliases.yaml: not valid YAML: {fragment}"):
         load_world(path)
+
+
+def test_a_key_given_twice_is_refused_and_merge_keys_still_merge(tmp_path):
+    """YAML keeps the last of a key given twice: a scene with two `bodies:` lists had lost the
+    first without a word."""
+    path = tmp_path / "twice.yaml"
+    path.write_text("version: 1\nbodies: [{name: a}]\nbodies: [{name: b, position: [3, 0, 0.5]}]\n")
+    with pytest.raises(SceneError, match="twice.yaml: not valid YAML: the key 'bodies' is given twice in one mapping"):
+        load_world(path)
+    path.write_text("version: 1\nbodies:\n  - &crate {name: a, size: [1, 1, 1], mass: 2}\n"
+                    "  - {<<: *crate, name: b, position: [3, 0, 0.5]}\n")
+    world = load_world(path)
+    assert world.body("b")["mass"] == 2.0 and world.body("b")["position"] == [3.0, 0.0, 0.5]

@@ -138,7 +138,9 @@ ARM = """<robot name="arm">
 
 
 @pytest.mark.parametrize("text, message", [
-    (ARM.format(mass=0, kind="revolute"), "link 'upper': no inertial"),
+    (ARM.format(mass=0, kind="revolute"), "link 'upper': no inertial, or a mass of 0"),
+    (ARM.format(mass=1, kind="revolute").replace("</robot>", '<link name="upper"/></robot>'),
+     "two links are named 'upper'"),
     (ARM.format(mass=-1, kind="revolute"), "link 'upper': mass -1 kg is not physical"),
     (ARM.format(mass=1, kind="floating"), "joint 'shoulder': type 'floating' is not supported"),
     (ARM.format(mass=1, kind="revolute").replace('<child link="upper"/>', '<child link="elbow"/>'),

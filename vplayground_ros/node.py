@@ -302,6 +302,12 @@ class SimulatorNode(Node):
             raise ValueError(f"{name}: give it on the command line ({COMMAND_LINE_ONLY[name]}), "
                              f"not as a ROS parameter override")
         store.override(overrides)
+        # An override of a name the node does not have (a typo: -p steps_per_secnd:=200) is
+        # taken by rclpy and used by nothing: said, not silent.
+        unknown = sorted(set(getattr(self, "_parameter_overrides", {})) - set(store.specs) - {"use_sim_time"})
+        if unknown:
+            self.get_logger().warning(f"--ros-args -p {', '.join(unknown)}: no such parameter of this node, ignored "
+                                      f"(ros2 param list {self.get_fully_qualified_name()} lists them)")
         self._from_rclpy = threading.local()  # .active: inside our set-parameters callback
         self._copying = threading.local()     # .active: copying a change into rclpy
         self.add_on_set_parameters_callback(self._on_parameters)

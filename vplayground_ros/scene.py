@@ -46,6 +46,21 @@ class YamlLoader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):
     `mass: 1e4` was then refused as."""
 
 
+def construct_mapping(loader, node, deep=False):
+    """A mapping whose keys, as written, are each there once (merge keys `<<:` aside, whose keys
+    the mapping's own override): YAML keeps the last of a key given twice, so a scene with two
+    `bodies:` lists had quietly lost the first."""
+    seen = set()
+    for key, _ in node.value:
+        if isinstance(key, yaml.ScalarNode) and key.tag != "tag:yaml.org,2002:merge":
+            if key.value in seen:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"the key {key.value[:80]!r} is given twice in one mapping", key.start_mark)
+            seen.add(key.value)
+    return yaml.SafeLoader.construct_mapping(loader, node, deep)
+
+
+YamlLoader.construct_mapping = construct_mapping
 YamlLoader.add_implicit_resolver("tag:yaml.org,2002:float",
                                  re.compile(r"^[-+]?[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"), list("-+0123456789"))
 

@@ -138,10 +138,16 @@ def parse(text, label):
     import yourdfpy
     from io import StringIO
     try:
-        return yourdfpy.URDF.load(StringIO(text), build_scene_graph=False, load_meshes=False,
-                                  load_collision_meshes=False).robot
+        robot = yourdfpy.URDF.load(StringIO(text), build_scene_graph=False, load_meshes=False,
+                                   load_collision_meshes=False).robot
     except Exception as error:  # yourdfpy raises what its XML and number parsing raise
         raise UnreadableUrdf(f"{label}: not a URDF robot yourdfpy can read: {error}") from None
+    for kind, elements in (("link", robot.links), ("joint", robot.joints)):  # one of them had been lost
+        names = [element.name for element in elements]
+        twice = next((name for name in names if names.count(name) > 1), None)
+        if twice is not None:
+            raise UrdfError(f"{label}: two {kind}s are named {twice!r}")
+    return robot
 
 
 def origin(element):
@@ -386,8 +392,8 @@ def robot_model(source, name, position=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), fix
             mass, centre, tensor = combine_inertials(entry["inertials"])
             spec["inertial"] = {"mass": mass, "centre": centre.tolist(), "inertia": tensor.tolist()}
         elif not (owner == root and fixed):
-            raise UrdfError(f"{label}: link {owner!r}: no inertial (mass and inertia are needed for "
-                            "every moving link)")
+            raise UrdfError(f"{label}: link {owner!r}: no inertial, or a mass of 0 (mass and inertia are "
+                            "needed for every moving link)")
         if owner == root and fixed:
             spec["immovable"] = True
         body_specs.append(spec)
