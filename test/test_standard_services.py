@@ -100,6 +100,10 @@ def test_spawn_entity_and_its_result_codes(ros):
     assert urdf.result.result == SpawnEntity.Response.UNSUPPORTED_ASSETS and "link 'a'" in urdf.result.error_message
     unreadable = spawn(ros, "robot", resource="<robot name='r'><link name='a'></robot>")
     assert unreadable.result.result == SpawnEntity.Response.RESOURCE_PARSE_ERROR
+    for xml in ("<?xml version='1.0'?><!-- a model --><sdf version='1.9'><model name='m'/></sdf>",
+                "<mujoco model='m'/>"):  # another kind of XML, not a URDF that fails to parse
+        other = spawn(ros, "robot", resource=xml)
+        assert other.result.result == SpawnEntity.Response.UNSUPPORTED_FORMAT, other.result.error_message
     far = call(ros, SpawnEntity, "spawn_entity", name="far", resource_string=BOX, initial_pose=pose(1e7, 0, 0))
     assert far.result.result == SpawnEntity.Response.INVALID_POSE
     unknown_frame = call(ros, SpawnEntity, "spawn_entity", name="lost", resource_string=BOX,
@@ -139,7 +143,7 @@ def test_spawn_from_a_file_in_the_scene_directories_and_relative_to_a_frame(ros)
     assert call(ros, DeleteEntity, "delete_entity", entity="file_arm").result.result == OK
     (ros.scene_directory / "notes.txt").write_text("shape: box\n")
     other = call(ros, SpawnEntity, "spawn_entity", name="notes", uri=str(ros.scene_directory / "notes.txt"))
-    assert other.result.result == NOT_FOUND and ".urdf" in other.result.error_message
+    assert other.result.result == SpawnEntity.Response.UNSUPPORTED_FORMAT and ".urdf" in other.result.error_message
     outside = call(ros, SpawnEntity, "spawn_entity", name="outside",
                    uri=str(Path(__file__).parent.parent / "config" / "arm.urdf"))
     assert outside.result.result == NOT_FOUND and "outside the scene directories" in outside.result.error_message
@@ -171,6 +175,11 @@ def test_entity_state_info_bounds_and_delete(ros):
     assert bounds.result.result == OK and bounds.bounds.type == Bounds.TYPE_BOX
     low, high = bounds.bounds.points
     assert (low.x, low.y, low.z) == pytest.approx((-0.25,) * 3) and (high.x, high.y, high.z) == pytest.approx((0.25,) * 3)
+    # A car's bounds take in its wheels over their travel (they had been the chassis alone).
+    wheels = ros.sim.world.vehicle("car")["wheels"]
+    lowest = min(w["mount"][2] - w["spring_length"] - w["radius"] for w in wheels)
+    low = call(ros, GetEntityBounds, "get_entity_bounds", entity="car").bounds.points[0]
+    assert low.z == pytest.approx(lowest) and low.y <= min(w["mount"][1] - w["radius"] for w in wheels)
     for kind, name in ((GetEntityState, "get_entity_state"), (GetEntityInfo, "get_entity_info"),
                        (GetEntityBounds, "get_entity_bounds"), (DeleteEntity, "delete_entity")):
         assert call(ros, kind, name, entity="no_such_entity").result.result == NOT_FOUND, name
@@ -207,6 +216,10 @@ def test_filters(ros):
     car = call(ros, GetEntityState, "get_entity_state", entity="car").state.pose.position
     near_car = Bounds(type=Bounds.TYPE_SPHERE, points=[Vector3(x=car.x, y=car.y, z=car.z), Vector3(x=0.5)])
     assert "car" in call(ros, GetEntities, "get_entities", filters=EntityFilters(bounds=near_car)).entities
+    # Where its wheels meet the ground, below the chassis: the car's too (it had been found by
+    # its chassis alone).
+    wheel_ground = Bounds(type=Bounds.TYPE_SPHERE, points=[Vector3(x=car.x, y=car.y, z=0.05), Vector3(x=0.02)])
+    assert "car" in call(ros, GetEntities, "get_entities", filters=EntityFilters(bounds=wheel_ground)).entities
     box = Bounds(type=Bounds.TYPE_BOX, points=[Vector3(x=-0.1, y=4.9, z=-1.0), Vector3(x=0.1, y=5.1, z=0.4)])
     states = call(ros, GetEntitiesStates, "get_entities_states",
                   filters=EntityFilters(filter="^filtered_", bounds=box))
@@ -297,6 +310,10 @@ def test_worlds_load_unload_and_list(ros):
     assert listed.result.result == OK
     mine = [w for w in listed.worlds if w.world_resource.uri == str(scene)]
     assert len(mine) == 1 and mine[0].name == "two_boxes" and mine[0].description == "Two boxes on the ground"
+    # Only worlds: an entity spec beside them (spawn_entity's uri) is no world load_world takes.
+    (ros.scene_directory / "lone_crate.yaml").write_text("# a crate\nshape: box\nsize: [0.4, 0.4, 0.4]\n")
+    listed = call(ros, GetAvailableWorlds, "get_available_worlds")
+    assert not [w for w in listed.worlds if w.name == "lone_crate"] and [w for w in listed.worlds if w.name == "two_boxes"]
     assert call(ros, GetAvailableWorlds, "get_available_worlds",
                 additional_sources=["/etc"]).result.result == FAILED  # outside the scene directories
     assert call(ros, GetAvailableWorlds, "get_available_worlds",
@@ -314,6 +331,9 @@ def test_worlds_load_unload_and_list(ros):
                 resource_string="version: 1\nbodies: [{shape: box, mass: -1}]").result.result == LoadWorld.Response.RESOURCE_PARSE_ERROR
     assert call(ros, LoadWorld, "load_world",
                 resource_string="<sdf version='1.9'/>").result.result == LoadWorld.Response.UNSUPPORTED_FORMAT
+    (ros.scene_directory / "world.sdf").write_text("<sdf version='1.9'/>")  # (it had answered NOT_FOUND)
+    sdf = call(ros, LoadWorld, "load_world", uri=str(ros.scene_directory / "world.sdf"))
+    assert sdf.result.result == LoadWorld.Response.UNSUPPORTED_FORMAT and ".yaml" in sdf.result.error_message
     (ros.scene_directory / "yard.gltf").write_text("{}")
     for text, code in (("version: 1\nplayground: {mesh: gone.obj}", LoadWorld.Response.MISSING_ASSETS),
                        (f"version: 1\nplayground: {{mesh: {ros.scene_directory / 'yard.gltf'}}}",

@@ -16,7 +16,7 @@ import numpy as np
 from . import messages
 from .api import INVALID_MAP_DATA, MAP_DOES_NOT_EXIST, MAP_SUCCESS
 from .api.entity_queries import category_of
-from .api.file_access import confine, local_path
+from .api.file_access import SCENE_SUFFIXES, confine, local_path
 from .api.payload import MAX_PAYLOAD, parse
 from .api.results import (FAILED, FEATURE_UNSUPPORTED, INCORRECT_STATE, NAME_INVALID, NO_RESOURCE, NO_WORLD_LOADED,
                           NOT_FOUND, RESOURCE_PARSE_ERROR, UNSUPPORTED_FORMAT, RequestError, handled)
@@ -79,10 +79,23 @@ SPAWN_SUFFIXES = (".yaml", ".yml", ".urdf", ".xacro")
 
 
 def is_urdf(uri, text):
-    """A URDF (or xacro) robot description rather than this package's YAML entity spec."""
+    """A URDF (or xacro) robot description rather than this package's YAML entity spec;
+    UNSUPPORTED_FORMAT for XML of another kind (SDFormat, MJCF), which had been read as a URDF
+    that failed to parse."""
     if uri:
         return uri.lower().endswith((".urdf", ".xacro"))
-    return is_description_text(text)
+    if not is_description_text(text):
+        return False
+    root = XML_ROOT.search(text)
+    if root is None or root.group(1) != "robot":
+        raise RequestError(UNSUPPORTED_FORMAT, f"resource_string is XML with a <{root.group(1) if root else '?'}> "
+                                               f"root, not a URDF <robot> (spawn_formats {SPAWN_FORMATS})")
+    return True
+
+
+# The root element of an XML text: the first element after its declaration, comments and
+# processing instructions.
+XML_ROOT = re.compile(r"^(?:\s|<\?.*?\?>|<!--.*?-->|<!DOCTYPE[^>]*>)*<([A-Za-z_][\w.:-]*)", re.DOTALL)
 
 
 def robot_name(text):
@@ -224,6 +237,10 @@ class StandardServices:
         return self.requests.spawn_entities(spec)
 
     def _read_resource(self, uri):
+        suffix = Path(local_path(uri)).suffix.lower()
+        if suffix not in SPAWN_SUFFIXES:
+            raise RequestError(UNSUPPORTED_FORMAT, f"uri: {specs.quote(uri)}: entity files end in "
+                                                   f"{' or '.join(SPAWN_SUFFIXES)} (spawn_formats {SPAWN_FORMATS})")
         try:
             target = confine(local_path(uri), "uri", self.requests.scene_directories, SPAWN_SUFFIXES,
                              "entity files")
@@ -362,6 +379,10 @@ class StandardServices:
         """~/load_scene of a scene file (uri, in the scene directories) or of scene YAML text
         (resource_string); the new world waits STOPPED, as the standard says."""
         uri, text = resource_of(request, "world_resource")
+        if uri and Path(local_path(uri)).suffix.lower() not in SCENE_SUFFIXES:
+            return {"result": failed(UNSUPPORTED_FORMAT, f"uri: {specs.quote(uri)}: a world is this package's scene "
+                                                         f"YAML, in a file ending in {' or '.join(SCENE_SUFFIXES)}",
+                                     LOAD_WORLD_CODES)}
         if uri:
             code, message = self.requests.load_scene(local_path(uri), stopped=True)
         elif text:

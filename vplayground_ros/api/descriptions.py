@@ -20,6 +20,8 @@ def describe(world, name, vehicles=None):
     half = np.asarray(half_extents(SHAPES[body["shape"]].code, shape.dimensions))
     if shape.compound is not None:  # about its frame, where its pose is, not its centre of mass
         half = half + np.abs(shape.compound.centre)
+    if is_vehicle:
+        half = with_wheels(props, half)
     size = 2.0 * half
     return {
         "name": name,
@@ -33,6 +35,20 @@ def describe(world, name, vehicles=None):
         "shape": body["shape"],
         "bounds": {"size": size.tolist()},
     }
+
+
+def with_wheels(vehicle, half):
+    """A chassis's half extents about its frame grown to take in its wheels over their
+    suspension's whole travel: they are rays, no body's volume, but they stand where nothing
+    should be spawned (the bounds had been the chassis alone, 0.8 m above the car's contact
+    points). Each wheel's box is its radius every way about its centre (the engine's wheels
+    have no width)."""
+    for wheel in vehicle["wheels"]:
+        mount, radius = np.asarray(wheel["mount"], float), float(wheel["radius"])
+        low = mount - [radius, radius, wheel["spring_length"] + radius]
+        high = mount + radius
+        half = np.maximum(half, np.maximum(np.abs(low), np.abs(high)))
+    return half
 
 
 def describe_sensor(world, spec):

@@ -13,7 +13,7 @@ import numpy as np
 from ..physics import specs
 from ..physics.math3d import quaternions_to_matrices
 from ..urdf_robots import robot_spec
-from .descriptions import SENSOR_SIZE, describe, describe_robot, describe_sensor
+from .descriptions import SENSOR_SIZE, describe, describe_robot, describe_sensor, with_wheels
 from .name_filter import match_names
 from .results import FAILED, FEATURE_UNSUPPORTED, NOT_FOUND, RequestError
 
@@ -34,6 +34,9 @@ def entity_table(world):
     categories = np.where(state["immovable"], STATIC_OBJECT, OBJECT)
     categories[[k for k, name in enumerate(names) if name in vehicles]] = ROBOT
     half = 0.5 * state["sizes"]
+    for k, name in enumerate(names):
+        if name in vehicles:  # its wheels too, as its bounds have them
+            half[k] = with_wheels(world.vehicle(name), half[k])
     rotations = quaternions_to_matrices(state["quaternions"])
     reach = np.einsum("nij,nj->ni", np.abs(rotations), half)
     positions, quaternions = state["positions"], state["quaternions"]

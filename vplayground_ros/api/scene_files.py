@@ -3,6 +3,7 @@ directories (file_access.py); the worlds of simulation_interfaces (load_world fr
 YAML text, unload_world, get_current_world, get_available_worlds) are the same scene files.
 """
 import copy
+import re
 from pathlib import Path
 
 import yaml
@@ -92,9 +93,10 @@ class SceneRequests:
         return self.sim.call(lambda world: self.scene_label if self.sim.world_loaded else None)
 
     def available_worlds(self, sources=()):
-        """The scene files (.yaml, .yml) directly inside the scene directories and inside
-        `sources` (directories, each within a scene directory): [(path, description)], the
-        description being the file's first comment line. FAILED naming a source outside."""
+        """The scene files (.yaml, .yml that declare a `version:`) directly inside the scene
+        directories and inside `sources` (directories, each within a scene directory): [(path,
+        description)], the description being the file's first comment line. FAILED naming a
+        source outside."""
         roots = allowed_directories(self.scene_directories)
         folders = list(roots)
         for source in sources:
@@ -107,7 +109,7 @@ class SceneRequests:
         found = {}
         for folder in folders:
             for path in sorted(folder.iterdir()):
-                if path.suffix in SCENE_SUFFIXES and path.is_file() and path not in found:
+                if path.suffix in SCENE_SUFFIXES and path.is_file() and path not in found and is_scene_file(path):
                     found[path] = first_comment(path)
                     if len(found) >= MAX_LISTED_WORLDS:
                         return list(found.items())
@@ -138,6 +140,22 @@ class SceneRequests:
             raise RequestError(FAILED, f"cannot write {target}: {error.strerror or error}") from None
         return reply(OK, str(target))
 
+
+
+# A scene file says its `version:` at its top level (SPEC 3), an entity spec (spawn_entity's uri,
+# in the same directories) does not: within the first this many bytes, as files begin.
+SCENE_HEAD_BYTES = 64 * 1024
+SCENE_VERSION = re.compile(rb"^version[ \t]*:", re.MULTILINE)
+
+
+def is_scene_file(path):
+    """Whether the YAML file at `path` is a scene (a world LoadWorld takes), not an entity spec
+    (get_available_worlds had listed those, which load_world then refused)."""
+    try:
+        with open(path, "rb") as stream:
+            return SCENE_VERSION.search(stream.read(SCENE_HEAD_BYTES)) is not None
+    except OSError:
+        return False
 
 
 def first_comment(path):
