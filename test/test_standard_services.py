@@ -355,6 +355,7 @@ def test_worlds_load_unload_and_list(ros):
     assert spawn(ros, "nowhere").result.result == INCORRECT_STATE
     assert call(ros, ResetSimulation, "reset_simulation").result.result == INCORRECT_STATE
     assert set_state(ros, SimulationState.STATE_PLAYING).result == SetSimulationState.Response.INCORRECT_TRANSITION
+    assert set_state(ros, SimulationState.STATE_NO_WORLD).result == SetSimulationState.Response.ALREADY_IN_TARGET_STATE
     text = call(ros, LoadWorld, "load_world", resource_string=scene.read_text())
     assert text.result.result == OK, text.result.error_message
     assert state(ros) == SimulationState.STATE_STOPPED

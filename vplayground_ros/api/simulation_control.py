@@ -87,6 +87,8 @@ class ControlRequests:
         reply). NO_WORLD and LOADING_WORLD are reached through unload_world and load_world."""
         target = specs.integer(target, "state.state", 0, 255)
         names = {STOPPED: "stopped", PLAYING: "playing", PAUSED: "paused", QUITTING: "quitting"}
+        if target == self.sim.state and target not in names:  # NO_WORLD asked for in NO_WORLD, say
+            return reply(ALREADY, f"already in state {target}")
         if target not in names:
             raise RequestError(INCORRECT_TRANSITION, f"state.state: {target} cannot be set (0 STOPPED, 1 PLAYING, "
                                                      "2 PAUSED, 3 QUITTING; unload_world and load_world reach 4 and 5)")
