@@ -64,6 +64,30 @@ def test_rests_at_the_spring_equilibrium_height_and_stops_bouncing():
     assert np.max(np.abs(vertical)) < 1e-3  # the dampers have taken the bounce out
 
 
+@pytest.mark.parametrize("chassis_mass, wheel_mass, wheel_keys", [
+    (20.0, 1.0, {}),                               # the default damper on a 24 kg car
+    (CHASSIS_MASS, WHEEL_MASS, {"spring_stiffness": 1e9}),  # the schema's stiffest spring
+    (CHASSIS_MASS, WHEEL_MASS, {"damper": 3e5}),
+])
+def test_a_light_car_or_a_stiff_suspension_settles(chassis_mass, wheel_mass, wheel_keys):
+    """The springs and dampers act explicitly: beyond what the step integrates (a damper of
+    4,000 N s/m on a 24 kg car, a spring of 1e7 N/m on a 1,200 kg one) each step's impulse had
+    overshot more than the last and the car bounced tens of metres (14.6 km at 1e9 N/m). They
+    act only as stiff as the step integrates there: dropped on its wheels, it comes to rest."""
+    spec = car_spec(position=(0.0, 0.0, 1.3))
+    spec["chassis"]["mass"] = chassis_mass
+    spec["wheels"] = [{**wheel, "mass": wheel_mass, **wheel_keys} for wheel in spec["wheels"]]
+    world = World({"freezing": {"enabled": False}})
+    world.add_vehicle(spec)
+    heights = []
+    for _ in range(4 * 128):
+        world.step(1)
+        heights.append(world.state()["positions"][row(world), 2])
+    assert max(heights) <= 1.3 + 1e-6
+    # At rest on its springs (the 3e5 damper, overdamped for 7.5 s, still sinks a few mm a second).
+    assert max(heights[-128:]) - min(heights[-128:]) < 0.01
+
+
 @pytest.mark.parametrize("rear_friction", [None, 0.2])
 def test_full_throttle_acceleration_matches_power_mass_and_grip(rear_friction):
     world = car_world(rear_friction=rear_friction)

@@ -167,6 +167,7 @@ def drive_vehicles(vehicles, bodies, hulls, parts, broad, playground, settings):
         if vehicles.command_speed[v] != 0.0 or vehicles.command_yaw_rate[v] != 0.0:
             bodies.freeze_timer[c] = 0.0  # a car with a command to follow does not freeze
         loads = np.zeros(WHEELS)
+        mounts = np.zeros((WHEELS, 3))  # in the world
         hits = np.zeros(WHEELS, np.int64)  # what each wheel stands on (slot, GROUND, PLAYGROUND)
         for w in range(WHEELS):  # suspension: ray casts and spring loads on the step's state
             angle = ackermann(vehicles, v, w)
@@ -192,8 +193,23 @@ def drive_vehicles(vehicles, bodies, hulls, parts, broad, playground, settings):
             rel = contact_velocity(bodies, c, hit, vehicles.contact_point[v, w])
             compression_rate = -(rel[0] * up[0] + rel[1] * up[1] + rel[2] * up[2])
             vehicles.compression_rate[v, w] = compression_rate
-            loads[w] = max(vehicles.stiffness[v, w] * compression
-                           + vehicles.damper[v, w] * compression_rate, 0.0)
+            for e in range(3):
+                mounts[w, e] = mount[e]
+        # The springs and dampers act explicitly, on this step's compressions and rates, which
+        # holds while stiffness dt^2 and damper dt stay small against 1 / lambda, lambda the
+        # largest response of the wheels' mounts together to their pushes (each push moves the
+        # other mounts too). Beyond it a light car (20 kg on the default damper) or a stiff
+        # spring (1e7 N/m) bounced itself tens of metres high: there they act only as stiff as
+        # the step integrates (MAX_DAMPING, MAX_SPRING).
+        springy = largest_response(bodies, c, hits, mounts, vehicles.contact_point[v], vehicles.in_contact[v], up)
+        for w in range(WHEELS):
+            if not vehicles.in_contact[v, w]:
+                continue
+            stiffness, damper = vehicles.stiffness[v, w], vehicles.damper[v, w]
+            if springy > 0.0:
+                damper = min(damper, MAX_DAMPING / (springy * dt))
+                stiffness = min(stiffness, MAX_SPRING / (springy * dt * dt))
+            loads[w] = max(stiffness * vehicles.compression[v, w] + damper * vehicles.compression_rate[v, w], 0.0)
         for w in range(WHEELS):  # the springs push the chassis at the mounts, what is hit back
             if not vehicles.in_contact[v, w]:
                 continue
@@ -318,6 +334,54 @@ def tyre_response(bodies, chassis, point, d, up):
            + up[1] * (inv_i[1, 0] * cx + inv_i[1, 1] * cy + inv_i[1, 2] * cz)
            + up[2] * (inv_i[2, 0] * cx + inv_i[2, 1] * cy + inv_i[2, 2] * cz))
     return bodies.solver_inv_mass[chassis] + yaw * (up[0] * cx + up[1] * cy + up[2] * cz)
+
+
+# The explicit suspension's bounds (see drive_vehicles), in units of the step: damper dt lambda
+# at most 1 (its impulse then at most stops the compression rate: the most a damper does, where
+# more had reversed it, and a light car bounced higher each step), stiffness dt^2 lambda at most
+# 1 (the one-wheel limit is 4 less twice the damper's, but four wheels on one chassis, 1e7 N/m
+# on a 1,200 kg car, still rose without end at 2.9).
+MAX_DAMPING = 1.0
+MAX_SPRING = 1.0
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
+def largest_response(bodies, chassis, hits, mounts, points, touching, up):
+    """The largest eigenvalue of the wheels' response matrix along `up`: entry (i, j) the
+    velocity an impulse at wheel j's spring gives wheel i's (the chassis at the mounts, and a
+    body that two wheels stand on at their contact points); power iteration on the 4 x 4."""
+    response = np.zeros((WHEELS, WHEELS))
+    for i in range(WHEELS):
+        for j in range(WHEELS):
+            if touching[i] and touching[j]:
+                response[i, j] = (pair_response(bodies, chassis, mounts[i], mounts[j], up)
+                                  + (pair_response(bodies, hits[i], points[i], points[j], up) if hits[i] == hits[j] else 0.0))
+    vector = np.ones(WHEELS)
+    value = 0.0
+    for _ in range(16):
+        product = response @ vector
+        value = np.sqrt(product @ product)
+        if value == 0.0:
+            return 0.0
+        vector = product / value
+    return value
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
+def pair_response(bodies, body, at, by, d):
+    """Velocity along unit d at world point `at` of `body` per unit impulse along d at point
+    `by` (0 if it does not move)."""
+    if body < 0 or not bodies.awake[body]:
+        return 0.0
+    inv_i, x = bodies.inv_inertia_world[body], bodies.position[body]
+    a = (at[0] - x[0], at[1] - x[1], at[2] - x[2])
+    b = (by[0] - x[0], by[1] - x[1], by[2] - x[2])
+    ax, ay, az = a[1] * d[2] - a[2] * d[1], a[2] * d[0] - a[0] * d[2], a[0] * d[1] - a[1] * d[0]
+    bx, by_, bz = b[1] * d[2] - b[2] * d[1], b[2] * d[0] - b[0] * d[2], b[0] * d[1] - b[1] * d[0]
+    return bodies.solver_inv_mass[body] + (
+        ax * (inv_i[0, 0] * bx + inv_i[0, 1] * by_ + inv_i[0, 2] * bz)
+        + ay * (inv_i[1, 0] * bx + inv_i[1, 1] * by_ + inv_i[1, 2] * bz)
+        + az * (inv_i[2, 0] * bx + inv_i[2, 1] * by_ + inv_i[2, 2] * bz))
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
