@@ -119,6 +119,22 @@ def test_a_box_hitting_a_frozen_tower_wakes_it():
     assert world.state()["positions"][names.index("t2"), 0] > 0.005
 
 
+def test_a_box_grown_inside_a_frozen_tower_pushes_the_tower_up():
+    """A box grown to twice its height in a frozen tower of four: the edit woke its neighbours,
+    the top box stayed frozen as a lid, and the overlap, pushed apart by position correction
+    alone (no speed to wake anything by), stayed 0.8 m deep for good. A frozen body that an
+    awake one overlaps deeper than WAKE_DEPTH wakes."""
+    world = tower(4)
+    world.step(128)
+    assert world.state()["frozen"].all()
+    world.edit_body("t1", size=[1, 1, 2])
+    world.step(5 * 128)
+    z = world.state()["positions"][:, 2]
+    gaps = np.diff(z) - [1.5, 1.5, 1.0]  # centre distances less the half heights: the overlaps
+    assert np.all(gaps > -0.02), gaps
+    assert z[-1] == pytest.approx(4.5, abs=0.03)
+
+
 def test_same_scene_twice_is_bit_identical():
     runs = []
     for _ in range(2):

@@ -61,6 +61,11 @@ WARM_START_MATCH_DISTANCE = 0.03
 # times the freezing linear speed threshold: a box sliding over a frozen pile wakes it, a box
 # merely resting on it does not.
 WAKE_SPEED_FACTOR = 2.0
+# ... and by one that overlaps it deeper than this (m): the overlap is pushed apart by position
+# correction alone, which moves nothing at a speed, so a box grown inside a frozen tower jammed
+# the boxes between it and the frozen top ones 0.8 m into each other for good. Resting
+# contacts settle at about LINEAR_SLOP.
+WAKE_DEPTH = 3.0 * LINEAR_SLOP
 
 # A frozen body enters the (rarely rebuilt) static index once this many bodies wait for it, or a
 # fraction of the indexed ones; until then it is re-indexed each step like a moving body.

@@ -10,7 +10,7 @@ link knocked wakes its robot): a jointed body freezes only with every moving bod
 """
 from numba import njit
 
-from .constants import WAKE_SPEED_FACTOR
+from .constants import WAKE_DEPTH, WAKE_SPEED_FACTOR
 from .joints import BODY_A, BODY_B, ISLAND_BODIES, ISLAND_BODY_START
 
 
@@ -30,8 +30,8 @@ def wake_body(bodies, i):
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def wake_touched(contacts, bodies, linear_threshold):
-    """Wakes frozen bodies that an awake body touches fast enough. Returns how many woke and how
-    many of them left stale static-index entries."""
+    """Wakes frozen bodies that an awake body touches fast enough, or overlaps deeper than
+    WAKE_DEPTH. Returns how many woke and how many of them left stale static-index entries."""
     limit_sq = (WAKE_SPEED_FACTOR * linear_threshold) ** 2
     velocity, position, awake = bodies.velocity, bodies.position, bodies.awake
     woken = stale = 0
@@ -48,7 +48,7 @@ def wake_touched(contacts, bodies, linear_threshold):
         vx = v[0] + w[1] * r[2] - w[2] * r[1]
         vy = v[1] + w[2] * r[0] - w[0] * r[2]
         vz = v[2] + w[0] * r[1] - w[1] * r[0]
-        if vx * vx + vy * vy + vz * vz > limit_sq:
+        if vx * vx + vy * vy + vz * vz > limit_sq or contacts.depth[c] > WAKE_DEPTH:
             stale += wake_body(bodies, sleeper)
             woken += 1
     return woken, stale
