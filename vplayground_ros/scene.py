@@ -96,36 +96,35 @@ def check_aliases(root, limit, characters):
     beyond it, or for a node inside itself. Iterative: a document may nest a thousand levels
     deep."""
     sizes = {}      # id(node) -> nodes it expands to, itself included
-    open_ = set()   # nodes being counted (their children are): met again, a node inside itself
+    open_ = set()   # nodes being counted (the path down to where the walk is): met again, a cycle
     stack = [(root, False)]
     while stack:
         node, counted = stack.pop()
         key = id(node)
         if counted:
-            children = node.value if isinstance(node, yaml.SequenceNode) else [
-                part for pair in node.value for part in pair]
-            sizes[key] = 1 + sum(sizes[id(child)] for child in children)
+            sizes[key] = 1 + sum(sizes[id(child)] for child in node_children(node))
             open_.discard(key)
             if sizes[key] > limit:
                 raise YamlExpansion(f"its aliases expand its {characters:,} characters to more than {limit:,} "
                                     "values (twice what they could hold written out, and 10,000): write the "
                                     "values out, or repeat fewer")
-            continue
-        if key in sizes:
-            continue
-        if key in open_:
-            raise YamlExpansion("an alias is inside the node it names (a structure that contains itself)")
-        if isinstance(node, yaml.ScalarNode):
-            sizes[key] = 1
-            continue
-        open_.add(key)
-        stack.append((node, True))
-        children = node.value if isinstance(node, yaml.SequenceNode) else [part for pair in node.value for part in pair]
-        for child in children:
-            if id(child) in open_:
-                raise YamlExpansion("an alias is inside the node it names (a structure that contains itself)")
-            if id(child) not in sizes:
-                stack.append((child, False))
+        elif key not in sizes:
+            if isinstance(node, yaml.ScalarNode):
+                sizes[key] = 1
+                continue
+            open_.add(key)
+            stack.append((node, True))
+            for child in node_children(node):
+                if id(child) in open_:
+                    raise YamlExpansion("an alias is inside the node it names (a structure that contains itself)")
+                if id(child) not in sizes:
+                    stack.append((child, False))
+
+
+def node_children(node):
+    """A sequence's items, a mapping's keys and values."""
+    return node.value if isinstance(node, yaml.SequenceNode) else [part for pair in node.value for part in pair]
+
 
 log = logging.getLogger(__name__)
 
