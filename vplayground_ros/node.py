@@ -304,7 +304,7 @@ class SimulatorNode(Node):
         store.override(overrides)
         # An override of a name the node does not have (a typo: -p steps_per_secnd:=200) is
         # taken by rclpy and used by nothing: said, not silent.
-        unknown = sorted(set(getattr(self, "_parameter_overrides", {})) - set(store.specs) - {"use_sim_time"})
+        unknown = sorted(name for name in getattr(self, "_parameter_overrides", {}) if not self.has_parameter(name))
         if unknown:
             self.get_logger().warning(f"--ros-args -p {', '.join(unknown)}: no such parameter of this node, ignored "
                                       f"(ros2 param list {self.get_fully_qualified_name()} lists them)")
