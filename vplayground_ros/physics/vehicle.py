@@ -368,34 +368,26 @@ def largest_response(bodies, chassis, hits, mounts, points, touching, up):
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
-def pair_response(bodies, body, at, by, d):
-    """Velocity along unit d at world point `at` of `body` per unit impulse along d at point
-    `by` (0 if it does not move)."""
+def pair_response(bodies, body, at, pushed, d):
+    """Velocity along unit d at world point `at` of `body` per unit impulse along d at world
+    point `pushed` (0 if it does not move)."""
     if body < 0 or not bodies.awake[body]:
         return 0.0
     inv_i, x = bodies.inv_inertia_world[body], bodies.position[body]
     a = (at[0] - x[0], at[1] - x[1], at[2] - x[2])
-    b = (by[0] - x[0], by[1] - x[1], by[2] - x[2])
+    p = (pushed[0] - x[0], pushed[1] - x[1], pushed[2] - x[2])
     ax, ay, az = a[1] * d[2] - a[2] * d[1], a[2] * d[0] - a[0] * d[2], a[0] * d[1] - a[1] * d[0]
-    bx, by_, bz = b[1] * d[2] - b[2] * d[1], b[2] * d[0] - b[0] * d[2], b[0] * d[1] - b[1] * d[0]
+    px, py, pz = p[1] * d[2] - p[2] * d[1], p[2] * d[0] - p[0] * d[2], p[0] * d[1] - p[1] * d[0]
     return bodies.solver_inv_mass[body] + (
-        ax * (inv_i[0, 0] * bx + inv_i[0, 1] * by_ + inv_i[0, 2] * bz)
-        + ay * (inv_i[1, 0] * bx + inv_i[1, 1] * by_ + inv_i[1, 2] * bz)
-        + az * (inv_i[2, 0] * bx + inv_i[2, 1] * by_ + inv_i[2, 2] * bz))
+        ax * (inv_i[0, 0] * px + inv_i[0, 1] * py + inv_i[0, 2] * pz)
+        + ay * (inv_i[1, 0] * px + inv_i[1, 1] * py + inv_i[1, 2] * pz)
+        + az * (inv_i[2, 0] * px + inv_i[2, 1] * py + inv_i[2, 2] * pz))
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def point_response(bodies, body, point, d):
     """1 / effective mass of `body` at a world point along unit d (0 if it does not move)."""
-    if body < 0 or not bodies.awake[body]:
-        return 0.0
-    inv_i, x = bodies.inv_inertia_world[body], bodies.position[body]
-    arm = (point[0] - x[0], point[1] - x[1], point[2] - x[2])
-    cx, cy, cz = arm[1] * d[2] - arm[2] * d[1], arm[2] * d[0] - arm[0] * d[2], arm[0] * d[1] - arm[1] * d[0]
-    return bodies.solver_inv_mass[body] + (
-        cx * (inv_i[0, 0] * cx + inv_i[0, 1] * cy + inv_i[0, 2] * cz)
-        + cy * (inv_i[1, 0] * cx + inv_i[1, 1] * cy + inv_i[1, 2] * cz)
-        + cz * (inv_i[2, 0] * cx + inv_i[2, 1] * cy + inv_i[2, 2] * cz))
+    return pair_response(bodies, body, point, point, d)
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
