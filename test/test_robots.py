@@ -479,7 +479,7 @@ def test_odometry_starts_again_for_a_robot_spawned_again(run):
     spawned = runtime.sim.snapshot.time
     assert wait_for(lambda: any(t > spawned for t, _ in sink.of("/odom")), 60)
     odom = next(ODOMETRY(data) for t, data in sink.of("/odom") if t > spawned)
-    assert np.array(odom.pose.covariance).reshape(6, 6)[1, 1] < 0.3 ** 2 * 0.5  # not the 16 m of drift before
+    assert across_variance(odom, spec["position"]) < 0.3 ** 2 * 0.5  # not the 16 m of drift before
     # Removed and spawned again where it stands within one batch (no round between): a new car too.
     runtime.sim.call(lambda world: world.drive("car", 4.0, 0.0, timeout=100))
     assert wait_for(lambda: runtime.sim.snapshot.time > spawned + 4.0, 60)
@@ -488,11 +488,21 @@ def test_odometry_starts_again_for_a_robot_spawned_again(run):
         again = world.vehicle("car")
         world.remove_body("car")
         world.add_vehicle(again)
-    runtime.sim.call(respawn)
+        return again["position"]
+    where = runtime.sim.call(respawn)
     spawned = runtime.sim.snapshot.time
     assert wait_for(lambda: any(t > spawned for t, _ in sink.of("/odom")), 60)
     odom = next(ODOMETRY(data) for t, data in sink.of("/odom") if t > spawned)
-    assert np.array(odom.pose.covariance).reshape(6, 6)[1, 1] < 0.3 ** 2 * 0.5
+    assert across_variance(odom, where) < 0.3 ** 2 * 0.5
+
+
+def across_variance(odom, start):
+    """The cross-track variance of a spawned car's odometry less what slip_across (0.3) gives the
+    way driven since `start` (the first /odom after a spawn comes a round or more later, further
+    on a busy machine whose publisher skips snapshots): what is left is what it carried over."""
+    position = odom.pose.pose.position
+    driven = float(np.hypot(position.x - start[0], position.y - start[1]))
+    return np.array(odom.pose.covariance).reshape(6, 6)[1, 1] - 0.3 ** 2 * driven
 
 
 @pytest.mark.parametrize("overrides", [{"localization": "none"}, {"publish_odom_tf": False}])
