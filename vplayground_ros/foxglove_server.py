@@ -24,7 +24,7 @@ from foxglove.websocket import Capability, StatusLevel
 from .foxglove_front import ProtocolFront
 from .inputs import TWIST, TWIST_STAMPED, from_cdr, from_json, subscriptions
 from .interfaces import decoder, encode, schema
-from .throttle import Throttle, held_note
+from .throttle import Throttle
 
 DEFAULT_PORT = 8765
 # The message definitions every channel and service uses are Jazzy's (interfaces.py); viewers
@@ -298,8 +298,7 @@ class FoxgloveServer:
     def _warn(self, text, kind):
         """A warning to the log and a status to the clients (every one of them: the sdk has no
         status for one client), a few of each `kind` in a while (throttle.py)."""
-        held = self._throttle.admit(kind)
-        if held is not None:
-            text += held_note(held, self._throttle.period)
+        text = self._throttle.passes(kind, text)
+        if text is not None:
             self.runtime.log.warning(f"foxglove: {text}")
             self.server.publish_status(text, StatusLevel.Warning)

@@ -37,6 +37,13 @@ class Throttle:
             return None
 
 
+    def passes(self, kind, text):
+        """`text` when a warning of `kind` may go out now, with the count of those held back
+        since the last one; else None."""
+        held = self.admit(kind)
+        return None if held is None else text + held_note(held, self.period)
+
+
 def held_note(held, period=PERIOD):
     return f" ({held} more like it in the {period:g} s before were not logged)" if held else ""
 
@@ -50,9 +57,9 @@ class ThrottledLog:
         self._throttle = throttle or Throttle()
 
     def warning(self, text):
-        held = self._throttle.admit(re.match(r"\S*", text).group(0)[:80])
-        if held is not None:
-            self._log.warning(text + held_note(held, self._throttle.period))
+        text = self._throttle.passes(re.match(r"\S*", text).group(0)[:80], text)
+        if text is not None:
+            self._log.warning(text)
 
     def __getattr__(self, name):
         return getattr(self._log, name)

@@ -232,9 +232,9 @@ def collision_part(collision, pose, where, label, link):
             vertices, _ = read_mesh(path, f"link {link!r} mesh")
         except ValueError as error:
             raise UrdfError(f"{label}: {error}") from None
-        scale = mesh_scale(geometry.mesh, f"{label}: link {link!r}: mesh {geometry.mesh.filename!r}")
-        return {**part, "shape": "convex", "points": hull_points(
-            np.asarray(vertices) * scale, f"{label}: link {link!r}: mesh {geometry.mesh.filename!r}").tolist()}
+        what = f"{label}: link {link!r}: mesh {geometry.mesh.filename!r}"
+        return {**part, "shape": "convex",
+                "points": hull_points(np.asarray(vertices) * mesh_scale(geometry.mesh, what), what).tolist()}
     raise UrdfError(f"{label}: link {link!r}: a collision element without a geometry")
 
 

@@ -31,12 +31,12 @@ def entity_table(world):
     state = world.state()
     names = world.body_names()
     vehicles = set(world.vehicle_names())
+    vehicle_rows = [k for k, name in enumerate(names) if name in vehicles]
     categories = np.where(state["immovable"], STATIC_OBJECT, OBJECT)
-    categories[[k for k, name in enumerate(names) if name in vehicles]] = ROBOT
+    categories[vehicle_rows] = ROBOT
     half = 0.5 * state["sizes"]
-    for k, name in enumerate(names):
-        if name in vehicles:  # its wheels too, as its bounds have them
-            half[k] = with_wheels(world.vehicle(name), half[k])
+    for k in vehicle_rows:  # its wheels too, as its bounds have them
+        half[k] = with_wheels(world.vehicle(names[k]), half[k])
     rotations = quaternions_to_matrices(state["quaternions"])
     reach = np.einsum("nij,nj->ni", np.abs(rotations), half)
     positions, quaternions = state["positions"], state["quaternions"]

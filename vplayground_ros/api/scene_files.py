@@ -109,8 +109,10 @@ class SceneRequests:
         found = {}
         for folder in folders:
             for path in sorted(folder.iterdir()):
-                if path.suffix in SCENE_SUFFIXES and path.is_file() and path not in found and is_scene_file(path):
-                    found[path] = first_comment(path)
+                description = (world_description(path) if path.suffix in SCENE_SUFFIXES and path.is_file()
+                               and path not in found else None)
+                if description is not None:
+                    found[path] = description
                     if len(found) >= MAX_LISTED_WORLDS:
                         return list(found.items())
         return list(found.items())
@@ -148,21 +150,16 @@ SCENE_HEAD_BYTES = 64 * 1024
 SCENE_VERSION = re.compile(rb"^version[ \t]*:", re.MULTILINE)
 
 
-def is_scene_file(path):
-    """Whether the YAML file at `path` is a scene (a world LoadWorld takes), not an entity spec
-    (get_available_worlds had listed those, which load_world then refused)."""
+def world_description(path):
+    """The description of the scene file at `path`, its first line if that is a comment (without
+    the '#'; else ''), or None when the file is no scene, a world LoadWorld takes, but an entity
+    spec (get_available_worlds had listed those, which load_world then refused) or unreadable."""
     try:
         with open(path, "rb") as stream:
-            return SCENE_VERSION.search(stream.read(SCENE_HEAD_BYTES)) is not None
+            head = stream.read(SCENE_HEAD_BYTES)
     except OSError:
-        return False
-
-
-def first_comment(path):
-    """A scene file's first line if it is a comment, without the '#': its description."""
-    try:
-        with open(path, encoding="utf-8", errors="replace") as f:
-            line = f.readline(500).strip()
-    except OSError:
-        return ""
+        return None
+    if SCENE_VERSION.search(head) is None:
+        return None
+    line = head[:2000].splitlines()[0].decode("utf-8", errors="replace")[:500].strip()
     return line.lstrip("#").strip() if line.startswith("#") else ""
