@@ -51,8 +51,11 @@ PEER_PROGRAMS = Path(__file__).parent / "peers" / "target" / "release"
 class Ours:
     name = "vplayground"
 
-    def __init__(self, boxes, world=None, threads=SOLVER_THREADS):
-        self.world = world if world is not None else world_of(boxes, solver_threads=threads)
+    def __init__(self, boxes, world=None, threads=SOLVER_THREADS, measure_threads=False):
+        """On `threads` solver threads for every step; with measure_threads, the second
+        only while it measures that it pays (World.measure_threads, the World's default)."""
+        self.world = world if world is not None else world_of(boxes, solver_threads=threads,
+                                                              measure_threads=measure_threads)
 
     def step(self):
         self.world.step(1)

@@ -33,8 +33,11 @@ SCENES = {"loose": loose_pile, "dense": pile}
 FALLING_SECONDS = 2
 
 
-def world_of(boxes, capacity=64, solver_threads=None):
+def world_of(boxes, capacity=64, solver_threads=None, measure_threads=False):
+    """A world of `boxes` whose every step runs on `solver_threads` (the World's default when
+    None), or with measure_threads on the second only while it pays (World.measure_threads)."""
     world = World(capacity=max(capacity, len(boxes)), solver_threads=solver_threads)
+    world.measure_threads = measure_threads
     for size, position, quaternion, mass in boxes:
         world.add_body({"size": size.tolist(), "position": position.tolist(),
                         "quaternion": quaternion.tolist(), "mass": mass})

@@ -74,6 +74,7 @@ def stepped(build, threads, steps, numba_threads=None):
     `numba_threads`, Numba runs that many threads meanwhile (set_num_threads)."""
     world = build()
     world.solver_threads = threads
+    world.measure_threads = False  # every call on `threads`, whatever they measure
     if numba_threads is None:
         world.step(steps)
         return world

@@ -29,6 +29,7 @@ from .pipeline import (DONE, GROW_CONTACTS, GROW_INDEX, GROW_PAIRS, STAGES, STAT
 from .playground import EMPTY_PLAYGROUND_ARGS, index_playground, make_playground
 from .queries import WorldQueries
 from .step_context import StepContext, allocate_contact_buffers, kernel_settings, newest_contacts
+from .thread_choice import SecondThreadChoice, would_share
 from .vehicle_registry import DEFAULT_COMMAND_TIMEOUT, VehicleRegistry
 from .warm_up import SHARES, warm_up
 
@@ -98,6 +99,14 @@ class World(WorldQueries):
         # Threads the contact solve may use (solver_threads below); not a scene setting: how
         # many cores to give is the host's choice, not the world's.
         self.solver_threads = default_solver_threads() if solver_threads is None else solver_threads
+        # With solver_threads 2, whether a call uses the second thread is measured on the calls
+        # that share work (thread_choice): the same bytes either way, so only the time changes.
+        # Off, every call uses solver_threads (for comparing one thread with two).
+        self.measure_threads = True
+        self._thread_choice = SecondThreadChoice()
+        self._sharing = False  # whether the last call's steps were large enough to share work
+        self.threads_in_use = self.solver_threads  # the last call's
+        self._clock = time.perf_counter_ns  # what measure_threads times calls by
         self.ground = specs.validate_ground(ground)
         self.time = 0.0
         self.step_count = 0
@@ -151,10 +160,16 @@ class World(WorldQueries):
     @property
     def solver_threads(self):
         """Threads the contact solve may use: 1 solves every pass on the stepping thread; 2 lets
-        a second one share passes with enough points (contact_solver.PARALLEL_MIN_POINTS). For
-        a given value the results are bit-identical from run to run, and 2 gives the same bytes
-        whether or not the second thread gets a core."""
+        a second one share passes with enough points (contact_solver.PARALLEL_MIN_POINTS), while
+        it measures that the second pays (measure_threads). The results are bit-identical from
+        run to run and with 1 or 2, whether or not the second thread gets a core."""
         return self._solver_threads
+
+    @property
+    def second_thread_speedup(self):
+        """One thread's time over two threads' on this world's last trial (measure_threads),
+        or None before one ended."""
+        return self._thread_choice.speedup
 
     @solver_threads.setter
     def solver_threads(self, threads):
@@ -630,9 +645,15 @@ class World(WorldQueries):
             b = self._bodies
             self._unchecked |= ~(b.frozen | b.immovable)  # the bodies this call moves
         counters = np.zeros(5, np.int64)
+        sharing = self._sharing
+        threads = self._solver_threads
+        if self.measure_threads:
+            threads = self._thread_choice.threads(threads, sharing)
+        self.threads_in_use = threads
         done = 0
+        wall = self._clock()
         while done < n:
-            ctx = self.step_context(counters)
+            ctx = self.step_context(counters, threads)
             started = time.thread_time()
             steps, status = step_world(n - done, ctx)
             self.engine_cpu_seconds += time.thread_time() - started
@@ -648,17 +669,23 @@ class World(WorldQueries):
                 raise RuntimeError("octree index overflow: an index is smaller than 8 x bodies")
             else:
                 assert status == DONE
+        wall = self._clock() - wall
+        pairs = int(counters[STAT_PAIRS] + counters[STAT_TRIANGLES])
+        self._sharing = would_share(n, int(counters[STAT_POINTS]), pairs)
+        if self.measure_threads and sharing and self._sharing:
+            self._thread_choice.record(threads, wall, int(counters[STAT_POINTS]) + pairs)
         for key, index in (("woken", STAT_WOKEN), ("frozen", STAT_FROZEN), ("pairs", STAT_PAIRS),
                            ("points", STAT_POINTS), ("triangles", STAT_TRIANGLES)):
             self.stats[key] += int(counters[index])
 
-    def step_context(self, counters):
+    def step_context(self, counters, threads=None):
         """What step_world takes: this world's arrays and settings, `counters` for its
-        statistics (the octree's root fitted: step)."""
+        statistics, `threads` for the contact solve (solver_threads when None; the octree's
+        root fitted: step)."""
         return StepContext(self._bodies, self._hulls, self._parts, self._playground, self._vehicles.arrays,
                            self._broad, self._contacts, self._joints.arrays,
                            kernel_settings(self.settings, self.ground, specs.DEFAULT_GROUND,
-                                           self._root, self._solver_threads),
+                                           self._root, threads or self._solver_threads),
                            counters, self._stage_ns, self.profiling)
 
     # ------------------------------------------------------------------ internals
