@@ -21,7 +21,8 @@ threads. Printed: the same figures for both, each engine's speed-up (one thread'
 issue 36.3's goal (ours at least 1.6x on the phase's total). Ours runs a third time as a World
 runs by default ("measured": the second thread used only while a trial of its own calls finds
 that it pays, World.measure_threads). Wall time needs the other cores free: the load average is
-printed beside it.
+printed beside it, and so is what the machine gives a second thread at the moment (a cache
+line's round trip between two threads, bench/machine.py).
 
     python bench/falling.py [--boxes 1000] [--runs 2] [--scenes loose dense] [--threads 2] [--out bench/results]
 """
@@ -37,6 +38,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).parent))
 import compare  # noqa: E402
 import scenes  # noqa: E402
+from machine import core_round_trip_ns  # noqa: E402
 from pile import warm_up  # noqa: E402
 
 PILES = {"loose": scenes.loose_pile, "dense": scenes.pile}
@@ -162,11 +164,13 @@ def main():
         print_rows(rows)
         against_peers(rows)
         if args.threads > 1:
-            load = os.getloadavg()[0]
+            load, round_trip = os.getloadavg()[0], core_round_trip_ns()
             speedups = thread_speedups(boxes, args.runs, args.seconds, args.threads)
-            result.setdefault("threads", {})[pile] = dict(speedups, load_average=load)
+            result.setdefault("threads", {})[pile] = dict(speedups, load_average=load,
+                                                          round_trip_ns=round_trip)
             print(f"\n{pile} pile on 1 and {args.threads} threads, wall ms a step, each step's fastest of "
-                  f"{args.runs} runs (load average {load:.2f} before them):")
+                  f"{args.runs} runs (before them: load average {load:.2f}, a cache line's round trip "
+                  f"between two threads {round_trip:.0f} ns, bench/machine.py):")
             print_speedups(speedups, args.threads)
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / "falling.json"

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
+from machine import core_round_trip_ns  # noqa: E402
 from scenes import loose_pile, pile, resting_columns, tower  # noqa: E402
 from vplayground_ros.physics import World  # noqa: E402
 
@@ -112,7 +113,8 @@ def compare_threads(scene, count, rounds):
                   f"max {wall.max():.3f}), process CPU {process.sum():.0f} ms, load {loads[-1]:.2f}{busy}")
     print(f"{scene} pile of {count} boxes, falling phase (first {FALLING_SECONDS} s), {rounds} rounds "
           f"of 1 and 2 solver threads interleaved, load average (1 min) {min(loads):.2f}-{max(loads):.2f}"
-          + (f", other processes busy {min(others):.2f}-{max(others):.2f} cores" if others else ""))
+          + (f", other processes busy {min(others):.2f}-{max(others):.2f} cores" if others else "")
+          + f", a cache line's round trip between two threads {core_round_trip_ns():.0f} ns")
     summary = {}
     for threads in (1, 2):
         for clock, rounds_of in clocks[threads].items():

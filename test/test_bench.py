@@ -74,13 +74,14 @@ def test_falling_phase_bench_reports_finite_figures(tmp_path):
         assert {key for key in ours if key.startswith("x_")} == {f"x_{name}" for name in rows if name != "vplayground"}
     assert set(report["threads"]) == {"loose", "dense"}
     for rows in report["threads"].values():
-        engines = {name for name in rows if name != "load_average"}
+        engines = {name for name in rows if name not in ("load_average", "round_trip_ns")}
         assert "vplayground" in engines and engines <= {"vplayground", "rapier-parallel", "jolt"}
         for name in engines:
             one, two, speedup = rows[name]["1"], rows[name]["2"], rows[name]["speedup"]
             for row in (one, two):
                 assert 0 < row["median_ms"] <= row["p95_ms"] <= row["max_ms"] <= max(row["runs_longest_ms"])
             assert speedup["total_ms"] == pytest.approx(one["total_ms"] / two["total_ms"])
+        assert rows["round_trip_ns"] > 0
         measured = rows["vplayground"]["measured"]  # ours as a World runs by default
         assert 0 < measured["median_ms"] <= measured["p95_ms"] <= measured["max_ms"]
         assert rows["vplayground"]["speedup measured"]["total_ms"] == pytest.approx(
