@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from vplayground_ros.physics import World
+from vplayground_ros.physics.playground import BORDER, CONCAVE, make_playground
 from vplayground_ros.resources import find_shared
 from vplayground_ros.scene import load_world
 
@@ -146,3 +147,77 @@ def test_box_pushed_against_a_step_stops_at_its_riser():
     p = world.state()["positions"][0]
     assert p[1] == pytest.approx(10.0 - 0.25, abs=0.02)  # against the first riser at y = 10
     assert p[2] == pytest.approx(0.25, abs=0.01)  # still on the ground, not lifted onto the step
+
+
+def ramp_onto_floor():
+    """One mesh: a floor (z = 0, x from -10 to 0, |y| <= 3) and a ramp rising from it at x = 0
+    to 2 m at x = 8 (1:4), meeting at a concave crease; no ground plane under them."""
+    world = World(ground=None)
+    world.set_playground(np.array([[-10, -3, 0], [0, -3, 0], [0, 3, 0], [-10, 3, 0], [8, -3, 2], [8, 3, 2]], float),
+                         np.array([[0, 1, 2], [0, 2, 3], [1, 4, 5], [1, 5, 2]]))
+    return world
+
+
+def test_mesh_edges_know_creases_ridges_seams_and_borders():
+    """Each triangle edge's kind, found by where its corners are: the ramp's foot is a concave
+    crease on both sides, the floor's diagonal a seam (neither kind), the outline a border; a
+    ridge (the ramp's top onto a lower platform edge, convex) is no crease, and a mesh that
+    repeats its vertices per triangle is read the same."""
+    edges = ramp_onto_floor()._playground.edges
+    # floor [0 1 2]: 0-1 border, 1-2 the crease, 2-0 the diagonal; [0 2 3]: diagonal, borders.
+    assert edges.tolist() == [BORDER | CONCAVE << 1, BORDER << 1 | BORDER << 2,
+                              BORDER | BORDER << 1, BORDER << 1 | CONCAVE << 2]
+    ridge = np.array([[0, -1, 0], [1, -1, 1], [1, 1, 1], [0, 1, 0], [2, -1, 0], [2, 1, 0]], float)
+    faces = np.array([[0, 1, 2], [0, 2, 3], [1, 4, 5], [1, 5, 2]])
+    assert not np.any(make_playground(ridge, faces)[0].edges & (CONCAVE * 0b111))
+    creased = ramp_onto_floor()._playground
+    repeated = make_playground(creased.triangles.reshape(-1, 3), np.arange(12).reshape(4, 3))[0]
+    assert repeated.edges.tolist() == creased.edges.tolist()
+
+
+@pytest.mark.parametrize("shape", ["sphere", "box"])
+def test_a_small_fast_body_coming_down_a_ramp_stays_on_the_floor_below(shape):
+    """A 4 cm ball or box at 30 m/s down the ramp crosses the crease in one step: the floor,
+    one-sided, gave no contact while the body was beside it and none once it was behind its
+    plane, and the body fell through (8.7 m below it a second later). The floor's plane goes
+    on past the crease now, so the body meets it."""
+    world = ramp_onto_floor()
+    slope = math.atan(0.25)
+    down, up = np.array([-math.cos(slope), 0, -math.sin(slope)]), np.array([-math.sin(slope), 0, math.cos(slope)])
+    spec = {"name": "b", "position": (np.array([6.0, 0, 1.5]) + 0.021 * up).tolist(),
+            "linear_velocity": (30.0 * down).tolist()}
+    spec.update({"shape": "sphere", "radius": 0.02} if shape == "sphere" else {"size": [0.04] * 3, "rpy": [0, -slope, 0]})
+    world.add_body(spec)
+    over_floor = []
+    for _ in range(128):
+        world.step(1)
+        x, _, z = world.state()["positions"][0]
+        if -9.5 < x < -0.5:
+            over_floor.append(z)
+    assert len(over_floor) >= 3 and min(over_floor) > 0.02 - 0.005
+
+
+def test_small_spheres_dropped_into_the_half_pipe_stay_in_it():
+    """Spheres of 5 mm dropped 5 m into the shipped half-pipe: 27 of 40 had fallen through its
+    curved floor, whose strips meet at concave edges (a point beside both of two such strips,
+    seen along each one's normal, got no contact from either)."""
+    world = playground_world()
+    rng = np.random.default_rng(1)
+    for k in range(40):
+        world.add_body({"name": f"s{k}", "shape": "sphere", "radius": 0.0025,
+                        "position": [float(rng.uniform(-19, -9)), float(rng.uniform(-15.5, -8.5)), 5.0]})
+    world.step(3 * 128)
+    p = world.state()["positions"]
+    # The half-pipe (meshes/make_playground.py): radius 4 m, its lowest line at y = -12 on z = 0.
+    surface = 4.0 - np.sqrt(np.maximum(16.0 - (p[:, 1] + 12.0) ** 2, 0.0))
+    assert np.all(p[:, 2] > surface - 0.01)
+
+
+def test_a_ball_rolls_off_the_border_of_a_mesh_floor():
+    """The plane goes on past concave edges only: past the floor's border there is nothing."""
+    world = ramp_onto_floor()
+    world.add_body({"name": "b", "shape": "sphere", "radius": 0.1, "position": [-8.0, 0.0, 0.1],
+                    "linear_velocity": [-4.0, 0.0, 0.0]})
+    world.step(2 * 128)
+    x, _, z = world.state()["positions"][0]
+    assert x < -10.0 and z < -2.0  # off the end at ~2.9 m/s (rolling), 1.3 s of falling

@@ -11,6 +11,7 @@ from .constants import SEAM_TOLERANCE
 from .convex_contact import (PARALLEL_SINE, add_scaled, dot, scaled, set_row, sub, to_local,
                      to_world, triangle_weights)
 from .math3d import cross
+from .playground import past_crease
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
@@ -148,15 +149,18 @@ def round_ground(p, r, dims, height, margin, out_point, out_depth):
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
-def sphere_triangle(c, radius, tri, tri_normal, margin, out_point, out_depth):
-    """Sphere and one-sided triangle: (point count, normal sphere -> triangle). None when the
-    centre is behind the plane. The triangle's closest point gives the contact. While the
-    sphere is sunk at most SEAM_TOLERANCE below the plane the normal is the face's even when
-    that point is on an edge, so a ball rolling over the seam of two coplanar triangles is not
-    pushed back by the edge it crosses; the depth is then the sphere's surface straight above
-    the edge point, and the point is the sphere's lowest, which stands still while it rolls (at
-    the edge point, a rolling ball's surface moves down onto the next triangle, and the solver
-    would take that for an approach and bump the ball up)."""
+def sphere_triangle(c, radius, tri, tri_normal, edges, margin, out_point, out_depth):
+    """Sphere and one-sided triangle (`edges`: its Playground.edges): (point count, normal
+    sphere -> triangle). None when the centre is behind the plane. The triangle's closest point
+    gives the contact. While the sphere is sunk at most SEAM_TOLERANCE below the plane the normal
+    is the face's even when that point is on an edge, so a ball rolling over the seam of two
+    coplanar triangles is not pushed back by the edge it crosses; the depth is then the sphere's
+    surface straight above the edge point, and the point is the sphere's lowest, which stands
+    still while it rolls (at the edge point, a rolling ball's surface moves down onto the next
+    triangle, and the solver would take that for an approach and bump the ball up). Past a
+    concave edge (playground.past_crease) the plane goes on: the depth is the sphere's lowest
+    point's, however far beside, so a ball coming down a ramp onto a floor meets the floor's
+    plane before it crosses it."""
     n = (tri_normal[0], tri_normal[1], tri_normal[2])
     front = dot(sub(c, tri[0]), n)
     if front <= 0.0:
@@ -167,11 +171,15 @@ def sphere_triangle(c, radius, tri, tri_normal, margin, out_point, out_depth):
     distance_sq = dot(gap, gap)
     if distance_sq > (radius + margin) ** 2:
         return 0, (0.0, 0.0, 0.0)
-    if (u > 0.0 and v > 0.0 and w > 0.0) or front - radius >= -SEAM_TOLERANCE:
-        beside_sq = max(distance_sq - front * front, 0.0)  # the centre's offset along the plane
-        if beside_sq >= radius * radius:
-            return 0, (0.0, 0.0, 0.0)
-        depth = np.sqrt(radius * radius - beside_sq) - front
+    crease = past_crease(u, v, w, edges)
+    if (u > 0.0 and v > 0.0 and w > 0.0) or front - radius >= -SEAM_TOLERANCE or crease:
+        if crease:
+            depth = radius - front
+        else:
+            beside_sq = max(distance_sq - front * front, 0.0)  # the centre's offset along the plane
+            if beside_sq >= radius * radius:
+                return 0, (0.0, 0.0, 0.0)
+            depth = np.sqrt(radius * radius - beside_sq) - front
         if depth < -margin:
             return 0, (0.0, 0.0, 0.0)
         set_row(out_point, 0, add_scaled(c, 0.5 * depth - radius, n))
