@@ -803,7 +803,6 @@ class Broadcaster:
 
     def publish_diagnostics(self, snap):
         sim = self.sim
-        world = sim.world  # (a load may replace it meanwhile: these figures are of either)
         frozen = int(np.count_nonzero(snap.state["frozen"]))
         active, removed = len(snap.names) - frozen, len(sim.removed)
         target = f"{sim.real_time_factor:.2f}" if sim.real_time_factor > 0.0 else "max"
@@ -818,9 +817,9 @@ class Broadcaster:
               "step_ms": round(step_ms, 4), "late_ticks": sim.late_ticks, "errors": sim.fault_count,
               "simulation_thread_cpu_s": round(sim.thread_cpu_seconds, 3),
               "engine_cpu_s": round(sim.engine_cpu_seconds, 3), "time": round(snap.time, 4),
-              # the second solver thread: whether the last step used it, and what it measured
-              "solver_threads_in_use": world.threads_in_use,
-              "second_thread_speedup": round(world.second_thread_speedup or 0.0, 3)}),
+              # the second solver thread: whether the last batch used it, and what it measured
+              "solver_threads_in_use": sim.solver_threads_in_use,
+              "second_thread_speedup": round(sim.second_thread_speedup or 0.0, 3)}),
             ("bodies", WARN if removed else OK,
              f"{len(snap.names)} bodies: {active} active, {frozen} frozen, {removed} removed",
              {"active": active, "frozen": frozen, "removed": removed,

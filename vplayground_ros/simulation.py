@@ -103,6 +103,11 @@ class Simulation:
         self._thread_cpu_seconds = 0.0  # the simulation thread's CPU time when it ended
         self._cpu_clock = None          # its CPU clock while it runs (thread_cpu_seconds)
         self.engine_cpu_seconds = 0.0  # the part of it inside the compiled step, over all worlds
+        # The world's solver threads in its last batch and the last trial's speed-up of the
+        # second (World.threads_in_use, second_thread_speedup; None before a trial), copied
+        # after each batch: the publisher reads these, never the World.
+        self.solver_threads_in_use = world.threads_in_use
+        self.second_thread_speedup = None
         self.achieved_rtf = 0.0
         # The next simulated time a listener publishes at: a batch ends at the first step at or
         # after it, so what is published carries the same times at any real-time factor.
@@ -275,6 +280,8 @@ class Simulation:
                     self.paused, self._pending_steps = True, 0  # not the same failure 100 times a second
                     self.fault("step", error)
                 self.engine_cpu_seconds += world.engine_cpu_seconds - engine_before
+                self.solver_threads_in_use = world.threads_in_use
+                self.second_thread_speedup = world.second_thread_speedup
                 if not first_batch:
                     self.step_seconds += time.perf_counter() - started
                     self.timed_steps += steps
