@@ -197,7 +197,7 @@ def wrap_angle(angle):
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True)
 def measure_joints(bodies, joints):
     """Each joint's coordinate (turns counted from the last measurement: a joint must not turn
-    half a revolution between two, ~100 rad/s at 128 steps/s) and its rate."""
+    half a revolution between two, ~400 rad/s at 128 steps/s) and its rate."""
     velocity = bodies.velocity
     static_row = len(bodies.active)
     for j in range(joints.count[0]):

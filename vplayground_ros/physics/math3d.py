@@ -28,13 +28,23 @@ def quat_to_matrix(q, m):
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def integrate_orientation(q, omega, dt):
-    """q + dt/2 * (omega, 0) * q, renormalised (a tuple): first order, exact enough at 128 steps/s."""
-    ox, oy, oz = omega[0] * 0.5 * dt, omega[1] * 0.5 * dt, omega[2] * 0.5 * dt
+    """q turned by the world angular velocity omega for dt: the rotation of angle |omega| dt
+    about omega, (sin(angle / 2) axis, cos(angle / 2)) * q, renormalised for rounding (a tuple).
+    The first-order step q + dt/2 (omega, 0) q turned bodies by 2 atan(|omega| dt / 2) instead:
+    0.4 % short at 28 rad/s (the Husky's wheels at 5 m/s, whose odometry reads their angles),
+    15 % at 200 rad/s."""
+    speed = np.sqrt(omega[0] * omega[0] + omega[1] * omega[1] + omega[2] * omega[2])
+    half = 0.5 * speed * dt
+    # sin(half) / speed, by its series where the division would lose digits (1e-4 rad: the
+    # series' next term is below rounding)
+    scale = np.sin(half) / speed if half > 1.0e-4 else 0.5 * dt * (1.0 - half * half / 6.0)
+    c = np.cos(half)
+    ox, oy, oz = omega[0] * scale, omega[1] * scale, omega[2] * scale
     x, y, z, w = q[0], q[1], q[2], q[3]
-    nx = x + ox * w + oy * z - oz * y
-    ny = y - ox * z + oy * w + oz * x
-    nz = z + ox * y - oy * x + oz * w
-    nw = w - ox * x - oy * y - oz * z
+    nx = c * x + ox * w + oy * z - oz * y
+    ny = c * y - ox * z + oy * w + oz * x
+    nz = c * z + ox * y - oy * x + oz * w
+    nw = c * w - ox * x - oy * y - oz * z
     inv = 1.0 / np.sqrt(nx * nx + ny * ny + nz * nz + nw * nw)
     return nx * inv, ny * inv, nz * inv, nw * inv
 
