@@ -25,8 +25,9 @@ more than MAX_DIRECT_JOINTS solve each joint's block alone (6x6), one after the 
 Rows 6-8 are bounded, solved one by one before the block, each with its effective mass
 through the island's equalities (what moving the axis moves: a motor turning a light link that
 carries a heavy one feels the heavy one) and its change carried through them by a response
-computed once a step, so one such row is exact in one sweep; in the contact pass, an island no
-contact touches has them solved together (solve_island_alone). A row with no effective mass
+computed once a step, so one such row is exact in one sweep (the motor first, the limits after:
+a limit has the last word); in the contact pass, an island no contact touches has them solved
+together, as a bounded problem by active sets (solve_island_alone, bounded_solve). A row with no effective mass
 (both sides static, or a limit or motor the joint does not have) is skipped. Position errors are corrected through the real velocities in full each step
 (target -C/dt, a velocity-level SHAKE): the split-impulse correction the contacts use forgets
 the centripetal share of a swing, and a pendulum corrected so lost ~1 % of its energy a
@@ -66,6 +67,9 @@ REDUNDANT_PIVOT = 1.0e-9
 # pass's sweeps: where a motor fights a limit no answer exists, and more sweeps only push
 # both harder) stop when none changed more than this (N s, N m s: another changes nothing).
 SETTLED_IMPULSE = 1.0e-12
+# bounded_solve changes which rows a bound holds at most this many times a row (one at a time:
+# a chain of limited joints takes a few) before the sweeps above finish what it left.
+PIVOTS_PER_ROW = 3
 # An island of m joints keeps (6m)^2 floats of K's factor, 3m x 6m of its bounded rows'
 # responses and 3m x 2m x 6 of their velocity changes: ISLAND_FLOATS m^2 (island_floats).
 ISLAND_FLOATS = 36 + 18 + 36
@@ -817,7 +821,7 @@ def solve_island(velocity, joints, target, impulse, island, with_motors):
     size = last - first
     for p in range(size):
         j = joints.islands[ISLAND_JOINTS, first + p]
-        for which in range(3):
+        for which in (2, 0, 1):  # the motor, then the limits: a limit has the last word
             row = LOWER_ROW + which
             if row == MOTOR_ROW and not with_motors:
                 continue
@@ -908,40 +912,37 @@ def solve_island_alone(velocity, joints, target, impulse, island, sweeps):
                     speed += sign * rows[j, row, DIRECTION + e] * moved[at, e] + (
                         sign * rows[j, row, arm + e] * moved[at, 3 + e])
             coupling[i, k] = speed
-    # Start from the answer without bounds, S^-1 times what the rows lack, projected onto the
-    # bounds: the sweeps then only settle the rows a bound holds (sweeping from zero, an arm's
-    # rows, coupled across a 13:1 mass ratio, had not settled in 100). S is factored as K is
-    # (Cholesky, in the rows' order), so a row that depends on those before it gets no share of
-    # the start (a motor on a joint at its limit: the same axis; with an inverse of the whole S,
-    # such a pair started at +-1e15 N s).
-    factor = np.zeros(count * count)  # every row's envelope from column 0 (row 0's upper triangle)
-    for r in range(count):
-        for c in range(r + 1):
-            factor[r * count + c] = coupling[r, c]
-    cholesky_factor(factor, count)
-    exact = lacking.copy()
-    cholesky_solve(factor, count, exact)
-    change = np.empty(count)
+    # Start from the bounded answer (bounded_solve): sweeping from zero, an arm's rows, coupled
+    # across a 13:1 mass ratio, had not settled in 100 sweeps, and from the answer without
+    # bounds projected onto them, a chain of limited joints had been left with the pushes that
+    # balanced the pulls clipped away, and gained 90 times its energy.
+    old, low, high = np.empty(count), np.empty(count), np.empty(count)
     for i in range(count):
         j, row = joints.islands[ISLAND_JOINTS, first + bounded[i, 0]], LOWER_ROW + bounded[i, 1]
-        old = impulse[j, row]
-        impulse[j, row] = min(max(old + exact[i], joints.row_values[j, row, IMPULSE_LOW]),
-                              joints.row_values[j, row, IMPULSE_HIGH])
-        change[i] = impulse[j, row] - old
+        old[i] = impulse[j, row]
+        low[i], high[i] = joints.row_values[j, row, IMPULSE_LOW], joints.row_values[j, row, IMPULSE_HIGH]
+    change = bounded_solve(coupling, lacking, old, low, high)
+    for i in range(count):
+        j, row = joints.islands[ISLAND_JOINTS, first + bounded[i, 0]], LOWER_ROW + bounded[i, 1]
+        impulse[j, row] = min(max(old[i] + change[i], low[i]), high[i])
+        change[i] = impulse[j, row] - old[i]
     for _ in range(sweeps):
         largest = 0.0
-        for i in range(count):
+        for turn in range(2 * count):  # the motors, then the limits: a limit has the last word
+            i = turn % count
+            if (bounded[i, 1] == MOTOR_ROW - LOWER_ROW) != (turn < count):
+                continue
             p, row = bounded[i, 0], LOWER_ROW + bounded[i, 1]
             j = joints.islands[ISLAND_JOINTS, first + p]
             speed_change = 0.0
             for k in range(count):
                 speed_change += coupling[i, k] * change[k]
-            old = impulse[j, row]
-            new = old + joints.row_values[j, row, ROW_MASS] * (lacking[i] - speed_change)
-            new = min(max(new, joints.row_values[j, row, IMPULSE_LOW]), joints.row_values[j, row, IMPULSE_HIGH])
+            before = impulse[j, row]
+            new = before + joints.row_values[j, row, ROW_MASS] * (lacking[i] - speed_change)
+            new = min(max(new, low[i]), high[i])
             impulse[j, row] = new
-            change[i] += new - old
-            largest = max(largest, abs(new - old))
+            change[i] += new - before
+            largest = max(largest, abs(new - before))
         if largest <= SETTLED_IMPULSE:
             break
     for i in range(count):
@@ -956,6 +957,79 @@ def solve_island_alone(velocity, joints, target, impulse, island, sweeps):
             for e in range(6):
                 velocity[body, e] += change[i] * moved[k - bodies_first, e]
     solve_island_equalities(velocity, joints, target, impulse, island)
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
+def bounded_solve(coupling, lacking, old, low, high):
+    """The changes of bounded rows' impulses (each row's accumulated impulse `old`, kept within
+    [low, high]; `coupling` S: row i's speed change per unit impulse of row k) that give every
+    row what it `lacking` where no bound holds it, and hold a row at a bound only where it would
+    pass it: at its low bound a row has what it lacks or more, at its high bound less (the
+    box-bounded complementarity problem). By active sets: the rows no bound holds are solved
+    exactly (S's factor over them; a row that depends on earlier ones gets nothing, as in
+    factor_island), then the worst row on the wrong side of its bound, or held by a bound it
+    pulls away from, changes set, one at a time, at most PIVOTS_PER_ROW times a row (the
+    sweeps that follow finish what that leaves: a motor and a limit of one axis that disagree
+    have no answer)."""
+    n = len(lacking)
+    state = np.zeros(n, np.int64)  # -1: held at low, 1: held at high, 0: free
+    change = np.zeros(n)
+    free = np.empty(n, np.int64)
+    factor = np.empty(n * n)
+    for _ in range(PIVOTS_PER_ROW * n + 1):
+        m = 0
+        for i in range(n):
+            if state[i] < 0:
+                change[i] = low[i] - old[i]
+            elif state[i] > 0:
+                change[i] = high[i] - old[i]
+            else:
+                free[m] = i
+                m += 1
+        rhs = np.empty(m)
+        for k in range(m * m):  # every row's envelope from column 0 (row 0's upper triangle)
+            factor[k] = 0.0
+        for a in range(m):
+            i = free[a]
+            value = lacking[i]
+            for k in range(n):
+                if state[k] != 0:
+                    value -= coupling[i, k] * change[k]
+            rhs[a] = value
+            for b in range(a + 1):
+                factor[a * m + b] = coupling[i, free[b]]
+        if m > 0:
+            cholesky_factor(factor, m)
+            cholesky_solve(factor, m, rhs)
+        for a in range(m):
+            change[free[a]] = rhs[a]
+        worst, worst_row, worst_state = SETTLED_IMPULSE, -1, 0
+        for i in range(n):
+            if coupling[i, i] <= 0.0:
+                continue
+            lacks = lacking[i]
+            for k in range(n):
+                lacks -= coupling[i, k] * change[k]
+            wants = lacks / coupling[i, i]  # the impulse the row still lacks
+            if state[i] == 0:
+                below, above = low[i] - (old[i] + change[i]), old[i] + change[i] - high[i]
+                if below > worst:
+                    worst, worst_row, worst_state = below, i, -1
+                if above > worst:
+                    worst, worst_row, worst_state = above, i, 1
+                # Solved, a row lacks nothing but rounding, unless it depends on the rows before
+                # it and wants otherwise (a motor pushing a joint against its limit): then it
+                # pushes as hard as it may, and the others answer that.
+                if abs(wants) > 1e-9 * abs(old[i] + change[i]) + worst:
+                    bound = high[i] if wants > 0.0 else low[i]
+                    if np.isfinite(bound):
+                        worst, worst_row, worst_state = abs(wants), i, (1 if wants > 0.0 else -1)
+            elif -state[i] * wants > worst:  # what it lacks takes it off its bound
+                worst, worst_row, worst_state = -state[i] * wants, i, 0
+        if worst_row < 0:
+            break
+        state[worst_row] = worst_state
+    return change
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
