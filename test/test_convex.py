@@ -15,7 +15,8 @@ from vplayground_ros.physics.shapes.convex import pack_hulls
 MARGIN = 0.02
 SCRATCH = allocate_scratch()
 NO_HULLS = pack_hulls([None])  # the hull table of a world without convex bodies (slot 0)
-ALONE = 0  # Playground.edges of a triangle tested alone: no concave edge (nor border bits)
+# Playground.edges and crease_rows of a triangle tested alone: no concave edge (nor border bits).
+ALONE = (0, ((0.0,) * 4,) * 3)
 POINTS, DEPTHS = np.empty((MAX_CLIP_POINTS, 3)), np.empty(MAX_CLIP_POINTS)
 KINDS = (BOX, SPHERE, CAPSULE, CYLINDER)
 
@@ -51,7 +52,7 @@ def triangle(a, tri, margin=MARGIN):
     tri = np.asarray(tri, float)
     normal = np.cross(tri[1] - tri[0], tri[2] - tri[0])
     normal /= np.linalg.norm(normal)
-    n, normal = collide_triangle(NO_HULLS, *a, tuple(vec(v) for v in tri), vec(normal), ALONE,
+    n, normal = collide_triangle(NO_HULLS, *a, tuple(vec(v) for v in tri), vec(normal), *ALONE,
                                  margin, SCRATCH, POINTS, DEPTHS)
     return result(n, normal, False)
 
@@ -500,7 +501,7 @@ def test_a_hull_brick_on_the_ground_and_on_a_triangle_gives_its_four_corners():
     n = collide_ground(hulls, *brick, 0.0, MARGIN, SCRATCH, POINTS, DEPTHS)
     assert n == 4 and DEPTHS[:4] == pytest.approx([0.002] * 4)
     tri = ((-3.0, -3.0, 0.0), (3.0, -3.0, 0.0), (0.0, 3.0, 0.0))
-    n, normal = collide_triangle(hulls, *brick, tri, (0.0, 0.0, 1.0), ALONE, MARGIN, SCRATCH,
+    n, normal = collide_triangle(hulls, *brick, tri, (0.0, 0.0, 1.0), *ALONE, MARGIN, SCRATCH,
                                  POINTS, DEPTHS)
     assert n == 4 and DEPTHS[:4] == pytest.approx([0.002] * 4)
     assert normal == pytest.approx((0, 0, -1))

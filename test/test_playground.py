@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from vplayground_ros.physics import World
-from vplayground_ros.physics.playground import BORDER, CONCAVE, make_playground
+from vplayground_ros.physics.playground import CONCAVE, make_playground
 from vplayground_ros.resources import find_shared
 from vplayground_ros.scene import load_world
 
@@ -158,21 +158,25 @@ def ramp_onto_floor():
     return world
 
 
-def test_mesh_edges_know_creases_ridges_seams_and_borders():
-    """Each triangle edge's kind, found by where its corners are: the ramp's foot is a concave
-    crease on both sides, the floor's diagonal a seam (neither kind), the outline a border; a
-    ridge (the ramp's top onto a lower platform edge, convex) is no crease, and a mesh that
-    repeats its vertices per triangle is read the same."""
-    edges = ramp_onto_floor()._playground.edges
-    # floor [0 1 2]: 0-1 border, 1-2 the crease, 2-0 the diagonal; [0 2 3]: diagonal, borders.
-    assert edges.tolist() == [BORDER | CONCAVE << 1, BORDER << 1 | BORDER << 2,
-                              BORDER | BORDER << 1, BORDER << 1 | CONCAVE << 2]
-    ridge = np.array([[0, -1, 0], [1, -1, 1], [1, 1, 1], [0, 1, 0], [2, -1, 0], [2, 1, 0]], float)
-    faces = np.array([[0, 1, 2], [0, 2, 3], [1, 4, 5], [1, 5, 2]])
-    assert not np.any(make_playground(ridge, faces)[0].edges & (CONCAVE * 0b111))
+def test_mesh_edges_find_the_creases():
+    """Which edges are concave creases, found by where the corners are: the ramp's foot on both
+    sides (each holding the other's plane), not the floor's diagonal (a seam), the outline, a
+    ridge (convex), nor a fence wound the other way round; the same for a mesh that repeats its
+    vertices per triangle or rounds them."""
     creased = ramp_onto_floor()._playground
-    repeated = make_playground(creased.triangles.reshape(-1, 3), np.arange(12).reshape(4, 3))[0]
-    assert repeated.edges.tolist() == creased.edges.tolist()
+    assert creased.edges.tolist() == [CONCAVE << 1, 0, 0, CONCAVE << 2]
+    ramp = np.array([-2.0, 0.0, 8.0]) / math.hypot(2.0, 8.0)
+    np.testing.assert_allclose(creased.creases[0, 1], [*ramp, 0.0], atol=1e-15)  # the ramp's plane
+    np.testing.assert_allclose(creased.creases[3, 2], [0.0, 0.0, 1.0, 0.0])  # the floor's
+    faces = np.array([[0, 1, 2], [0, 2, 3], [1, 4, 5], [1, 5, 2]])
+    ridge = np.array([[0, -1, 0], [1, -1, 1], [1, 1, 1], [0, 1, 0], [2, -1, 0], [2, 1, 0]], float)
+    assert not make_playground(ridge, faces)[0].edges.any()
+    repeated = creased.triangles.reshape(-1, 3) + np.random.default_rng(0).uniform(-1e-7, 1e-7, (12, 3))
+    assert make_playground(repeated, np.arange(12).reshape(4, 3))[0].edges.tolist() == creased.edges.tolist()
+    fence = np.array([[-5, -3, 0], [0, -3, 0], [0, 3, 0], [-5, 3, 0], [0, -3, 1], [0, 3, 1]], float)
+    facing_in, facing_out = [[0, 1, 2], [0, 2, 3], [2, 1, 4], [2, 4, 5]], [[0, 1, 2], [0, 2, 3], [1, 2, 5], [1, 5, 4]]
+    assert make_playground(fence, facing_in)[0].edges.tolist() == [CONCAVE << 1, 0, CONCAVE, 0]
+    assert not make_playground(fence, facing_out)[0].edges.any()
 
 
 @pytest.mark.parametrize("shape", ["sphere", "box"])
@@ -221,3 +225,23 @@ def test_a_ball_rolls_off_the_border_of_a_mesh_floor():
     world.step(2 * 128)
     x, _, z = world.state()["positions"][0]
     assert x < -10.0 and z < -2.0  # off the end at ~2.9 m/s (rolling), 1.3 s of falling
+
+
+@pytest.mark.parametrize("shape", ["sphere", "box"])
+def test_nothing_holds_a_body_beside_a_crease_or_behind_a_fence(shape):
+    """The plane goes on past a crease only across it and only for a body in front of the
+    other triangle: a body falling 2 mm clear of the mesh's side where the ramp's foot ends
+    (the floor's plane went on past that end, and caught 7 of 20), and a body behind a fence
+    rising from a floor's edge (the floor's plane went on under it), fall."""
+    body = {"shape": "sphere", "radius": 0.05} if shape == "sphere" else {"size": [0.1] * 3}
+    for dx in (-0.04, 0.0, 0.04):
+        world = ramp_onto_floor()
+        world.add_body({**body, "name": "b", "position": [dx, 3.052, 3.0], "linear_velocity": [0, 0, -20.0]})
+        world.step(32)
+        assert world.state()["linear_velocities"][0, 2] < -20.0
+    fence = World(ground=None)
+    fence.set_playground(np.array([[-5, -3, 0], [0, -3, 0], [0, 3, 0], [-5, 3, 0], [0, -3, 1], [0, 3, 1]], float),
+                         np.array([[0, 1, 2], [0, 2, 3], [2, 1, 4], [2, 4, 5]]))  # facing the yard, x < 0
+    fence.add_body({**body, "name": "b", "position": [0.06, 0.5, 0.3]})
+    fence.step(128)
+    assert fence.state()["positions"][0, 2] < -3.0

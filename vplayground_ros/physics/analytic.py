@@ -149,18 +149,17 @@ def round_ground(p, r, dims, height, margin, out_point, out_depth):
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
-def sphere_triangle(c, radius, tri, tri_normal, edges, margin, out_point, out_depth):
-    """Sphere and one-sided triangle (`edges`: its Playground.edges): (point count, normal
-    sphere -> triangle). None when the centre is behind the plane. The triangle's closest point
-    gives the contact. While the sphere is sunk at most SEAM_TOLERANCE below the plane the normal
-    is the face's even when that point is on an edge, so a ball rolling over the seam of two
-    coplanar triangles is not pushed back by the edge it crosses; the depth is then the sphere's
-    surface straight above the edge point, and the point is the sphere's lowest, which stands
-    still while it rolls (at the edge point, a rolling ball's surface moves down onto the next
-    triangle, and the solver would take that for an approach and bump the ball up). Past a
-    concave edge (playground.past_crease) the plane goes on: the depth is the sphere's lowest
-    point's, however far beside, so a ball coming down a ramp onto a floor meets the floor's
-    plane before it crosses it."""
+def sphere_triangle(c, radius, tri, tri_normal, edges, creases, margin, out_point, out_depth):
+    """Sphere and one-sided triangle (`edges`, `creases`: its Playground.edges and crease_rows):
+    (point count, normal sphere -> triangle). None when the centre is behind the plane. The
+    triangle's closest point gives the contact. While the sphere is sunk at most SEAM_TOLERANCE
+    below the plane the normal is the face's even when that point is on an edge, so a ball rolling over the seam of two coplanar triangles is not pushed
+    back by the edge it crosses; the depth is then the sphere's surface straight above the edge
+    point, and the point is the sphere's lowest, which stands still while it rolls (at the edge
+    point, a rolling ball's surface moves down onto the next triangle, and the solver would
+    take that for an approach and bump the ball up). Past a concave edge (playground.past_crease)
+    the plane goes on: the depth is the sphere's lowest point's, however far beside, so a ball
+    coming down a ramp onto a floor meets the floor's plane before it crosses it."""
     n = (tri_normal[0], tri_normal[1], tri_normal[2])
     front = dot(sub(c, tri[0]), n)
     if front <= 0.0:
@@ -171,8 +170,10 @@ def sphere_triangle(c, radius, tri, tri_normal, edges, margin, out_point, out_de
     distance_sq = dot(gap, gap)
     if distance_sq > (radius + margin) ** 2:
         return 0, (0.0, 0.0, 0.0)
-    crease = past_crease(u, v, w, edges)
-    if (u > 0.0 and v > 0.0 and w > 0.0) or front - radius >= -SEAM_TOLERANCE or crease:
+    on = (1 if w == 0.0 else 0) | (2 if u == 0.0 else 0) | (4 if v == 0.0 else 0)  # edge j's bit
+    crease = (on == 1 or on == 2 or on == 4) and past_crease(edges, creases, on >> 1, c)
+    inside = u > 0.0 and v > 0.0 and w > 0.0
+    if inside or crease or front - radius >= -SEAM_TOLERANCE:
         if crease:
             depth = radius - front
         else:

@@ -23,7 +23,7 @@ from .constants import CONTACT_MARGIN, EDGE_AXIS_TOLERANCE, SEAM_TOLERANCE
 from .convex_contact import (MAX_CLIP_POINTS, allocate_scratch, clip_polygon, convex_ground,
                      convex_pair, convex_triangle)
 from .ids import GROUND, PLAYGROUND, triangle_key
-from .playground import CONCAVE
+from .playground import crease_rows, past_crease
 from .shapes import BOX, CAPSULE, COMPOUND, SPHERE
 from .shapes.compound import MAX_PARTS, part_pose
 
@@ -281,9 +281,10 @@ def interval_separation(box_center, box_radius, t0, t1, t2):
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
-def box_triangle(p, r, h, tri, tri_normal, edges, margin, poly_a, poly_b, out_point, out_depth):
-    """Manifold of a box and a one-sided triangle (`edges`: its Playground.edges): (point
-    count, normal box -> triangle).
+def box_triangle(p, r, h, tri, tri_normal, edges, creases, margin, poly_a, poly_b, out_point,
+                 out_depth):
+    """Manifold of a box and a one-sided triangle (`edges`, `creases`: its Playground.edges and
+    crease_rows): (point count, normal box -> triangle).
 
     13 axes: the triangle's normal, the box's 3 face axes, 9 crosses of box axes and triangle
     edges. The triangle's face is the reference whenever the box is in front of it and sunk at
@@ -291,9 +292,10 @@ def box_triangle(p, r, h, tri, tri_normal, edges, margin, poly_a, poly_b, out_po
     triangles then gets the face normal from the next triangle too, instead of an edge or side
     axis that would point into the neighbour and catch it. A box deeper below the plane is
     beside the triangle (at a step's riser, say), and the best axis decides: a box face clips
-    the triangle, or two edges give one point. The box's side is not clipped at the triangle's
-    concave edges (playground.CONCAVE): the plane goes on in front of the mesh there, so a box
-    coming down a ramp onto a floor meets the floor's plane before it crosses it."""
+    the triangle, or two edges give one point. Past a concave edge, for a box in front of the
+    triangle across it (playground.past_crease), the box's side is clipped to the strip beyond
+    the edge instead (between the lines across it at its ends): the plane goes on there, so a
+    box coming down a ramp onto a floor meets the floor's plane before it crosses it."""
     v0, v1, v2 = tri[0], tri[1], tri[2]
     n = (tri_normal[0], tri_normal[1], tri_normal[2])
     front = (p[0] - v0[0]) * n[0] + (p[1] - v0[1]) * n[1] + (p[2] - v0[2]) * n[2]
@@ -345,12 +347,19 @@ def box_triangle(p, r, h, tri, tri_normal, edges, margin, poly_a, poly_b, out_po
         incident_box_face(p, r, h, n, poly_a)
         count = 4
         for j in range(3):
-            if edges & (CONCAVE << j):
-                continue
             a, b = tri[j], tri[(j + 1) % 3]
-            plane = ((b[1] - a[1]) * n[2] - (b[2] - a[2]) * n[1],
-                     (b[2] - a[2]) * n[0] - (b[0] - a[0]) * n[2],
-                     (b[0] - a[0]) * n[1] - (b[1] - a[1]) * n[0])  # edge x normal: outwards
+            along = (b[0] - a[0], b[1] - a[1], b[2] - a[2])
+            if past_crease(edges, creases, j, p):
+                # The strip past the edge: along . x from along . a to along . b.
+                count = clip_polygon(poly_a, count, poly_b, (-along[0], -along[1], -along[2]),
+                                     -(along[0] * a[0] + along[1] * a[1] + along[2] * a[2]))
+                poly_a, poly_b = poly_b, poly_a
+                count = clip_polygon(poly_a, count, poly_b, along,
+                                     along[0] * b[0] + along[1] * b[1] + along[2] * b[2])
+                poly_a, poly_b = poly_b, poly_a
+                continue
+            plane = (along[1] * n[2] - along[2] * n[1], along[2] * n[0] - along[0] * n[2],
+                     along[0] * n[1] - along[1] * n[0])  # edge x normal: outwards
             offset = plane[0] * a[0] + plane[1] * a[1] + plane[2] * a[2]
             count = clip_polygon(poly_a, count, poly_b, plane, offset)
             poly_a, poly_b = poly_b, poly_a
@@ -428,15 +437,16 @@ def collide_pair(hulls, kind_a, pa, ra, da, slot_a, kind_b, pb, rb, db, slot_b, 
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True)
-def collide_triangle(hulls, kind, p, r, dims, slot, tri, tri_normal, edges, margin, scratch,
-                     out_point, out_depth):
-    """Manifold of a body and a one-sided playground triangle (`edges`: its Playground.edges):
-    (point count, normal body -> triangle)."""
+def collide_triangle(hulls, kind, p, r, dims, slot, tri, tri_normal, edges, creases, margin,
+                     scratch, out_point, out_depth):
+    """Manifold of a body and a one-sided playground triangle (`edges`, `creases`: its
+    Playground.edges and crease_rows): (point count, normal body -> triangle)."""
     if kind == BOX:
-        return box_triangle(p, r, dims, tri, tri_normal, edges, margin, scratch.poly_a,
+        return box_triangle(p, r, dims, tri, tri_normal, edges, creases, margin, scratch.poly_a,
                             scratch.poly_b, out_point, out_depth)
     if kind == SPHERE:
-        return sphere_triangle(p, dims[0], tri, tri_normal, edges, margin, out_point, out_depth)
+        return sphere_triangle(p, dims[0], tri, tri_normal, edges, creases, margin, out_point,
+                               out_depth)
     return convex_triangle(hulls, kind, p, r, dims, slot, tri, tri_normal, margin, scratch,
                            out_point, out_depth)
 
@@ -508,7 +518,7 @@ def near_pieces(parts, shape, position, rotation, dimensions, half_extents, a, b
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def collide_pieces(hulls, parts, shape, position, rotation, dimensions, half_extents, a, b, triangle,
                    job_piece, pieces_b, margin, ground_height, triangles, triangle_normals,
-                   triangle_edges, scratch, out_point, out_depth):
+                   triangle_edges, triangle_creases, scratch, out_point, out_depth):
     """Manifold of piece `job_piece` (see near_pieces) of a job in which a compound takes part.
     Returns (point count, normal A -> B, and the manifold's warm-start keys).
 
@@ -527,7 +537,8 @@ def collide_pieces(hulls, parts, shape, position, rotation, dimensions, half_ext
     if b == PLAYGROUND:
         n, normal = collide_triangle(hulls, kind_a, pa, ra, da, hull_a, matrix3(triangles, triangle),
                                      vector3(triangle_normals, triangle), triangle_edges[triangle],
-                                     margin, scratch, out_point, out_depth)
+                                     crease_rows(triangle_creases, triangle), margin, scratch,
+                                     out_point, out_depth)
         return n, normal, key_a, triangle_key(triangle)
     n = collide_ground(hulls, kind_a, pa, ra, da, hull_a, ground_height, margin, scratch, out_point, out_depth)
     return n, (0.0, 0.0, -1.0), key_a, GROUND
@@ -561,7 +572,7 @@ def collide(contacts, bodies, hulls, parts, broad, playground, ground_enabled, g
                                     broad.pair_count[0], broad.playground_body,
                                     broad.playground_triangle, broad.playground_count[0],
                                     playground.triangles, playground.normals, playground.edges,
-                                    ground_enabled, ground_height, live, np.int64(0), jobs, np.int64(0), np.int64(0),
+                                    playground.creases, ground_enabled, ground_height, live, np.int64(0), jobs, np.int64(0), np.int64(0),
                                     len(contacts.body_a),
                                     len(contacts.manifold_start))
     contacts.count[0], contacts.manifold_count[0] = max(count, 0), max(manifolds, 0)
@@ -601,7 +612,8 @@ def collide_shared(contacts, bodies, hulls, parts, broad, playground, ground_ena
     run_collide_workers(contacts, bodies, hulls, parts, broad.pair_a, broad.pair_b,
                         broad.pair_count[0], broad.playground_body, broad.playground_triangle,
                         broad.playground_count[0], playground.triangles, playground.normals,
-                        playground.edges, ground_enabled, ground_height, live, bounds, ends, sync)
+                        playground.edges, playground.creases, ground_enabled, ground_height, live,
+                        bounds, ends, sync)
     if ends[0, 0] < 0 or ends[1, 0] < 0:
         contacts.count[0] = contacts.manifold_count[0] = 0
         return False
@@ -627,7 +639,7 @@ def collide_shared(contacts, bodies, hulls, parts, broad, playground, ground_ena
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, parallel=True)
 def run_collide_workers(contacts, bodies, hulls, parts, pair_a, pair_b, body_pairs, mesh_body,
                         mesh_triangle, mesh_pairs, triangles, triangle_normals, triangle_edges,
-                        ground_enabled, ground_height, live, bounds, ends, sync):
+                        triangle_creases, ground_enabled, ground_height, live, bounds, ends, sync):
     """One parallel region: each thread takes a part (bounds[part]: first and last job, first
     point and manifold, their ends) until none is left, and leaves its counts in ends[part]."""
     for _ in prange(2):
@@ -640,14 +652,16 @@ def run_collide_workers(contacts, bodies, hulls, parts, pair_a, pair_b, body_pai
                 bounds[part, 5])
             ends[part, 0], ends[part, 1] = collide_jobs(
                 contacts, bodies, hulls, parts, pair_a, pair_b, body_pairs, mesh_body, mesh_triangle,
-                mesh_pairs, triangles, triangle_normals, triangle_edges, ground_enabled,
-                ground_height, live, first, last, count, manifolds, point_end, manifold_end)
+                mesh_pairs, triangles, triangle_normals, triangle_edges, triangle_creases,
+                ground_enabled, ground_height, live, first, last, count, manifolds, point_end,
+                manifold_end)
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def collide_jobs(contacts, bodies, hulls, parts, pair_a, pair_b, body_pairs, mesh_body, mesh_triangle,
-                 mesh_pairs, triangles, triangle_normals, triangle_edges, ground_enabled, ground_height,
-                 live, first, last, count, manifolds, point_end, manifold_end):
+                 mesh_pairs, triangles, triangle_normals, triangle_edges, triangle_creases,
+                 ground_enabled, ground_height, live, first, last, count, manifolds, point_end,
+                 manifold_end):
     """collide's jobs first to last - 1 (the body_pairs pairs, then the mesh_pairs (body,
     playground triangle) pairs, then the live bodies against the ground), their manifolds
     written from point `count` and manifold `manifolds` on, short of point_end and
@@ -709,7 +723,8 @@ def collide_jobs(contacts, bodies, hulls, parts, pair_a, pair_b, body_pairs, mes
                 n, normal, key_a, key_b = collide_pieces(
                     hulls, parts, shape, position, rotation, dimensions, bodies.half_extents, a, b, t,
                     near[job_piece], pieces_b, margin, ground_height, triangles,
-                    triangle_normals, triangle_edges, scratch, scratch_point, scratch_depth)
+                    triangle_normals, triangle_edges, triangle_creases, scratch, scratch_point,
+                    scratch_depth)
             elif job < body_pairs:
                 if shape[a] == BOX and shape[b] == BOX:
                     n, normal = box_box(vector3(position, a), matrix3(rotation, a),
@@ -726,15 +741,16 @@ def collide_jobs(contacts, bodies, hulls, parts, pair_a, pair_b, body_pairs, mes
                 if shape[a] == BOX:
                     n, normal = box_triangle(vector3(position, a), matrix3(rotation, a),
                                              vector3(dimensions, a), matrix3(triangles, t),
-                                             vector3(triangle_normals, t), triangle_edges[t], margin,
-                                             poly_a, poly_b, scratch_point, scratch_depth)
+                                             vector3(triangle_normals, t), triangle_edges[t],
+                                             crease_rows(triangle_creases, t), margin, poly_a,
+                                             poly_b, scratch_point, scratch_depth)
                 else:
                     n, normal = collide_triangle(hulls, shape[a], vector3(position, a),
                                                  matrix3(rotation, a), vector3(dimensions, a), a,
                                                  matrix3(triangles, t),
                                                  vector3(triangle_normals, t), triangle_edges[t],
-                                                 margin, scratch, scratch_point,
-                                                 scratch_depth)
+                                                 crease_rows(triangle_creases, t), margin,
+                                                 scratch, scratch_point, scratch_depth)
             else:
                 normal = down
                 if shape[a] == BOX:

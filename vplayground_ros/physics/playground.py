@@ -13,7 +13,8 @@ from .broad_phase import (MAX_CELLS_PER_OBJECT, aabbs_overlap, allocate_index, b
 Playground = namedtuple("Playground", [
     "triangles",          # (T, 3, 3) vertices, world, counter-clockwise seen from the front
     "normals",            # (T, 3) unit front normals
-    "edges",              # (T,) int64 each edge's kind (mesh_edges: CONCAVE and BORDER bits)
+    "edges",              # (T,) int64 which edges are concave creases (mesh_edges: CONCAVE bits)
+    "creases",            # (T, 3, 4) across each concave edge, the neighbour's plane (normal, offset)
     "aabb_min", "aabb_max",  # (T, 3)
     "octree_level",       # (T,) int64
     "index",              # OctreeIndex of the triangles
@@ -23,15 +24,18 @@ Playground = namedtuple("Playground", [
 # Triangles with less area than this (m^2) are degenerate: no normal to speak of.
 MIN_TRIANGLE_AREA = 1e-10
 
-# Bits of Playground.edges for edge j of a triangle (from corner j to corner j + 1): CONCAVE << j
-# when one other triangle shares it and rises in front of this one's plane (a crease the mesh
-# turns up at: a ramp meeting a floor, the half-pipe's strips), BORDER << j when no other
-# triangle shares it (the mesh ends there).
-CONCAVE, BORDER = 1, 8
+# The bit of Playground.edges for edge j of a triangle (from corner j to corner j + 1) is
+# CONCAVE << j when one other triangle shares it, wound the same way round (it runs the edge the
+# other way), and rises in front of this one's plane: a crease the mesh turns up at (a ramp
+# meeting a floor, the half-pipe's strips).
+CONCAVE = 1
 
 # A neighbour rises in front of a plane when its far corner is in front by more than this
 # share of its distance from the shared edge (sin of ~0.06 degrees): flatter seams are seams.
 CREASE_SINE = 1e-3
+
+# Corners closer than this (m) are one vertex of the mesh (an exporter's rounding).
+WELD = 1e-6
 
 
 def make_playground(vertices, faces):
@@ -57,7 +61,7 @@ def make_playground(vertices, faces):
     playground = Playground(
         triangles=np.ascontiguousarray(triangles),
         normals=normals,
-        edges=mesh_edges(triangles, normals),
+        **dict(zip(("edges", "creases"), mesh_edges(triangles, normals))),
         aabb_min=triangles.min(axis=1) if count else np.zeros((0, 3)),
         aabb_max=triangles.max(axis=1) if count else np.zeros((0, 3)),
         octree_level=np.zeros(count, np.int64),
@@ -68,14 +72,15 @@ def make_playground(vertices, faces):
 
 
 def mesh_edges(triangles, normals):
-    """Playground.edges of triangles (T, 3, 3) with unit normals (T, 3): which triangles share
-    an edge is found by where their corners are (a mesh may repeat a vertex), each edge's kind
-    from the one other triangle on it (an edge of three or more triangles is neither kind)."""
+    """(Playground.edges, Playground.creases) of triangles (T, 3, 3) with unit normals (T, 3):
+    which triangles share an edge is found by where their corners are (a mesh may repeat a
+    vertex, or round it: corners within WELD are one), whether it is a crease from the one other
+    triangle on it (an edge of three or more triangles, a two-sided sheet's, is none)."""
     count = len(triangles)
-    edges = np.zeros(count, np.int64)
+    edges, creases = np.zeros(count, np.int64), np.zeros((count, 3, 4))
     if count == 0:
-        return edges
-    _, vertex = np.unique(triangles.reshape(-1, 3), axis=0, return_inverse=True)
+        return edges, creases
+    _, vertex = np.unique(np.round(triangles.reshape(-1, 3) / WELD), axis=0, return_inverse=True)
     vertex = vertex.reshape(count, 3)
     start, end = vertex, np.roll(vertex, -1, axis=1)  # edge j: corner j to corner j + 1
     low, high = np.minimum(start, end).ravel(), np.maximum(start, end).ravel()
@@ -83,26 +88,40 @@ def mesh_edges(triangles, normals):
     first = np.r_[True, (low[order][1:] != low[order][:-1]) | (high[order][1:] != high[order][:-1])]
     run = np.cumsum(first) - 1
     sharing = np.bincount(run)[run]  # how many triangles have the edge of each sorted slot
-    border = order[sharing == 1]
-    np.bitwise_or.at(edges, border // 3, BORDER << (border % 3))  # (|= keeps one per triangle)
     pairs = np.nonzero(first & (sharing == 2))[0]
+    pairs = pairs[start.ravel()[order[pairs]] == end.ravel()[order[pairs + 1]]]  # wound alike
     for this, other in ((order[pairs], order[pairs + 1]), (order[pairs + 1], order[pairs])):
-        t, j = this // 3, this % 3
-        far = triangles[other // 3, (other % 3 + 2) % 3] - triangles[t, j]  # the neighbour's far corner
+        t, j, neighbour = this // 3, this % 3, other // 3
+        far = triangles[neighbour, (other % 3 + 2) % 3] - triangles[t, j]  # the neighbour's far corner
         rises = np.einsum("ij,ij->i", normals[t], far) > CREASE_SINE * np.linalg.norm(far, axis=1)
-        np.bitwise_or.at(edges, t[rises], CONCAVE << j[rises])
-    return edges
+        t, j, neighbour = t[rises], j[rises], neighbour[rises]
+        np.bitwise_or.at(edges, t, CONCAVE << j)  # (|= keeps one per triangle)
+        creases[t, j, :3] = normals[neighbour]
+        creases[t, j, 3] = np.einsum("ij,ij->i", normals[neighbour], triangles[neighbour, 0])
+    return edges, creases
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
-def past_crease(u, v, w, edges):
-    """Whether a triangle's point of barycentric weights (u, v, w) (its corners') lies on a
-    concave edge of it, or at a corner of one that has no border edge: the mesh goes on in front
-    of the triangle's plane there, so that plane holds up a body beside the triangle too. (A
-    body crossing the crease quickly is behind the plane by the step after, where a one-sided
-    triangle gives no contact.) `edges`: the triangle's Playground.edges."""
-    on = (1 if w == 0.0 else 0) | (2 if u == 0.0 else 0) | (4 if v == 0.0 else 0)  # edge j's bit
-    return (on & edges) != 0 and (on & (edges >> 3)) == 0
+def crease_rows(creases, t):
+    """Triangle t's Playground.creases as a tuple of three (normal x, y, z, offset) tuples."""
+    return ((creases[t, 0, 0], creases[t, 0, 1], creases[t, 0, 2], creases[t, 0, 3]),
+            (creases[t, 1, 0], creases[t, 1, 1], creases[t, 1, 2], creases[t, 1, 3]),
+            (creases[t, 2, 0], creases[t, 2, 1], creases[t, 2, 2], creases[t, 2, 3]))
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
+def past_crease(edges, creases, j, point):
+    """Whether a body whose centre is at `point` is past a triangle's edge j that is a concave
+    crease (`edges`, `creases`: the triangle's, crease_rows) and in front of the triangle
+    across it: then the mesh goes on in front of this triangle's plane, between the two, and
+    that plane holds up the body beside the triangle too. (A body crossing the crease quickly
+    is behind the plane by the step after, where a one-sided triangle gives no contact.) A body
+    behind the other triangle (a fence rising from a floor, seen from outside) has nothing
+    under it."""
+    if not edges & (CONCAVE << j):
+        return False
+    plane = creases[j]
+    return point[0] * plane[0] + point[1] * plane[1] + point[2] * plane[2] > plane[3]
 
 
 EMPTY_PLAYGROUND_ARGS = (np.zeros((0, 3)), np.zeros((0, 3), np.int64))
