@@ -292,7 +292,10 @@ def box_triangle(p, r, h, tri, tri_normal, edges, creases, margin, poly_a, poly_
     triangles then gets the face normal from the next triangle too, instead of an edge or side
     axis that would point into the neighbour and catch it. A box deeper below the plane is
     beside the triangle (at a step's riser, say), and the best axis decides: a box face clips
-    the triangle, or two edges give one point. Past a concave edge, for a box in front of the
+    the triangle, or two edges give one point; only an axis along which the triangle would push
+    the box out of its front (or along it) may decide, since nothing is behind a one-sided
+    triangle: a box sliding up the ramp, its rear below the platform's plane, had its front face
+    taken for the separating axis, and the platform stopped it like a wall at the ridge. Past a concave edge, for a box in front of the
     triangle across it (playground.past_crease), the box's side is clipped to the strip beyond
     the edge instead (between the lines across it at its ends): the plane goes on there, so a
     box coming down a ramp onto a floor meets the floor's plane before it crosses it."""
@@ -316,7 +319,7 @@ def box_triangle(p, r, h, tri, tri_normal, edges, creases, margin, poly_a, poly_
             v2[0] * a[0] + v2[1] * a[1] + v2[2] * a[2])
         if gap > margin:
             return 0, (0.0, 0.0, 0.0)
-        if gap > best:
+        if gap > best and sign * (a[0] * n[0] + a[1] * n[1] + a[2] * n[2]) <= 0.0:
             best, best_kind, best_axis, best_sign = gap, 1, k, sign
     for j in range(3):
         e0 = tri[(j + 1) % 3][0] - tri[j][0]
@@ -339,7 +342,7 @@ def box_triangle(p, r, h, tri, tri_normal, edges, creases, margin, poly_a, poly_
                 v2[0] * l0 + v2[1] * l1 + v2[2] * l2)
             if gap > margin:
                 return 0, (0.0, 0.0, 0.0)
-            if gap > best + EDGE_AXIS_TOLERANCE:
+            if gap > best + EDGE_AXIS_TOLERANCE and sign * (l0 * n[0] + l1 * n[1] + l2 * n[2]) <= 0.0:
                 best, best_kind, best_axis, best_sign = gap, 2, 3 * k + j, sign
                 best_dir = (l0 * sign, l1 * sign, l2 * sign)
     if best_kind == 0 or face_gap >= -SEAM_TOLERANCE:
