@@ -548,3 +548,18 @@ def test_a_saved_fixed_joint_loads_again():
     scene = world_to_scene(world)
     assert "position" not in scene["joints"][0]
     assert load_world(scene).joint_names() == ["weld"]
+
+
+@pytest.mark.parametrize("motor", [{"mode": "velocity", "target": 0.03},
+                                   {"mode": "position", "target": 0.0, "velocity": 0.03}])
+def test_a_slowly_driven_joint_does_not_freeze(motor):
+    """A hinge its motor turns at 0.03 rad/s (below the freezing thresholds: a velocity motor,
+    or a position target moving on): its group froze after 0.5 s and stopped at 0.015 rad. A
+    driven group stays awake; at 0.3 rad after 10 s."""
+    world = World({"gravity": [0, 0, -G]}, ground=None)  # the default freezing
+    world.add_body({"name": "arm", "size": [0.3, 0.05, 0.05], "mass": 1.0, "position": [0.15, 0, 2]})
+    world.add_joint({"name": "hinge", "type": "revolute", "child": "arm", "anchor": [0, 0, 2], "axis": [0, 0, 1],
+                     "motor": {**motor, "max_effort": 100.0}})
+    world.step(10 * RATE)
+    assert world.joint("hinge")["position"] == pytest.approx(0.3, abs=1e-3)
+    assert not world.body("arm")["frozen"]
