@@ -563,3 +563,19 @@ def test_a_slowly_driven_joint_does_not_freeze(motor):
     world.step(10 * RATE)
     assert world.joint("hinge")["position"] == pytest.approx(0.3, abs=1e-3)
     assert not world.body("arm")["frozen"]
+
+
+def test_a_frozen_arm_reports_the_effort_that_holds_it():
+    """An arm held level by its position motor freezes; its joint's effort stays what holds it
+    (m g l / 2 = 9.81 N m) when anything else in the world moves (the step's preparation had
+    dropped the impulses of joints whose bodies are all at rest, and it read 0)."""
+    world = World({"gravity": [0, 0, -G], "freezing": {"enabled": True, "time": 0.5}}, ground=None)
+    world.add_body({"name": "arm", "size": [1.0, 0.05, 0.05], "mass": 2.0, "position": [0.5, 0, 2]})
+    world.add_joint({"name": "shoulder", "type": "revolute", "child": "arm", "anchor": [0, 0, 2], "axis": [0, -1, 0],
+                     "motor": {"mode": "position", "target": 0.0, "max_effort": 100.0}})
+    world.step(RATE)
+    assert world.body("arm")["frozen"]
+    world.add_body({"name": "faller", "position": [20, 0, 50]})
+    for _ in range(3):
+        world.step(1)
+        assert world.body("arm")["frozen"] and world.joint("shoulder")["effort"] == pytest.approx(G, rel=1e-6)

@@ -368,10 +368,14 @@ def prepare_joints(joints, bodies, dt):
                 bound = joints.values[j, MAX_EFFORT] * dt
                 joints.row_values[j, MOTOR_ROW, IMPULSE_LOW] = -bound
                 joints.row_values[j, MOTOR_ROW, IMPULSE_HIGH] = bound
+        resting = m_a == 0.0 and m_b == 0.0  # (frozen, immovable, the world)
         for row in range(JOINT_ROWS):
             joints.row_values[j, row, COLLISION_IMPULSE] = 0.0
             if joints.row_values[j, row, ROW_MASS] == 0.0:
-                joints.row_values[j, row, IMPULSE] = 0.0
+                # A joint at rest keeps its impulses: what held it when it froze is its effort
+                # (a frozen arm reported 0 once anything else moved) and its warm start on waking.
+                if not resting:
+                    joints.row_values[j, row, IMPULSE] = 0.0
                 joints.rows[j, row, :] = 0.0
                 joints.row_values[j, row, COLLISION_TARGET] = joints.row_values[j, row, CONTACT_TARGET] = 0.0
     group_islands(joints, static_row)
