@@ -333,3 +333,21 @@ def test_a_sensor_rides_on_a_robot_link():
     reading = {s.name: r for s, r in sensors.sample(world)}["wrist_imu"]
     # Upright at every joint 0, the last link's z is up: +g along it.
     assert reading["linear_acceleration"] == pytest.approx([0.0, 0.0, 9.81], abs=0.05)
+
+
+def test_a_robot_starts_within_its_joint_limits():
+    """Past a limit, a joint's correction launched it across its range (the KUKA's joint 4 put
+    at 2.9 rad ended at -2.09): a position outside the limits is refused, and a description
+    whose zero lies outside them (pybullet_data's a1: its calves' range is [-2.70, -0.92])
+    starts at the nearest limit instead of being thrown to the far one at -5 rad/s."""
+    with pytest.raises(UrdfError, match=r"'lbr_iiwa_joint_4' at 2.9 is outside its limits \[-2.0944, 2.0944\]"):
+        robot_model(KUKA, "k", joint_positions={"lbr_iiwa_joint_4": 2.9})
+    world = World({"freezing": {"enabled": False}}, ground=None)
+    add_robot(world, robot_model(os.path.join(pybullet_data.getDataPath(), "a1", "a1.urdf"), "a1"))
+    for _ in range(8):
+        for name in world.joint_names():
+            joint = world.joint(name)
+            assert joint["lower"] - 1e-6 <= joint["position"] <= joint["upper"] + 1e-6, name
+            assert abs(joint["velocity"]) < 1.0, name
+        world.step(1)
+    assert world.joint("a1.FR_lower_joint")["position"] == pytest.approx(-0.916, abs=1e-2)

@@ -338,6 +338,21 @@ def robot_model(source, name, position=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), fix
     movable = {joint.name for joint in robot.joints if joint.type != "fixed"}
     for joint in sorted(set(joint_positions) - movable):
         raise UrdfError(f"{label}: joint_positions: no revolute, continuous or prismatic joint named {joint!r}")
+    # A joint starts within its limits: past one, its correction would launch it across its
+    # range. A position asked outside them is refused; a description whose zero lies outside
+    # them (pybullet_data's a1: its calves) starts at the nearest one.
+    for joint in robot.joints:
+        if joint.type == "continuous" or joint.limit is None or joint.name not in movable:
+            continue
+        lower = -math.inf if joint.limit.lower is None else float(joint.limit.lower)
+        upper = math.inf if joint.limit.upper is None else float(joint.limit.upper)
+        if joint.name in joint_positions:
+            value = float(joint_positions[joint.name])
+            if not lower <= value <= upper:
+                raise UrdfError(f"{label}: joint_positions: {joint.name!r} at {value:g} is outside its limits "
+                                f"[{lower:g}, {upper:g}]")
+        elif lower <= upper and not lower <= 0.0 <= upper:
+            joint_positions[joint.name] = min(max(0.0, lower), upper)
     # Link poses in the world with the joints at their positions, and the body each link is
     # lumped into.
     turn = np.asarray(quaternion, dtype=np.float64) if quaternion is not None else rpy_to_quat(rpy)
