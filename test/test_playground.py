@@ -268,3 +268,22 @@ def test_a_box_slides_up_the_ramp_over_its_ridge_onto_the_platform(size):
             break
     assert world.state()["positions"][0, 0] > 16.0 + size  # on the platform
     assert world.state()["linear_velocities"][0, 0] == pytest.approx(expected, rel=0.05)
+
+
+@pytest.mark.parametrize("size", [0.01, 0.02])
+def test_small_capsules_dropped_onto_a_mesh_floor_stay_on_it(size):
+    """Capsules of 1-2 cm (radius size/4) dropped 5 cm at random tilts, sliding at up to 3 m/s:
+    on a mesh floor 21 of 24 one-centimetre ones had sunk through (the convex path gave a
+    tilted capsule one point, its lower end, and the free end landed unseen); on the ground none.
+    Both ends meet the floor's face now, as on the ground."""
+    world = World(ground=None, settings={"freezing": {"enabled": False}})
+    world.set_playground(*mesh_floor(cells=2, cell=20.0))
+    rng = np.random.default_rng(7)
+    for i in range(24):
+        world.add_body({"name": f"c{i}", "shape": "capsule", "radius": size / 4, "length": size / 2,
+                        "position": [-8 + (i % 6) * 3.0, -12 + (i // 6) * 3.0, 0.05],
+                        "rpy": rng.uniform(-np.pi, np.pi, 3).tolist(),
+                        "linear_velocity": [*rng.uniform(-3, 3, 2).tolist(), 0.0]})
+    for _ in range(2 * 128):
+        world.step(1)
+        assert world.state()["positions"][:, 2].min() > -size / 2

@@ -149,6 +149,26 @@ def round_ground(p, r, dims, height, margin, out_point, out_depth):
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
+def capsule_triangle(p, r, dims, tri, tri_normal, edges, creases, margin, out_point, out_depth):
+    """A capsule's two end spheres against a one-sided triangle (sphere_triangle each), when
+    both meet its face: those two points (normal the face's), so a capsule rocking on a mesh
+    floor has its free end's speculative contact as on the ground (round_ground). -1 otherwise
+    (an end at an edge, or beyond the margin): the convex path decides. (It gave a tilted
+    capsule one point, its lower end; the free end landed unseen, and capsules of 5-10 mm
+    dropped onto a mesh floor sank through it.)"""
+    axis = core_axis(r)
+    count = 0
+    for k in range(2):
+        end = add_scaled(p, dims[1] if k == 0 else -dims[1], axis)
+        found, normal = sphere_triangle(end, dims[0], tri, tri_normal, edges, creases, margin,
+                                        out_point[count:], out_depth[count:])
+        if found == 0 or normal[0] != -tri_normal[0] or normal[1] != -tri_normal[1] or normal[2] != -tri_normal[2]:
+            return -1
+        count += 1
+    return count
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def sphere_triangle(c, radius, tri, tri_normal, edges, creases, margin, out_point, out_depth):
     """Sphere and one-sided triangle (`edges`, `creases`: its Playground.edges and crease_rows):
     (point count, normal sphere -> triangle). None when the centre is behind the plane. The

@@ -18,7 +18,7 @@ import numpy as np
 from numba import njit, prange
 
 from .atomics import atomic_add
-from .analytic import round_ground, round_pair, sphere_box, sphere_triangle
+from .analytic import capsule_triangle, round_ground, round_pair, sphere_box, sphere_triangle
 from .constants import CONTACT_MARGIN, EDGE_AXIS_TOLERANCE, SEAM_TOLERANCE
 from .convex_contact import (MAX_CLIP_POINTS, allocate_scratch, clip_polygon, convex_ground,
                      convex_pair, convex_triangle)
@@ -456,6 +456,11 @@ def collide_triangle(hulls, kind, p, r, dims, slot, tri, tri_normal, edges, crea
     if kind == SPHERE:
         return sphere_triangle(p, dims[0], tri, tri_normal, edges, creases, margin, out_point,
                                out_depth)
+    if kind == CAPSULE:
+        count = capsule_triangle(p, r, dims, tri, tri_normal, edges, creases, margin, out_point,
+                                 out_depth)
+        if count > 0:
+            return count, (-tri_normal[0], -tri_normal[1], -tri_normal[2])
     return convex_triangle(hulls, kind, p, r, dims, slot, tri, tri_normal, margin, scratch,
                            out_point, out_depth)
 
