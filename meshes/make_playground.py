@@ -71,9 +71,12 @@ def build():
     # Five steps of 0.2 m rise and 0.8 m going, north.
     for k in range(5):
         mesh.box((-4.0, 10.0 + 0.8 * k, 0.0), (4.0, 10.0 + 0.8 * (k + 1), 0.2 * (k + 1)))
-    # A 1 m wall around the 50 x 50 m yard.
-    for lo, hi in [((-25.0, -25.0, 0.0), (25.0, -24.5, 1.0)), ((-25.0, 24.5, 0.0), (25.0, 25.0, 1.0)),
-                   ((-25.0, -24.5, 0.0), (-24.5, 24.5, 1.0)), ((24.5, -24.5, 0.0), (25.0, 24.5, 1.0))]:
+    # A 3 m wall around the 50 x 50 m yard: above the car's 3D lidar (1.77 m), so its upper rings
+    # see something. With a 1 m wall a flat floor filled most of each scan and KISS-ICP, fed the
+    # default scene's clouds, drifted 10.6 % of the way driven and 13.5 degrees (3 m: 1.1 %, 0.7).
+    WALL = 3.0
+    for lo, hi in [((-25.0, -25.0, 0.0), (25.0, -24.5, WALL)), ((-25.0, 24.5, 0.0), (25.0, 25.0, WALL)),
+                   ((-25.0, -24.5, 0.0), (-24.5, 24.5, WALL)), ((24.5, -24.5, 0.0), (25.0, 24.5, WALL))]:
         mesh.box(lo, hi)
     return mesh
 
