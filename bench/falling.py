@@ -38,7 +38,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).parent))
 import compare  # noqa: E402
 import scenes  # noqa: E402
-from machine import core_round_trip_ns  # noqa: E402
+from machine import core_round_trip_ns, round_trip_text  # noqa: E402
 from pile import warm_up  # noqa: E402
 
 PILES = {"loose": scenes.loose_pile, "dense": scenes.pile}
@@ -170,7 +170,7 @@ def main():
                                                           round_trip_ns=round_trip)
             print(f"\n{pile} pile on 1 and {args.threads} threads, wall ms a step, each step's fastest of "
                   f"{args.runs} runs (before them: load average {load:.2f}, a cache line's round trip "
-                  f"between two threads {round_trip:.0f} ns, bench/machine.py):")
+                  f"between two threads {round_trip_text(round_trip)}, bench/machine.py):")
             print_speedups(speedups, args.threads)
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / "falling.json"

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
-from machine import core_round_trip_ns  # noqa: E402
+from machine import core_round_trip_ns, round_trip_text  # noqa: E402
 from scenes import loose_pile, pile, resting_columns, tower  # noqa: E402
 from vplayground_ros.physics import World  # noqa: E402
 
@@ -114,7 +114,7 @@ def compare_threads(scene, count, rounds):
     print(f"{scene} pile of {count} boxes, falling phase (first {FALLING_SECONDS} s), {rounds} rounds "
           f"of 1 and 2 solver threads interleaved, load average (1 min) {min(loads):.2f}-{max(loads):.2f}"
           + (f", other processes busy {min(others):.2f}-{max(others):.2f} cores" if others else "")
-          + f", a cache line's round trip between two threads {core_round_trip_ns():.0f} ns")
+          + f", a cache line's round trip between two threads {round_trip_text(core_round_trip_ns())}")
     summary = {}
     for threads in (1, 2):
         for clock, rounds_of in clocks[threads].items():

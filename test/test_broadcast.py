@@ -136,7 +136,7 @@ def test_diagnostics_name_each_status_once_and_summarise_the_figures(running):
                         status["simulation"].message), status["simulation"].message
     assert re.fullmatch(r"2 bodies: \d active, \d frozen, 0 removed", status["bodies"].message)
     figures = {v.key: v.value for v in status["simulation"].values}
-    # Two bodies never share work: the second thread is not tried (0: no trial yet).
+    # The thread count the last batch ran with; two bodies never share work, so no trial yet (0).
     assert figures["solver_threads_in_use"] == str(runtime.sim.solver_threads)
     assert figures["second_thread_speedup"] == "0.0"
     assert re.fullmatch(r"car: last command 1\.\d s ago", status["robot car"].message)

@@ -15,7 +15,7 @@ from vplayground_ros.physics.shapes.convex import pack_hulls
 MARGIN = 0.02
 SCRATCH = allocate_scratch()
 NO_HULLS = pack_hulls([None])  # the hull table of a world without convex bodies (slot 0)
-# Playground.edges and crease_rows of a triangle tested alone: no concave edge (nor border bits).
+# Playground.edges and crease_rows of a triangle tested alone: no concave edge.
 ALONE = (0, ((0.0,) * 4,) * 3)
 POINTS, DEPTHS = np.empty((MAX_CLIP_POINTS, 3)), np.empty(MAX_CLIP_POINTS)
 KINDS = (BOX, SPHERE, CAPSULE, CYLINDER)

@@ -370,6 +370,10 @@ def test_edit_and_remove_joint():
     ({"type": "revolute", "child": "a", "motor": {"max_effort": 0}}, "joint.motor.max_effort: must be > 0"),
     ({"type": "revolute", "child": "a", "axis": [0, 0, 0]}, "joint.axis: has zero length"),
     ({"type": "revolute", "child": "a", "spring": 3}, "joint.spring: unknown key"),
+    # Made past a limit, the joint's correction launched it across its range.
+    ({"type": "revolute", "child": "a", "lower": 0.5, "upper": 1.0},
+     r"joint.position: 0 .where the joint is made. is outside its limits \[0.5, 1\]"),
+    ({"type": "prismatic", "child": "a", "position": 2.0, "upper": 1.0}, r"joint.position: 2 .* \[-inf, 1\]"),
 ])
 def test_bad_joint_specs_are_refused_whole(spec, message):
     world = World(UNFROZEN)

@@ -50,9 +50,10 @@ def test_the_choice_is_tried_again_after_a_while():
     choice = SecondThreadChoice()
     run_trial(choice, {1: 100.0, 2: 130.0})
     assert not choice.use_second
-    for _ in range(HOLD_CALLS - 1):
+    for _ in range(HOLD_CALLS):
         assert choice.threads(2, sharing=True) == 1
         choice.record(1, 100_000, 1000)
+    assert not choice.trial_done()  # the next trial begins
     asked = run_trial(choice, {1: 100.0, 2: 60.0})
     assert 2 in asked and 1 in asked
     assert choice.use_second and choice.threads(2, sharing=True) == 2
@@ -81,8 +82,8 @@ def stepped_on_a_clock(two_over_one, steps=130):
     world.solver_threads = 2
     now = [0]
 
-    def clock():  # read at a call's start and end: its end adds what its thread count costs
-        now[0] += 1 if now[0] % 2 == 0 else int(1e6 * (two_over_one if world.threads_in_use == 2 else 1.0))
+    def clock():  # each read moves it on by what the call in progress costs: so does end - start
+        now[0] += int(1e6 * (two_over_one if world.threads_in_use == 2 else 1.0))
         return now[0]
     world._clock = clock
     used = []
@@ -105,3 +106,29 @@ def test_a_world_keeps_the_faster_count_and_the_serial_bytes(two_over_one):
         serial.step(1)
     for key, value in serial.state().items():
         assert np.array_equal(value, world.state()[key]), key
+
+
+def test_one_thread_allowed_runs_no_trial_and_a_new_count_a_new_one():
+    """With solver_threads 1 there is nothing to choose: no trial (one had filled with
+    one-thread calls alone and found a NaN speed-up); set to 2, the world tries both afresh."""
+    world = pile(300, seed=3)
+    world.solver_threads = 1
+    for _ in range(100):
+        world.step(1)
+        assert world.threads_in_use == 1
+    assert world.second_thread_speedup is None and not world._thread_choice.trial
+    world.solver_threads = 2
+    used = []
+    for _ in range(40):
+        world.step(1)
+        used.append(world.threads_in_use)
+    assert 1 in used and 2 in used and world.second_thread_speedup is not None
+
+
+def test_measure_threads_is_a_checked_setting():
+    world = pile(4)
+    for bad in (1, "yes", None):
+        with pytest.raises(ValueError, match="measure_threads"):
+            world.measure_threads = bad
+    world.measure_threads = False
+    assert world.measure_threads is False

@@ -351,3 +351,14 @@ def test_a_robot_starts_within_its_joint_limits():
             assert abs(joint["velocity"]) < 1.0, name
         world.step(1)
     assert world.joint("a1.FR_lower_joint")["position"] == pytest.approx(-0.916, abs=1e-2)
+
+
+def test_a_held_robot_holds_where_its_joints_start():
+    """`hold: true` drives each joint's position motor to where it starts: for the a1 whose
+    calves start at their upper limit (their zero lies outside it), that limit, not 0 beyond it
+    (its motors would push into the limit at full effort for ever)."""
+    from vplayground_ros.scene import load_world
+    a1 = os.path.join(pybullet_data.getDataPath(), "a1", "a1.urdf")
+    world = load_world({"version": 1, "robots": [{"name": "a1", "urdf": a1, "position": [0, 0, 0.5], "hold": True}]})
+    joint = world.joint("a1.FR_lower_joint")
+    assert joint["motor"]["mode"] == "position" and joint["motor"]["target"] == pytest.approx(joint["upper"])

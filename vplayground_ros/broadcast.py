@@ -817,7 +817,8 @@ class Broadcaster:
               "step_ms": round(step_ms, 4), "late_ticks": sim.late_ticks, "errors": sim.fault_count,
               "simulation_thread_cpu_s": round(sim.thread_cpu_seconds, 3),
               "engine_cpu_s": round(sim.engine_cpu_seconds, 3), "time": round(snap.time, 4),
-              # the second solver thread: whether the last batch used it, and what it measured
+              # the solver threads the last batch ran with, and what the last trial of the
+              # second one measured (thread_choice)
               "solver_threads_in_use": sim.solver_threads_in_use,
               "second_thread_speedup": round(sim.second_thread_speedup or 0.0, 3)}),
             ("bodies", WARN if removed else OK,

@@ -296,6 +296,16 @@ def combine_inertials(inertials):
     return mass, centre, tensor
 
 
+def joint_limits(joint):
+    """A URDF joint's (lower, upper), -inf and inf where it has none (a continuous joint, a
+    limit without that side)."""
+    limit = joint.limit
+    if limit is None or joint.type == "continuous":
+        return -math.inf, math.inf
+    return (-math.inf if limit.lower is None else float(limit.lower),
+            math.inf if limit.upper is None else float(limit.upper))
+
+
 def robot_model(source, name, position=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), fixed_base=None,
                 self_collide=False, joint_positions=None, label=None, quaternion=None, directories=None,
                 description=None):
@@ -342,10 +352,9 @@ def robot_model(source, name, position=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), fix
     # range. A position asked outside them is refused; a description whose zero lies outside
     # them (pybullet_data's a1: its calves) starts at the nearest one.
     for joint in robot.joints:
-        if joint.type == "continuous" or joint.limit is None or joint.name not in movable:
+        if joint.name not in movable:
             continue
-        lower = -math.inf if joint.limit.lower is None else float(joint.limit.lower)
-        upper = math.inf if joint.limit.upper is None else float(joint.limit.upper)
+        lower, upper = joint_limits(joint)
         if joint.name in joint_positions:
             value = float(joint_positions[joint.name])
             if not lower <= value <= upper:
@@ -427,11 +436,10 @@ def robot_model(source, name, position=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), fix
                 "parent": body_name(name, body_of[joint.parent], label),
                 "child": body_name(name, link, label), "anchor": anchor.tolist(),
                 "axis": axis.tolist(), "position": moved}
+        for key, value in zip(("lower", "upper"), joint_limits(joint)):
+            if math.isfinite(value):
+                spec[key] = value
         limit = joint.limit
-        if limit is not None and joint.type != "continuous":
-            for key in ("lower", "upper"):
-                if getattr(limit, key) is not None:
-                    spec[key] = float(getattr(limit, key))
         motor = {}
         if limit is not None and limit.effort:
             motor["max_effort"] = float(limit.effort)

@@ -225,9 +225,10 @@ def add_robot_entry(world, entry, model, path, frames):
                                                    "the node or a stack publishes: give the robot a namespace")
     added = add_robot(world, model)
     limits = {spec["name"]: (spec["motor"]["max_effort"], spec["motor"]["max_speed"]) for spec in model.joints}
-    if entry.get("hold"):  # powered on: position motors hold joint_positions (a mimic follows its own)
-        world.drive_joints({entity: {"mode": "position", "target": entry["joint_positions"].get(joint, 0.0),
-                                     "velocity": 0.0, "max_effort": limits[entity][0], "max_speed": limits[entity][1]}
+    if entry.get("hold"):  # powered on: position motors hold where the joints start (a mimic follows its own)
+        start = {spec["name"]: spec["position"] for spec in model.joints}
+        world.drive_joints({entity: {"mode": "position", "target": start[entity], "velocity": 0.0,
+                                     "max_effort": limits[entity][0], "max_speed": limits[entity][1]}
                             for joint, entity in model.joint_names.items() if joint not in model.mimics})
     world.robot_specs = [*world.robot_specs, {
         **entry, "namespace": namespace,

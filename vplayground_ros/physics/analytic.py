@@ -173,9 +173,10 @@ def sphere_triangle(c, radius, tri, tri_normal, edges, creases, margin, out_poin
     """Sphere and one-sided triangle (`edges`, `creases`: its Playground.edges and crease_rows):
     (point count, normal sphere -> triangle). None when the centre is behind the plane. The
     triangle's closest point gives the contact. While the sphere is sunk at most SEAM_TOLERANCE
-    below the plane the normal is the face's even when that point is on an edge, so a ball rolling over the seam of two coplanar triangles is not pushed
-    back by the edge it crosses; the depth is then the sphere's surface straight above the edge
-    point, and the point is the sphere's lowest, which stands still while it rolls (at the edge
+    below the plane the normal is the face's even when that point is on an edge, so a ball
+    rolling over the seam of two coplanar triangles is not pushed back by the edge it crosses;
+    the depth is then the sphere's surface straight above the edge point, and the point is the
+    sphere's lowest, which stands still while it rolls (at the edge
     point, a rolling ball's surface moves down onto the next triangle, and the solver would
     take that for an approach and bump the ball up). Past a concave edge (playground.past_crease)
     the plane goes on: the depth is the sphere's lowest point's, however far beside, so a ball

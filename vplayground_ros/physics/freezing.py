@@ -14,10 +14,11 @@ from numba import njit
 
 from .constants import WAKE_DEPTH, WAKE_SPEED_FACTOR
 from .joints import (BODY_A, BODY_B, CONTACT_TARGET, ISLAND_BODIES, ISLAND_BODY_START, ISLAND_JOINTS,
-                     ISLAND_START, MOTOR_ROW, ROW_MASS)
+                     ISLAND_START, MOTOR_ROW, ROW_MASS, SPEED)
 
-# A motor whose goal is faster than this (rad/s, m/s) drives its group: it does not freeze. (A
-# position motor holding its target has a goal of rounding's size.)
+# A motor whose goal and joint are both faster than this (rad/s, m/s) drives its group: it does
+# not freeze. (A position motor holding its target has a goal of rounding's size; one stalled
+# against a limit or an obstacle has a goal but no motion, and its group may sleep.)
 DRIVING_SPEED = 1.0e-4
 
 
@@ -119,8 +120,10 @@ def freeze_joint_groups(bodies, joints, time_to_freeze):
             body = members[place]
             ready = ready and bodies.awake[body] and bodies.freeze_timer[body] >= time_to_freeze
         for place in range(joints.islands[ISLAND_START, island], joints.islands[ISLAND_START, island + 1]):
-            motor = joints.row_values[joints.islands[ISLAND_JOINTS, place], MOTOR_ROW]
-            ready = ready and not (motor[ROW_MASS] != 0.0 and abs(motor[CONTACT_TARGET]) > DRIVING_SPEED)
+            j = joints.islands[ISLAND_JOINTS, place]
+            motor = joints.row_values[j, MOTOR_ROW]
+            ready = ready and not (motor[ROW_MASS] != 0.0 and abs(motor[CONTACT_TARGET]) > DRIVING_SPEED
+                                   and abs(joints.values[j, SPEED]) > DRIVING_SPEED)
         if not ready:
             continue
         for place in range(start[island], start[island + 1]):

@@ -27,9 +27,10 @@ through the island's equalities (what moving the axis moves: a motor turning a l
 carries a heavy one feels the heavy one) and its change carried through them by a response
 computed once a step, so one such row is exact in one sweep (the motor first, the limits after:
 a limit has the last word); in the contact pass, an island no contact touches has them solved
-together, as a bounded problem by active sets (solve_island_alone, bounded_solve). A row with no effective mass
-(both sides static, or a limit or motor the joint does not have) is skipped. Position errors are corrected through the real velocities in full each step
-(target -C/dt, a velocity-level SHAKE): the split-impulse correction the contacts use forgets
+together, as a bounded problem by active sets (solve_island_alone, bounded_solve). A row with
+no effective mass (both sides static, or a limit or motor the joint does not have) is skipped.
+Position errors are corrected through the real velocities in full each step (target -C/dt, a
+velocity-level SHAKE): the split-impulse correction the contacts use forgets
 the centripetal share of a swing, and a pendulum corrected so lost ~1 % of its energy a
 minute; corrected in full, a 1 m pendulum at 128 steps/s keeps it to 0.01 %.
 """
@@ -49,6 +50,10 @@ MOTORS = {"none": MOTOR_NONE, "velocity": MOTOR_VELOCITY, "position": MOTOR_POSI
 # Row slots of a joint (see the module's docstring).
 ANCHOR_ROW, TURN_ROW, LOWER_ROW, UPPER_ROW, MOTOR_ROW = 0, 3, 6, 7, 8
 EQUALITY_ROWS, JOINT_ROWS = 6, 9
+# The bounded rows (counted from LOWER_ROW) in the order a sweep solves them: the motor, then the
+# limits, which so have the last word (solved after it, a 300 N m motor drove a light link a
+# radian past its limit).
+MOTOR_FIRST = (MOTOR_ROW - LOWER_ROW, 0, UPPER_ROW - LOWER_ROW)
 
 # A position motor closes this fraction of its error each step (at most max_speed): all of it
 # would fight the other rows' sweeps and ring; a fifth settles in ~25 steps (0.2 s at 128/s).
@@ -67,8 +72,9 @@ REDUNDANT_PIVOT = 1.0e-9
 # pass's sweeps: where a motor fights a limit no answer exists, and more sweeps only push
 # both harder) stop when none changed more than this (N s, N m s: another changes nothing).
 SETTLED_IMPULSE = 1.0e-12
-# bounded_solve changes which rows a bound holds at most this many times a row (one at a time:
-# a chain of limited joints takes a few) before the sweeps above finish what it left.
+# bounded_solve changes which rows a bound holds, one at a time, at most this many times the
+# rows' count in all (a chain of limited joints takes a few; 1,500 random problems of up to 12
+# rows never more than 22) before the sweeps above finish what it left.
 PIVOTS_PER_ROW = 3
 # An island of m joints keeps (6m)^2 floats of K's factor, 3m x 6m of its bounded rows'
 # responses and 3m x 2m x 6 of their velocity changes: ISLAND_FLOATS m^2 (island_floats).
@@ -368,13 +374,14 @@ def prepare_joints(joints, bodies, dt):
                 bound = joints.values[j, MAX_EFFORT] * dt
                 joints.row_values[j, MOTOR_ROW, IMPULSE_LOW] = -bound
                 joints.row_values[j, MOTOR_ROW, IMPULSE_HIGH] = bound
-        resting = m_a == 0.0 and m_b == 0.0  # (frozen, immovable, the world)
+        # A frozen joint (both sides at rest, one of them frozen) keeps its impulses: what held
+        # it when it froze is its effort (a frozen arm reported 0 once anything else moved) and
+        # its warm start on waking.
+        frozen = m_a == 0.0 and m_b == 0.0 and ((a >= 0 and bodies.frozen[a]) or (b >= 0 and bodies.frozen[b]))
         for row in range(JOINT_ROWS):
             joints.row_values[j, row, COLLISION_IMPULSE] = 0.0
             if joints.row_values[j, row, ROW_MASS] == 0.0:
-                # A joint at rest keeps its impulses: what held it when it froze is its effort
-                # (a frozen arm reported 0 once anything else moved) and its warm start on waking.
-                if not resting:
+                if not frozen:
                     joints.row_values[j, row, IMPULSE] = 0.0
                 joints.rows[j, row, :] = 0.0
                 joints.row_values[j, row, COLLISION_TARGET] = joints.row_values[j, row, CONTACT_TARGET] = 0.0
@@ -825,7 +832,7 @@ def solve_island(velocity, joints, target, impulse, island, with_motors):
     size = last - first
     for p in range(size):
         j = joints.islands[ISLAND_JOINTS, first + p]
-        for which in (2, 0, 1):  # the motor, then the limits: a limit has the last word
+        for which in MOTOR_FIRST:
             row = LOWER_ROW + which
             if row == MOTOR_ROW and not with_motors:
                 continue
@@ -859,16 +866,15 @@ def solve_island_equalities(velocity, joints, target, impulse, island):
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def solve_island_alone(velocity, joints, target, impulse, island, sweeps):
     """An island solved whole that no contact point touches, in the contact pass: what sweeps
-    of solve_island reach in the limit, in about the time of one. Its equalities are solved;
-    then its motor and limit rows as a bounded problem in their own coupling through the
-    equalities, S[i, k] = row i's speed change per unit impulse of row k (with the equality
-    impulses that keep the equalities: body_changes): S^-1 times what they lack (rows that
-    depend on earlier ones left out), projected onto their bounds, then up to `sweeps` projected
-    Gauss-Seidel sweeps on S alone (a few hundred multiply-adds each instead of every island
-    body's velocity a row, as solve_island's sweeps are); their changes are applied once
-    through body_changes, and the equalities solved again for what rounding left. Sweeping the
-    bodies, 10 sweeps of a KUKA arm took ~25 us of its ~80 us step and stopped short of the
-    answer."""
+    of solve_island reach in the limit. Its equalities are solved; then its motor and limit
+    rows as a bounded problem in their own coupling through the equalities, S[i, k] = row i's
+    speed change per unit impulse of row k (with the equality impulses that keep the
+    equalities: body_changes), by bounded_solve, then up to `sweeps` projected Gauss-Seidel
+    sweeps on S alone for what it left (motors first: a limit has the last word; a few hundred
+    multiply-adds each instead of every island body's velocity a row, as solve_island's sweeps
+    are); their changes are applied once through body_changes, and the equalities solved again
+    for what rounding left. Sweeping the bodies, 10 sweeps of a KUKA arm took ~25 us of its
+    ~80 us step and stopped short of the answer."""
     first, last = joints.islands[ISLAND_START, island], joints.islands[ISLAND_START, island + 1]
     size = last - first
     bodies_first = joints.islands[ISLAND_BODY_START, island]
@@ -932,9 +938,9 @@ def solve_island_alone(velocity, joints, target, impulse, island, sweeps):
         change[i] = impulse[j, row] - old[i]
     for _ in range(sweeps):
         largest = 0.0
-        for turn in range(2 * count):  # the motors, then the limits: a limit has the last word
+        for turn in range(2 * count):  # MOTOR_FIRST: every motor row, then every limit row
             i = turn % count
-            if (bounded[i, 1] == MOTOR_ROW - LOWER_ROW) != (turn < count):
+            if (bounded[i, 1] == MOTOR_FIRST[0]) != (turn < count):
                 continue
             p, row = bounded[i, 0], LOWER_ROW + bounded[i, 1]
             j = joints.islands[ISLAND_JOINTS, first + p]
@@ -972,9 +978,9 @@ def bounded_solve(coupling, lacking, old, low, high):
     box-bounded complementarity problem). By active sets: the rows no bound holds are solved
     exactly (S's factor over them; a row that depends on earlier ones gets nothing, as in
     factor_island), then the worst row on the wrong side of its bound, or held by a bound it
-    pulls away from, changes set, one at a time, at most PIVOTS_PER_ROW times a row (the
-    sweeps that follow finish what that leaves: a motor and a limit of one axis that disagree
-    have no answer)."""
+    pulls away from, changes set, one at a time, at most PIVOTS_PER_ROW times the rows' count
+    in all (the sweeps that follow finish what that leaves: an unbounded motor and a limit of
+    one axis that disagree have no answer)."""
     n = len(lacking)
     state = np.zeros(n, np.int64)  # -1: held at low, 1: held at high, 0: free
     change = np.zeros(n)
@@ -1097,9 +1103,9 @@ def solve_joint_sweep(velocity, joints, target, impulse, backwards, with_motors,
         else:
             for p in range(first, last):
                 j = joints.islands[ISLAND_JOINTS, last - 1 - (p - first) if backwards else p]
-                for row in (MOTOR_ROW, LOWER_ROW, UPPER_ROW):
-                    if row != MOTOR_ROW or with_motors:
-                        solve_bounded_row(velocity, joints, target, impulse, j, row)
+                for which in MOTOR_FIRST:
+                    if LOWER_ROW + which != MOTOR_ROW or with_motors:
+                        solve_bounded_row(velocity, joints, target, impulse, j, LOWER_ROW + which)
                 solve_joint_block(velocity, joints, target, impulse, j)
 
 

@@ -35,7 +35,7 @@ def integrate_orientation(q, omega, dt):
     15 % at 200 rad/s."""
     speed = np.sqrt(omega[0] * omega[0] + omega[1] * omega[1] + omega[2] * omega[2])
     half = 0.5 * speed * dt
-    # sin(half) / speed, by its series where the division would lose digits (1e-4 rad: the
+    # sin(half) / speed, by its series near no turn (at none it is 0 / 0; below 1e-4 rad the
     # series' next term is below rounding)
     scale = np.sin(half) / speed if half > 1.0e-4 else 0.5 * dt * (1.0 - half * half / 6.0)
     c = np.cos(half)

@@ -295,9 +295,9 @@ def box_triangle(p, r, h, tri, tri_normal, edges, creases, margin, poly_a, poly_
     the triangle, or two edges give one point; only an axis along which the triangle would push
     the box out of its front (or along it) may decide, since nothing is behind a one-sided
     triangle: a box sliding up the ramp, its rear below the platform's plane, had its front face
-    taken for the separating axis, and the platform stopped it like a wall at the ridge. Past a concave edge, for a box in front of the
-    triangle across it (playground.past_crease), the box's side is clipped to the strip beyond
-    the edge instead (between the lines across it at its ends): the plane goes on there, so a
+    taken for the separating axis, and the platform stopped it like a wall at the ridge. Past a
+    concave edge, for a box in front of the triangle across it (playground.past_crease), the
+    box's side is clipped to the strip beyond the edge instead (between the lines across it at its ends): the plane goes on there, so a
     box coming down a ramp onto a floor meets the floor's plane before it crosses it."""
     v0, v1, v2 = tri[0], tri[1], tri[2]
     n = (tri_normal[0], tri_normal[1], tri_normal[2])
@@ -586,7 +586,8 @@ def collide(contacts, bodies, hulls, parts, broad, playground, ground_enabled, g
                                     broad.pair_count[0], broad.playground_body,
                                     broad.playground_triangle, broad.playground_count[0],
                                     playground.triangles, playground.normals, playground.edges,
-                                    playground.creases, ground_enabled, ground_height, live, np.int64(0), jobs, np.int64(0), np.int64(0),
+                                    playground.creases, ground_enabled, ground_height, live, np.int64(0),
+                                    jobs, np.int64(0), np.int64(0),
                                     len(contacts.body_a),
                                     len(contacts.manifold_start))
     contacts.count[0], contacts.manifold_count[0] = max(count, 0), max(manifolds, 0)

@@ -31,7 +31,7 @@ MIN_TRIANGLE_AREA = 1e-10
 CONCAVE = 1
 
 # A neighbour rises in front of a plane when its far corner is in front by more than this
-# share of its distance from the shared edge (sin of ~0.06 degrees): flatter seams are seams.
+# share of its distance from the edge's first corner (~0.06 degrees): flatter seams are seams.
 CREASE_SINE = 1e-3
 
 # Corners closer than this (m) are one vertex of the mesh (an exporter's rounding).
@@ -80,7 +80,14 @@ def mesh_edges(triangles, normals):
     edges, creases = np.zeros(count, np.int64), np.zeros((count, 3, 4))
     if count == 0:
         return edges, creases
-    _, vertex = np.unique(np.round(triangles.reshape(-1, 3) / WELD), axis=0, return_inverse=True)
+    # (Imported here: scipy's import is a tenth of a second, and only playgrounds need it.)
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+    corners = triangles.reshape(-1, 3)
+    near = cKDTree(corners).query_pairs(WELD, output_type="ndarray")
+    _, vertex = connected_components(coo_matrix((np.ones(len(near)), (near[:, 0], near[:, 1])),
+                                                shape=(len(corners), len(corners))), directed=False)
     vertex = vertex.reshape(count, 3)
     start, end = vertex, np.roll(vertex, -1, axis=1)  # edge j: corner j to corner j + 1
     low, high = np.minimum(start, end).ravel(), np.maximum(start, end).ravel()
@@ -111,12 +118,12 @@ def crease_rows(creases, t):
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
 def past_crease(edges, creases, j, point):
-    """Whether a body whose centre is at `point` is past a triangle's edge j that is a concave
-    crease (`edges`, `creases`: the triangle's, crease_rows) and in front of the triangle
-    across it: then the mesh goes on in front of this triangle's plane, between the two, and
-    that plane holds up the body beside the triangle too. (A body crossing the crease quickly
-    is behind the plane by the step after, where a one-sided triangle gives no contact.) A body
-    behind the other triangle (a fence rising from a floor, seen from outside) has nothing
+    """Whether a triangle's edge j is a concave crease (`edges`, `creases`: the triangle's,
+    crease_rows) with a body whose centre is at `point` in front of the triangle across it (the
+    callers ask for a body beside the triangle at that edge): then the mesh goes on in front of
+    this triangle's plane, between the two, and that plane holds up the body there too. (A body
+    crossing the crease quickly is behind the plane by the step after, where a one-sided
+    triangle gives no contact.) A body behind the other triangle (a fence rising from a floor, seen from outside) has nothing
     under it."""
     if not edges & (CONCAVE << j):
         return False

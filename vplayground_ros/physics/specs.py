@@ -498,6 +498,9 @@ def mass_properties(solid, mass, path):
 # centre of mass), the joint's coordinate in that pose (`position`, default 0), limits along
 # the axis (rad or m; revolute and prismatic), a motor.
 JOINT_TYPES = ("fixed", "revolute", "continuous", "prismatic")
+# How far past a limit a joint may be made (rad or m): what the solver lets a limit give.
+JOINT_START_SLACK = 0.05
+
 JOINT_KEYS = {"name", "type", "parent", "child", "anchor", "axis", "position", "lower", "upper",
               "motor", "collide_connected"}
 JOINT_EDIT_KEYS = {"lower", "upper", "motor", "collide_connected"}
@@ -538,8 +541,15 @@ def validate_joint(raw, path="joint"):
         if joint["type"] == "fixed":
             raise SpecError(child(path, "position"), "a fixed joint has no position")
         joint["position"] = number(raw["position"], child(path, "position"), -MAX_COORDINATE, MAX_COORDINATE)
-    return {**joint, **validate_joint_edit({k: raw[k] for k in JOINT_EDIT_KEYS & raw.keys()},
-                                           path, joint["type"], joint)}
+    joint = {**joint, **validate_joint_edit({k: raw[k] for k in JOINT_EDIT_KEYS & raw.keys()},
+                                            path, joint["type"], joint)}
+    # Past a limit, a joint's correction would launch it across its range. (A saved joint may
+    # be a little past: the solver lets limits give by millimetres or milliradians.)
+    position = joint.get("position", 0.0)
+    if not joint["lower"] - JOINT_START_SLACK <= position <= joint["upper"] + JOINT_START_SLACK:
+        raise SpecError(child(path, "position"), f"{position:g} (where the joint is made) is outside its "
+                                                 f"limits [{joint['lower']:g}, {joint['upper']:g}]")
+    return joint
 
 
 def validate_joint_edit(raw, path, joint_type, current):

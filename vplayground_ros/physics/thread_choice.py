@@ -39,8 +39,8 @@ class SecondThreadChoice:
 
     def __init__(self):
         self.use_second = True  # until a trial says otherwise
-        self.trial = []  # (threads, wall ns per unit of work) of the running trial's calls
-        self.held = 0  # calls that would share since the last trial ended
+        self.trial = []  # (threads, wall ns per unit of work) of the last trial's calls
+        self.held = 0  # calls that shared work since the last trial ended
         self.speedup = None  # the last trial's: one thread's median over two threads'
 
     def threads(self, solver_threads, sharing):
@@ -52,11 +52,12 @@ class SecondThreadChoice:
         return TRIAL_PATTERN[len(self.trial) % len(TRIAL_PATTERN)]
 
     def trial_done(self):
-        return self.held > 0 or len(self.trial) >= TRIAL_CALLS
+        return len(self.trial) >= TRIAL_CALLS
 
     def record(self, threads, wall_ns, work):
-        """What a call that shared work (and was expected to) took on `threads`: its wall time
-        and its work (contact points and candidate pairs over its steps)."""
+        """What a call that shared work (and was expected to) took on `threads`, which
+        `threads()` chose out of two: its wall time and its work (contact points and candidate
+        pairs over its steps)."""
         if work <= 0:
             return
         if self.trial_done():
@@ -66,10 +67,9 @@ class SecondThreadChoice:
                 self.trial = []
             return
         self.trial.append((threads, wall_ns / work))
-        if len(self.trial) == TRIAL_CALLS:
+        if self.trial_done():
             per_unit = np.array(self.trial)
             one = np.median(per_unit[per_unit[:, 0] == 1, 1])
             two = np.median(per_unit[per_unit[:, 0] == 2, 1])
             self.speedup = float(one / two)
             self.use_second = bool(two <= KEEP_SHARE * one)
-            self.held = 1

@@ -98,14 +98,11 @@ class World(WorldQueries):
         self.settings = specs.validate_settings(settings)
         # Threads the contact solve may use (solver_threads below); not a scene setting: how
         # many cores to give is the host's choice, not the world's.
+        self._solver_threads = None
         self.solver_threads = default_solver_threads() if solver_threads is None else solver_threads
-        # With solver_threads 2, whether a call uses the second thread is measured on the calls
-        # that share work (thread_choice): the same bytes either way, so only the time changes.
-        # Off, every call uses solver_threads (for comparing one thread with two).
         self.measure_threads = True
-        self._thread_choice = SecondThreadChoice()
         self._sharing = False  # whether the last call's steps were large enough to share work
-        self.threads_in_use = self.solver_threads  # the last call's
+        self.threads_in_use = self.solver_threads  # the thread count the last call ran with
         self._clock = time.perf_counter_ns  # what measure_threads times calls by
         self.ground = specs.validate_ground(ground)
         self.time = 0.0
@@ -165,17 +162,32 @@ class World(WorldQueries):
         run to run and with 1 or 2, whether or not the second thread gets a core."""
         return self._solver_threads
 
+    @solver_threads.setter
+    def solver_threads(self, threads):
+        if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or not 1 <= threads <= 2:
+            raise ValueError(f"solver_threads: must be 1 or 2, got {threads!r}")
+        if threads != self._solver_threads:
+            self._thread_choice = SecondThreadChoice()  # what a trial found was for the other count
+        self._solver_threads = int(threads)
+
+    @property
+    def measure_threads(self):
+        """With solver_threads 2, whether a call uses the second thread is measured on the calls
+        that share work (thread_choice): the same bytes either way, so only the time changes.
+        Off, every call uses solver_threads (for comparing one thread with two)."""
+        return self._measure_threads
+
+    @measure_threads.setter
+    def measure_threads(self, measure):
+        if not isinstance(measure, (bool, np.bool_)):
+            raise ValueError(f"measure_threads: must be true or false, got {measure!r}")
+        self._measure_threads = bool(measure)
+
     @property
     def second_thread_speedup(self):
         """One thread's time over two threads' on this world's last trial (measure_threads),
         or None before one ended."""
         return self._thread_choice.speedup
-
-    @solver_threads.setter
-    def solver_threads(self, threads):
-        if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or not 1 <= threads <= 2:
-            raise ValueError(f"solver_threads: must be 1 or 2, got {threads!r}")
-        self._solver_threads = int(threads)
 
     # ----------------------------------------------------------------- bodies
     def body_names(self):
@@ -672,7 +684,7 @@ class World(WorldQueries):
         wall = self._clock() - wall
         pairs = int(counters[STAT_PAIRS] + counters[STAT_TRIANGLES])
         self._sharing = would_share(n, int(counters[STAT_POINTS]), pairs)
-        if self.measure_threads and sharing and self._sharing:
+        if self.measure_threads and self._solver_threads == 2 and sharing and self._sharing:
             self._thread_choice.record(threads, wall, int(counters[STAT_POINTS]) + pairs)
         for key, index in (("woken", STAT_WOKEN), ("frozen", STAT_FROZEN), ("pairs", STAT_PAIRS),
                            ("points", STAT_POINTS), ("triangles", STAT_TRIANGLES)):
