@@ -362,3 +362,17 @@ def test_a_held_robot_holds_where_its_joints_start():
     world = load_world({"version": 1, "robots": [{"name": "a1", "urdf": a1, "position": [0, 0, 0.5], "hold": True}]})
     joint = world.joint("a1.FR_lower_joint")
     assert joint["motor"]["mode"] == "position" and joint["motor"]["target"] == pytest.approx(joint["upper"])
+
+
+def test_pybullet_conventions_that_pybullet_data_relies_on():
+    """The Franka Panda names its meshes `package://meshes/...` beside its description (PyBullet
+    reads the package as a folder there); it had been refused for a mesh not found. A description
+    that is not well-formed XML is refused naming the line (the humanoid's NUL after its end had
+    given yourdfpy's 'reading file objects must return bytes objects'; now read past)."""
+    panda = robot_model(os.path.join(pybullet_data.getDataPath(), "franka_panda", "panda.urdf"), "panda")
+    assert len(panda.joints) == 9 and all(body["parts"] for body in panda.bodies)
+    with pytest.raises(UrdfError, match="not well-formed XML: junk after document element: line 1, column 40"):
+        robot_model('<robot name="x"><link name="a"/></robot><junk/>', "r")
+    humanoid = os.path.join(pybullet_data.getDataPath(), "humanoid", "humanoid.urdf")
+    with pytest.raises(UrdfError, match="Unknown tag: capsule"):  # PyBullet's own geometry, past the NUL
+        robot_model(humanoid, "h")

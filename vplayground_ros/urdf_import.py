@@ -135,8 +135,16 @@ def expand_xacro(text, label):
 
 
 def parse(text, label):
+    import xml.etree.ElementTree as ElementTree
     import yourdfpy
     from io import StringIO
+    # NUL characters after the document (pybullet_data's humanoid ends with one; PyBullet reads
+    # it) are no part of it.
+    text = text.rstrip("\0\r\n\t ")
+    try:
+        ElementTree.fromstring(text)  # (yourdfpy says little of what is wrong with the XML)
+    except ElementTree.ParseError as error:
+        raise UnreadableUrdf(f"{label}: not well-formed XML: {error}") from None
     try:
         robot = yourdfpy.URDF.load(StringIO(text), build_scene_graph=False, load_meshes=False,
                                    load_collision_meshes=False).robot
@@ -167,15 +175,18 @@ Where = namedtuple("Where", "folder directories")
 
 
 def resolve_mesh_file(filename, where, label, link):
-    """A mesh's file: `package://<package>/<path>` in the package's share folder (AMENT_PREFIX_PATH)
-    or in a folder of that name above the description; `file://` and plain paths relative to
-    the description's folder; within `where.directories` when it names some."""
+    """A mesh's file: `package://<package>/<path>` in the package's share folder (AMENT_PREFIX_PATH),
+    in a folder of that name above the description, or as <package>/<path> in the description's
+    folder (PyBullet's reading: pybullet_data's Franka Panda names `package://meshes/...` beside
+    it); `file://` and plain paths relative to the description's folder; within
+    `where.directories` when it names some."""
     folder = where.folder
     if filename.startswith("package://"):
         package, _, rest = filename[len("package://"):].partition("/")
         candidates = [Path(prefix) / "share" / package / rest
                       for prefix in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if prefix]
         candidates += [parent / rest for parent in [folder, *folder.parents] if parent.name == package]
+        candidates.append(folder / package / rest)
     else:
         path = Path(filename[len("file://"):] if filename.startswith("file://") else filename)
         candidates = [path if path.is_absolute() else folder / path]
