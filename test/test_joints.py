@@ -583,3 +583,15 @@ def test_a_frozen_arm_reports_the_effort_that_holds_it():
     for _ in range(3):
         world.step(1)
         assert world.body("arm")["frozen"] and world.joint("shoulder")["effort"] == pytest.approx(G, rel=1e-6)
+
+
+def test_limits_moved_past_the_joint_are_refused():
+    """Limits edited past where the joint is launched it across its range (a 100 kg arm 0.8 rad
+    past its new upper limit was driven back at 5 rad/s and on to its lower one): refused, like
+    a joint made past them, and the joint keeps its limits."""
+    world, _, _ = rod_pendulum(0.0)
+    with pytest.raises(SpecError, match=r"upper: the joint is at 0, outside the limits \[-1, -0.5\]"):
+        world.edit_joint("hinge", lower=-1.0, upper=-0.5)
+    assert world.joint("hinge")["upper"] == math.inf
+    world.edit_joint("hinge", lower=0.02, upper=0.5)  # within the slack of where it is: taken
+    assert world.joint("hinge")["lower"] == 0.02

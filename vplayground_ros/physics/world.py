@@ -520,6 +520,14 @@ class World(WorldQueries):
         max_effort, max_speed) and collide_connected. Wakes the bodies it holds."""
         spec = self._joints.spec(name)
         edit = specs.validate_joint_edit(fields, name, spec["type"], spec)
+        # Limits moved past where the joint is would launch it across its range, as a joint made
+        # past them (specs.validate_joint).
+        lower, upper = edit.get("lower", spec["lower"]), edit.get("upper", spec["upper"])
+        position = self.joint(name)["position"]
+        if ("lower" in edit or "upper" in edit) and not (
+                lower - specs.JOINT_START_SLACK <= position <= upper + specs.JOINT_START_SLACK):
+            raise specs.SpecError(f"{name}.{'lower' if position < lower else 'upper'}",
+                                  f"the joint is at {position:g}, outside the limits [{lower:g}, {upper:g}]")
         self._joints.edit(name, edit)
         self._joints.update_bodies(self._bodies.jointed)
         for slot in self._joints.slots(name):
