@@ -384,10 +384,18 @@ def test_quitting_ends_the_node_cleanly_with_its_bag(ros, tmp_path):
                                 "--ros-args", "-r", "__ns:=/quitter"],
                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
-        try:
-            reply = ros.call(GetSimulationState, "/quitter/get_simulation_state", GetSimulationState.Request(),
-                             timeout=120)
-        except AssertionError:  # seen once in a clean clone's full run, not again: say what the node said
+        # The first request to a node just found may go unanswered: DDS can match the request
+        # topic before the reply topic, and the reply is then lost (seen twice in clean clones'
+        # full runs, the node up and stepping for 100 s). The query is idempotent: asked again.
+        reply = None
+        for _ in range(12):
+            try:
+                reply = ros.call(GetSimulationState, "/quitter/get_simulation_state", GetSimulationState.Request(),
+                                 timeout=10)
+                break
+            except AssertionError:
+                continue
+        if reply is None:
             process.kill()
             raise AssertionError(f"the node never answered; it said:\n{process.communicate(timeout=10)[0][-3000:]}")
         assert reply.state.state == SimulationState.STATE_PLAYING

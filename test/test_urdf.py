@@ -150,7 +150,7 @@ ARM = """<robot name="arm">
      "no root link (a loop)"),
     (ARM.format(mass=1, kind="revolute").replace('<box size="0.2 0.2 0.2"/>', '<mesh filename="gone.stl"/>'),
      "link 'base': mesh 'gone.stl' not found"),
-    ("<robot", "not a URDF robot yourdfpy can read"),
+    ("<robot", "not well-formed XML: unclosed token: line 1, column 0"),
     # Numbers the physics cannot take, refused naming the element (numpy's and LAPACK's errors
     # had come out: a shape mismatch, "Eigenvalues did not converge").
     (ARM.format(mass=1, kind="revolute").replace('<axis xyz="0 1 0"/>', '<axis xyz="0 1"/>'),
