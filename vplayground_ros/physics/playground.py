@@ -123,8 +123,8 @@ def past_crease(edges, creases, j, point):
     callers ask for a body beside the triangle at that edge): then the mesh goes on in front of
     this triangle's plane, between the two, and that plane holds up the body there too. (A body
     crossing the crease quickly is behind the plane by the step after, where a one-sided
-    triangle gives no contact.) A body behind the other triangle (a fence rising from a floor, seen from outside) has nothing
-    under it."""
+    triangle gives no contact.) A body behind the other triangle (a fence rising from a floor,
+    seen from outside) has nothing under it."""
     if not edges & (CONCAVE << j):
         return False
     plane = creases[j]

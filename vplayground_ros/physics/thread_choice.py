@@ -4,9 +4,10 @@ own steps.
 Two threads give the serial result bit for bit (solve_schedule), so the thread count a step runs
 with changes only how long it takes. How long depends on the machine at the moment more than on
 the world: on the 2-core VM of this project the loose pile's falling phase took 0.82 of one
-thread's time with two one evening and 1.16 of it the next (a cache line's round trip between the
-two cores 0.4-0.5 us then: the data the threads share crosses between them at every shared pass),
-and the parallel builds of Rapier and Jolt lost their speed-up with it. So a World allowed two
+thread's time with two, and a quarter of an hour earlier 1.16 of it (a cache line's round trip
+between the two cores 0.4-0.5 us then, 41-48 ns after: the data the threads share crosses
+between them at every shared pass), and the parallel builds of Rapier and Jolt lost their
+speed-up with it. So a World allowed two
 threads tries both, now and then, on the calls that would share work, and keeps the faster.
 
 A trial is TRIAL_CALLS such calls, one thread and two in the order 1, 2, 2, 1 (a pile's calls
