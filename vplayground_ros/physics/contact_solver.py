@@ -546,9 +546,81 @@ def work_chains(velocity, rows, row_mass, row_inv_mass, rows_a, rows_b, mu, targ
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
 def collision_pass(contacts, bodies, iterations, gravity, threads):
+    before, bouncing = velocities_before(contacts, bodies.velocity)
     solve_rows(bodies.velocity, contacts, iterations, contacts.collision_target,
                contacts.collision_impulse, contacts.collision_friction, True, bodies.position,
                gravity, threads)
+    if bouncing:
+        take_back_gains(contacts, bodies, before)
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)
+def velocities_before(contacts, velocity):
+    """(K, 2, 6): the velocities of both sides of each point the collision pass solves, before
+    it (only those points' rows are set: a large world pays for its collisions alone), and
+    whether there is any such point."""
+    before = np.empty((contacts.count[0], 2, 6))
+    bouncing = False
+    for c in range(contacts.count[0]):
+        if contacts.collision_target[c] > INACTIVE:
+            bouncing = True
+            for e in range(6):
+                before[c, 0, e] = velocity[contacts.velocity_a[c], e]
+                before[c, 1, e] = velocity[contacts.velocity_b[c], e]
+    return before, bouncing
+
+
+@njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
+def take_back_gains(contacts, bodies, before):
+    """A bounce off what does not move (the ground, the playground, frozen and immovable bodies)
+    gives a body no energy; where the collision pass's sweeps, short of converged over many
+    points, gave it some, its change is scaled back to the energy it had (`before`:
+    velocities_before). A 20 cm box of elasticity 1 dropped onto a crease of the half-pipe (24
+    points) had left with 1.11 times its energy; 20 sweeps instead of 5 gave 0.976. With the
+    pass's impulses L on rows J, the change scaled by s changes the energy by s a + s^2 b / 2,
+    a = L . J v_before, b = L . J (v_after - v_before); s = -2 a / b keeps it. Bodies that
+    bounced off moving ones (energy passes between them) and jointed ones are left as the
+    sweeps left them."""
+    velocity, rows = bodies.velocity, contacts.rows
+    static_row = len(bodies.active)
+    work = np.zeros((static_row + 1, 2))  # per velocity row: a, b
+    point = np.full(static_row + 1, -1, np.int64)  # a point of each body that met only static sides
+    mixed = np.zeros(static_row + 1, np.bool_)
+    for c in range(contacts.count[0]):
+        if contacts.collision_target[c] <= INACTIVE:
+            continue
+        ra, rb = contacts.velocity_a[c], contacts.velocity_b[c]
+        moving_a, moving_b = contacts.row_inv_mass[c, 0] != 0.0, contacts.row_inv_mass[c, 1] != 0.0
+        if moving_a and moving_b:
+            mixed[ra] = mixed[rb] = True
+            continue
+        if not (moving_a or moving_b):
+            continue
+        body, side = (ra, 0) if moving_a else (rb, 1)
+        point[body] = c * 2 + side
+        for r in range(3):
+            impulse = contacts.collision_impulse[c] if r == 0 else contacts.collision_friction[c, r - 1]
+            if impulse == 0.0:
+                continue
+            speed_before = speed_after = 0.0
+            for e in range(3):
+                d, arm_a, arm_b = rows[c, r, DIRECTION + e], rows[c, r, ARM_A + e], rows[c, r, ARM_B + e]
+                speed_before += (d * (before[c, 1, e] - before[c, 0, e]) - arm_a * before[c, 0, 3 + e]
+                                 + arm_b * before[c, 1, 3 + e])
+                speed_after += (d * (velocity[rb, e] - velocity[ra, e]) - arm_a * velocity[ra, 3 + e]
+                                + arm_b * velocity[rb, 3 + e])
+            work[body, 0] += impulse * speed_before
+            work[body, 1] += impulse * (speed_after - speed_before)
+    for body in range(static_row):
+        if point[body] < 0 or mixed[body] or bodies.jointed[body]:
+            continue
+        a, b = work[body, 0], work[body, 1]
+        if a + 0.5 * b <= 0.0 or b <= 0.0:
+            continue  # no energy gained
+        scale = -2.0 * a / b
+        c, side = point[body] // 2, point[body] % 2
+        for e in range(6):
+            velocity[body, e] = before[c, side, e] + scale * (velocity[body, e] - before[c, side, e])
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
@@ -557,11 +629,14 @@ def collision_pass_with_joints(contacts, joints, bodies, iterations, gravity, th
     each array handed to a call costs it)."""
     # Typed flags: with a literal False here and True in the contact pass, Numba compiled
     # solve_with_joints twice (~11 s of the engine's cold compile).
+    before, bouncing = velocities_before(contacts, bodies.velocity)
     solve_with_joints(bodies.velocity, contacts, joints, iterations, contacts.collision_target,
                       contacts.collision_impulse, contacts.collision_friction,
                       joints.row_values[:, :, COLLISION_TARGET],
                       joints.row_values[:, :, COLLISION_IMPULSE], np.bool_(False), bodies.position,
                       gravity, threads)
+    if bouncing:
+        take_back_gains(contacts, bodies, before)
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True, fastmath=SOLVER_MATH)
