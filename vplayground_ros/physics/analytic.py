@@ -162,7 +162,8 @@ def capsule_triangle(p, r, dims, tri, tri_normal, edges, creases, margin, out_po
         end = add_scaled(p, dims[1] if k == 0 else -dims[1], axis)
         found, normal = sphere_triangle(end, dims[0], tri, tri_normal, edges, creases, margin,
                                         out_point[count:], out_depth[count:])
-        if found == 0 or normal[0] != -tri_normal[0] or normal[1] != -tri_normal[1] or normal[2] != -tri_normal[2]:
+        face = normal[0] == -tri_normal[0] and normal[1] == -tri_normal[1] and normal[2] == -tri_normal[2]
+        if found == 0 or not face:
             return -1
         count += 1
     return count
@@ -176,10 +177,9 @@ def sphere_triangle(c, radius, tri, tri_normal, edges, creases, margin, out_poin
     below the plane the normal is the face's even when that point is on an edge, so a ball
     rolling over the seam of two coplanar triangles is not pushed back by the edge it crosses;
     the depth is then the sphere's surface straight above the edge point, and the point is the
-    sphere's lowest, which stands still while it rolls (at the edge
-    point, a rolling ball's surface moves down onto the next triangle, and the solver would
-    take that for an approach and bump the ball up). Past a concave edge (playground.past_crease)
-    the plane goes on: the depth is the sphere's lowest point's, however far beside, so a ball
+    sphere's lowest, which stands still while it rolls (at the edge point, a rolling ball's
+    surface moves down onto the next triangle, and the solver would take that for an approach
+    and bump the ball up). Past a concave edge (playground.past_crease) the plane goes on: the depth is the sphere's lowest point's, however far beside, so a ball
     coming down a ramp onto a floor meets the floor's plane before it crosses it."""
     n = (tri_normal[0], tri_normal[1], tri_normal[2])
     front = dot(sub(c, tri[0]), n)

@@ -581,44 +581,56 @@ def take_back_gains(contacts, bodies, before):
     a = L . J v_before, b = L . J (v_after - v_before); s = -2 a / b keeps it. Bodies that
     bounced off moving ones (energy passes between them) and jointed ones are left as the
     sweeps left them."""
-    velocity, rows = bodies.velocity, contacts.rows
-    static_row = len(bodies.active)
-    work = np.zeros((static_row + 1, 2))  # per velocity row: a, b
-    point = np.full(static_row + 1, -1, np.int64)  # a point of each body that met only static sides
-    mixed = np.zeros(static_row + 1, np.bool_)
-    for c in range(contacts.count[0]):
+    velocity, rows, count = bodies.velocity, contacts.rows, contacts.count[0]
+    # Per body of the pass, by its rank among them (rank as in order_supports: not initialised,
+    # valid while members[rank[body]] points back, so a step pays for its points, not the
+    # World's capacity): a and b, a point of it, and whether it met a moving side.
+    rank = np.empty(len(bodies.active) + 1, np.int64)
+    members = np.empty(2 * count, np.int64)
+    work = np.zeros((2 * count, 2))
+    point = np.empty(2 * count, np.int64)
+    mixed = np.zeros(2 * count, np.bool_)
+    n = 0
+    for c in range(count):
         if contacts.collision_target[c] <= INACTIVE:
             continue
         ra, rb = contacts.velocity_a[c], contacts.velocity_b[c]
-        moving_a, moving_b = contacts.row_inv_mass[c, 0] != 0.0, contacts.row_inv_mass[c, 1] != 0.0
-        if moving_a and moving_b:
-            mixed[ra] = mixed[rb] = True
-            continue
-        if not (moving_a or moving_b):
-            continue
-        body, side = (ra, 0) if moving_a else (rb, 1)
-        point[body] = c * 2 + side
-        for r in range(3):
-            impulse = contacts.collision_impulse[c] if r == 0 else contacts.collision_friction[c, r - 1]
-            if impulse == 0.0:
+        moving = (contacts.row_inv_mass[c, 0] != 0.0, contacts.row_inv_mass[c, 1] != 0.0)
+        for side in range(2):
+            if not moving[side]:
                 continue
-            speed_before = speed_after = 0.0
-            for e in range(3):
-                d, arm_a, arm_b = rows[c, r, DIRECTION + e], rows[c, r, ARM_A + e], rows[c, r, ARM_B + e]
-                speed_before += (d * (before[c, 1, e] - before[c, 0, e]) - arm_a * before[c, 0, 3 + e]
-                                 + arm_b * before[c, 1, 3 + e])
-                speed_after += (d * (velocity[rb, e] - velocity[ra, e]) - arm_a * velocity[ra, 3 + e]
-                                + arm_b * velocity[rb, 3 + e])
-            work[body, 0] += impulse * speed_before
-            work[body, 1] += impulse * (speed_after - speed_before)
-    for body in range(static_row):
-        if point[body] < 0 or mixed[body] or bodies.jointed[body]:
+            body = ra if side == 0 else rb
+            k = rank[body]
+            if not (0 <= k < n and members[k] == body):
+                k = n
+                rank[body], members[k], point[k] = k, body, 2 * c + side
+                n += 1
+            if moving[1 - side]:
+                mixed[k] = True
+                continue
+            for r in range(3):
+                impulse = contacts.collision_impulse[c] if r == 0 else contacts.collision_friction[c, r - 1]
+                if impulse == 0.0:
+                    continue
+                speed_before = row_speed(rows, c, r, before[c, 1, 0] - before[c, 0, 0],
+                                         before[c, 1, 1] - before[c, 0, 1], before[c, 1, 2] - before[c, 0, 2],
+                                         before[c, 0, 3], before[c, 0, 4], before[c, 0, 5],
+                                         before[c, 1, 3], before[c, 1, 4], before[c, 1, 5])
+                speed_after = row_speed(rows, c, r, velocity[rb, 0] - velocity[ra, 0],
+                                        velocity[rb, 1] - velocity[ra, 1], velocity[rb, 2] - velocity[ra, 2],
+                                        velocity[ra, 3], velocity[ra, 4], velocity[ra, 5],
+                                        velocity[rb, 3], velocity[rb, 4], velocity[rb, 5])
+                work[k, 0] += impulse * speed_before
+                work[k, 1] += impulse * (speed_after - speed_before)
+    for k in range(n):
+        body = members[k]
+        if mixed[k] or bodies.jointed[body]:
             continue
-        a, b = work[body, 0], work[body, 1]
+        a, b = work[k, 0], work[k, 1]
         if a + 0.5 * b <= 0.0 or b <= 0.0:
             continue  # no energy gained
         scale = -2.0 * a / b
-        c, side = point[body] // 2, point[body] % 2
+        c, side = point[k] // 2, point[k] % 2
         for e in range(6):
             velocity[body, e] = before[c, side, e] + scale * (velocity[body, e] - before[c, side, e])
 
