@@ -501,6 +501,13 @@ JOINT_TYPES = ("fixed", "revolute", "continuous", "prismatic")
 # How far past a limit a joint may be made (rad or m): what the solver lets a limit give.
 JOINT_START_SLACK = 0.05
 
+
+def within_limits(position, lower, upper):
+    """Whether a joint at `position` may be made, or given these limits: past one, its
+    correction would launch it across its range (a saved joint may be a little past, as the
+    solver lets limits give by millimetres or milliradians)."""
+    return lower - JOINT_START_SLACK <= position <= upper + JOINT_START_SLACK
+
 JOINT_KEYS = {"name", "type", "parent", "child", "anchor", "axis", "position", "lower", "upper",
               "motor", "collide_connected"}
 JOINT_EDIT_KEYS = {"lower", "upper", "motor", "collide_connected"}
@@ -543,10 +550,8 @@ def validate_joint(raw, path="joint"):
         joint["position"] = number(raw["position"], child(path, "position"), -MAX_COORDINATE, MAX_COORDINATE)
     joint = {**joint, **validate_joint_edit({k: raw[k] for k in JOINT_EDIT_KEYS & raw.keys()},
                                             path, joint["type"], joint)}
-    # Past a limit, a joint's correction would launch it across its range. (A saved joint may
-    # be a little past: the solver lets limits give by millimetres or milliradians.)
     position = joint.get("position", 0.0)
-    if not joint["lower"] - JOINT_START_SLACK <= position <= joint["upper"] + JOINT_START_SLACK:
+    if not within_limits(position, joint["lower"], joint["upper"]):
         raise SpecError(child(path, "position"), f"{position:g} (where the joint is made) is outside its "
                                                  f"limits [{joint['lower']:g}, {joint['upper']:g}]")
     return joint

@@ -520,12 +520,9 @@ class World(WorldQueries):
         max_effort, max_speed) and collide_connected. Wakes the bodies it holds."""
         spec = self._joints.spec(name)
         edit = specs.validate_joint_edit(fields, name, spec["type"], spec)
-        # Limits moved past where the joint is would launch it across its range, as a joint made
-        # past them (specs.validate_joint).
         lower, upper = edit.get("lower", spec["lower"]), edit.get("upper", spec["upper"])
         position = self.joint(name)["position"]
-        if ("lower" in edit or "upper" in edit) and not (
-                lower - specs.JOINT_START_SLACK <= position <= upper + specs.JOINT_START_SLACK):
+        if ("lower" in edit or "upper" in edit) and not specs.within_limits(position, lower, upper):
             raise specs.SpecError(f"{name}.{'lower' if position < lower else 'upper'}",
                                   f"the joint is at {position:g}, outside the limits [{lower:g}, {upper:g}]")
         self._joints.edit(name, edit)
