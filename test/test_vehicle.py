@@ -353,6 +353,40 @@ def test_turns_on_the_radius_its_steer_limit_gives_and_both_wheels_agree():
     assert math.tan(right) * (centre + 0.8) == pytest.approx(wheelbase, rel=1e-6)
 
 
+@pytest.mark.parametrize("speed", [0.1, 0.25, -0.3])
+def test_a_slow_command_turns_on_the_commanded_radius(speed):
+    """A Twist's radius is speed / yaw rate at any speed (a planner's path near its goal is
+    slow). The bicycle model had been evaluated at 0.5 m/s or more: 0.25 m/s and 0.05 rad/s
+    turned a 10 m circle instead of 5."""
+    world = car_world(freezing=False)
+    world.drive("car", speed, speed / 5.0, timeout=100)
+    world.step(12 * 128)
+    radius = forward_speed(world) / world.state()["angular_velocities"][row(world), 2]
+    assert forward_speed(world) == pytest.approx(speed, rel=0.02)
+    assert radius == pytest.approx(5.0, rel=0.02)
+
+
+@pytest.mark.parametrize("speed, yaw_rate", [(8.0, 0.0), (15.0, 0.0), (-8.0, 0.0), (10.0, 0.2)])
+def test_a_fast_car_steers_steadily(speed, yaw_rate):
+    """The yaw-rate loop takes out a share of its error each step, whatever the speed: with a
+    fixed gain it passed back more than the whole error above 5.2 m/s, and the steer flipped
+    sign every step (+-0.0053 rad straight ahead at 8 m/s, the roll rate +-0.054 rad/s: noise
+    in the IMU and /odom for a filter to fuse)."""
+    world = car_world(freezing=False)
+    world.drive("car", speed, yaw_rate, timeout=100)
+    world.step(10 * 128)
+    steers, yaw_rates, roll_rates = [], [], []
+    for _ in range(64):
+        world.step(1)
+        steers.append(world.vehicle_state("car")["steer_angle"][:2].mean())
+        yaw_rates.append(world.state()["angular_velocities"][row(world), 2])
+        roll_rates.append(world.state()["angular_velocities"][row(world), 0])
+    assert forward_speed(world) == pytest.approx(speed, rel=0.02)
+    assert np.mean(yaw_rates) == pytest.approx(yaw_rate, abs=0.003)
+    assert np.abs(np.diff(steers)).max() < 1e-4
+    assert np.abs(np.diff(yaw_rates)).max() < 1e-3 and np.abs(roll_rates).max() < 0.01
+
+
 def test_a_slow_command_keeps_the_car_from_freezing():
     """0.03 m/s re-sent once a second (Foxglove Teleop's default): below the freezing speed,
     the car froze for a third of the time between commands."""

@@ -42,6 +42,7 @@ VehicleArrays = namedtuple("VehicleArrays", [
     "static_friction", "dynamic_friction",
     # Command (Twist) and controller state (V,).
     "command_speed", "command_yaw_rate", "command_age", "command_timeout", "speed_integral",
+    "steer_correction",  # (V,) rad: the yaw-rate loop's steer beyond the bicycle model's
     "throttle", "brake", "steer",  # (V,) applied: throttle -1..1, brake 0..1, steer rad
     # Wheel state (V, 4), for the node's joint states and markers.
     "steer_angle", "steer_rate", "spin_angle", "spin_rate", "compression", "compression_rate",
@@ -50,8 +51,12 @@ VehicleArrays = namedtuple("VehicleArrays", [
 
 SPEED_GAIN = 1.0          # throttle per m/s of speed error
 SPEED_INTEGRAL_GAIN = 0.5  # throttle per m of accumulated speed error
-YAW_GAIN = 0.5            # rad of extra steer per rad/s of yaw-rate error
-MIN_STEER_SPEED = 0.5     # m/s: below this the bicycle model is evaluated at this speed
+# The yaw-rate loop's share of its error taken out in a step. The yaw rate answers the steer
+# within a step (the tyres cancel side slip in one), by speed / wheelbase per radian, so the
+# loop's steer per rad/s of error is this x wheelbase / speed: a fixed 0.5 rad per rad/s had
+# passed the whole error back and more above 5.2 m/s, and the steer flipped sign every step.
+YAW_LOOP_SHARE = 0.5
+YAW_LOOP_SPEED = 0.5      # m/s: slower than this the loop rests (the bicycle model is exact there)
 STOP_SPEED = 0.05         # m/s: slower than this the car counts as standing (may reverse)
 TYRE_SWEEPS = 4           # passes over the four tyres a step (drive_vehicles)
 
@@ -65,7 +70,7 @@ def allocate_vehicles(capacity):
         steered=np.zeros((capacity, WHEELS), np.bool_), stiffness=f(WHEELS), damper=f(WHEELS),
         spring_length=f(WHEELS), static_friction=f(WHEELS), dynamic_friction=f(WHEELS),
         command_speed=f(), command_yaw_rate=f(), command_age=f(), command_timeout=f(),
-        speed_integral=f(), throttle=f(), brake=f(), steer=f(), steer_angle=f(WHEELS),
+        speed_integral=f(), steer_correction=f(), throttle=f(), brake=f(), steer=f(), steer_angle=f(WHEELS),
         steer_rate=f(WHEELS), spin_angle=f(WHEELS), spin_rate=f(WHEELS), compression=f(WHEELS),
         compression_rate=f(WHEELS), in_contact=np.zeros((capacity, WHEELS), np.bool_), contact_point=f(WHEELS, 3),
         contact_normal=f(WHEELS, 3))
@@ -104,17 +109,27 @@ def control(vehicles, v, speed, yaw_rate, hold, dt):
             # with the throttle already pulling towards the target (braking alone, the car
             # stopped, let go and rolled back again, and a slow command never climbed a ramp).
             brake = 1.0
-    wanted_yaw = vehicles.command_yaw_rate[v]
-    reference = speed
-    if abs(speed) < MIN_STEER_SPEED:
-        reference = MIN_STEER_SPEED if target >= 0.0 else -MIN_STEER_SPEED
-    steer = np.arctan(wanted_yaw * vehicles.wheelbase[v] / reference)
-    if abs(speed) > MIN_STEER_SPEED:
-        steer += YAW_GAIN * (wanted_yaw - yaw_rate) * (1.0 if speed > 0.0 else -1.0)
-    limit = vehicles.max_steer[v]
+    # The command's curvature (yaw rate per metre) is what the car follows, at whatever speed it
+    # has: a planner's path is its shape. (The speed the car had, held at 0.5 m/s or more, had
+    # turned a 0.25 m/s command for a 5 m circle round one of 10 m.) Told to turn without
+    # moving, the wheels steer to their limit that way: a turn in place an Ackermann car cannot.
+    wanted_yaw, wheelbase, limit = vehicles.command_yaw_rate[v], vehicles.wheelbase[v], vehicles.max_steer[v]
+    if target != 0.0:
+        curvature = wanted_yaw / target
+        model = np.arctan(curvature * wheelbase)
+    else:
+        curvature, model = 0.0, (limit if wanted_yaw > 0.0 else (-limit if wanted_yaw < 0.0 else 0.0))
+    # The yaw-rate loop adds what the tyres' slip takes off, YAW_LOOP_SHARE of the error a step
+    # (integrating: no error left in a steady turn), within the steering's reach.
+    correction = 0.0
+    if abs(speed) > YAW_LOOP_SPEED and target != 0.0:
+        error = curvature * speed - yaw_rate
+        correction = vehicles.steer_correction[v] + YAW_LOOP_SHARE * error * wheelbase / speed
+        correction = min(max(model + correction, -limit), limit) - model
+    vehicles.steer_correction[v] = correction
     vehicles.throttle[v] = throttle
     vehicles.brake[v] = brake
-    vehicles.steer[v] = min(max(steer, -limit), limit)
+    vehicles.steer[v] = min(max(model + correction, -limit), limit)
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)

@@ -9,7 +9,8 @@ from .vehicle import allocate_vehicles, grow_vehicles
 DEFAULT_COMMAND_TIMEOUT = 1.2  # s: SPEC 6.4 cmd_vel_timeout
 
 # Kernel state that starts at zero for a new vehicle (a reused row must not inherit any).
-RESET_FIELDS = ("command_speed", "command_yaw_rate", "command_age", "speed_integral", "throttle",
+RESET_FIELDS = ("command_speed", "command_yaw_rate", "command_age", "speed_integral",
+                "steer_correction", "throttle",
                 "brake", "steer", "steer_angle", "spin_angle", "spin_rate", "compression",
                 "in_contact")
 WHEEL_FIELDS = (("radius", "radius"), ("power_gain", "power_gain"), ("steered", "steered"),
