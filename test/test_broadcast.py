@@ -502,6 +502,14 @@ def test_odometry_covariances_are_small_not_zero_and_joints_have_rates(running):
     states = [message for _, message in sink.of("/joint_states", decoder("sensor_msgs/msg/JointState"))]
     suspension = [k for k, name in enumerate(states[0].name) if name.endswith("_suspension")]
     assert max(abs(m.velocity[k]) for m in states for k in suspension) > 0.01
+    # base_footprint stays level: /odom turns it about the vertical only, while the chassis
+    # (ground truth) rolls into the turn and pitches as it lands (/odom had the chassis' rates).
+    odometries = [m for _, m in sink.of("/odom", decoder("nav_msgs/msg/Odometry"))]
+    truth_key = next(k for k, _, _ in sink.messages if k.endswith("/ground_truth"))
+    truths = [m for _, m in sink.of(truth_key, decoder("nav_msgs/msg/Odometry"))]
+    assert all(m.twist.twist.angular.x == 0.0 == m.twist.twist.angular.y for m in odometries)
+    assert max(abs(m.twist.twist.angular.x) + abs(m.twist.twist.angular.y) for m in truths) > 0.01
+    assert odometries[-1].twist.twist.angular.z == pytest.approx(truths[-1].twist.twist.angular.z, rel=0.05)
 
 
 def test_a_newcomer_is_welcomed_while_another_keeps_subscribing(running):

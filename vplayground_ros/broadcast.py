@@ -603,12 +603,15 @@ class Broadcaster:
             measured = truth if tracker.noiseless else tracker.update(*truth, snap.time)
             transforms = robot_transforms(r, truth, measured, state, spec["wheels"], frames.world)
             # base_footprint in odom; its twist in its own axes, which the true heading turns,
-            # with the error the odometry made over its last interval.
+            # with the error the odometry made over its last interval. base_footprint stays
+            # level, so it turns about the vertical only: the chassis' roll and pitch rates
+            # are not its (wheel odometry measures neither).
             to_world = quaternions_to_matrices(np.asarray(truth[1], float)[None])[0]
+            turn = angular + to_world @ tracker.twist_error[3:]
             self.send(self.robot_topic(r, "odom"), messages.odometry(
                 snap.time, r.frames.odom, r.frames.footprint, footprint_pose(*measured, r.ride_height),
                 footprint_pose(*truth, r.ride_height)[1], linear + to_world @ tracker.twist_error[:3],
-                angular + to_world @ tracker.twist_error[3:], tracker.pose_covariance.ravel(),
+                np.array([0.0, 0.0, turn[2]]), tracker.pose_covariance.ravel(),
                 tracker.twist_covariance.ravel()), snap.time)
             self.send(self.robot_topic(r, "ground_truth"), messages.odometry(
                 snap.time, frames.world, r.frames.base, truth, truth[1], linear, angular), snap.time)
