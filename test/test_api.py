@@ -102,6 +102,29 @@ def test_a_refused_wheel_edit_changes_nothing():
     assert world.vehicle("car")["wheels"][1]["mass"] == 20.0
 
 
+def test_numpy_numbers_are_numbers():
+    """What numpy hands a caller (float32, int64, bool_ scalars, 1-D arrays) is taken as the
+    numbers and flags it holds: np.float32 speeds and array positions had been refused
+    ("expected a number, got float32")."""
+    world = World()
+    world.add_body({"name": "crate", "shape": "box", "size": np.array([0.5, 0.5, 0.5], np.float32),
+                    "position": np.array([0.0, 0.0, 2.0]), "mass": np.float32(3.0),
+                    "immovable": np.bool_(False)})
+    body = world.body("crate")
+    assert body["size"] == [0.5, 0.5, 0.5] and body["position"] == [0.0, 0.0, 2.0] and body["mass"] == 3.0
+    assert world.body("crate")["immovable"] is False
+    world.step(np.int64(3))
+    from vplayground_ros.resources import find_shared
+    car = load_world(find_shared("config/default_scene.yaml"))
+    name = car.vehicle_names()[0]
+    car.drive(name, np.float32(1.5), np.int64(0), timeout=np.float64(2.0))
+    assert car.vehicle_state(name)["command_speed"] == 1.5
+    with pytest.raises(ValueError, match="expected a number"):
+        car.drive(name, np.bool_(True), 0.0)
+    with pytest.raises(ValueError, match="expected a list of 3 numbers"):
+        world.edit_body("crate", position=np.zeros((1, 3)))
+
+
 def test_unknown_names_raise_key_error(world):
     before = snapshot(world)
     for call in (lambda: world.edit_body("nobody", mass=1.0), lambda: world.remove_body("nobody"),

@@ -5,6 +5,7 @@ Validators return normalised plain-Python values and never touch a World, so a f
 everything as it was.
 """
 import math
+import numbers
 import re
 import reprlib
 from collections import namedtuple
@@ -81,7 +82,9 @@ def child(path, key):
 
 
 def _is_number(value):
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
+    """A real number, numpy's scalars included (np.float32, np.int64: what arrays hand the
+    World's callers); not a bool."""
+    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
 
 
 def number(value, path, low=-math.inf, high=math.inf, low_open=False):
@@ -101,7 +104,8 @@ def number(value, path, low=-math.inf, high=math.inf, low_open=False):
 
 
 def integer(value, path, low, high):
-    if isinstance(value, float) and value.is_integer():
+    if isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_)) \
+            and math.isfinite(value) and float(value).is_integer():
         value = int(value)
     if not isinstance(value, int) or isinstance(value, bool):
         raise SpecError(path, f"expected an integer, got {type(value).__name__} {quote(value)}")
@@ -111,12 +115,14 @@ def integer(value, path, low, high):
 
 
 def boolean(value, path):
-    if not isinstance(value, bool):
+    if not isinstance(value, (bool, np.bool_)):
         raise SpecError(path, f"expected true or false, got {type(value).__name__} {quote(value)}")
-    return value
+    return bool(value)
 
 
 def vector(value, path, length, low=-math.inf, high=math.inf, low_open=False):
+    if isinstance(value, np.ndarray) and value.ndim == 1:
+        value = value.tolist()
     if not isinstance(value, (list, tuple)):
         raise SpecError(path, f"expected a list of {length} numbers, got {type(value).__name__}")
     if len(value) != length:
