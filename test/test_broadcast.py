@@ -512,6 +512,25 @@ def test_odometry_covariances_are_small_not_zero_and_joints_have_rates(running):
     assert odometries[-1].twist.twist.angular.z == pytest.approx(truths[-1].twist.twist.angular.z, rel=0.05)
 
 
+def test_a_query_while_paused_sends_nothing_again_and_an_edit_once(running):
+    """tf2 refuses a transform at a stamp it already holds, with a TF_REPEATED_DATA warning each
+    time: paused, every query (~/get_entity, Foxglove's polling) had sent /tf again at the
+    paused stamp. What changed nothing goes out no more; an edit goes out (once)."""
+    runtime, sink = running(SCENE, "--start-paused")
+    wait_for(lambda: sink.of("tf") and sink.of("poses"))
+    time.sleep(0.6)  # past the paused jobs' period
+    before = {key: len(sink.of(key)) for key in ("tf", "poses", "scene_markers")}
+    for _ in range(5):
+        runtime.sim.call(lambda world: world.body("crate"))
+        time.sleep(0.15)
+    time.sleep(0.6)
+    assert {key: len(sink.of(key)) for key in before} == before
+    runtime.sim.call(lambda world: world.edit_body("crate", position=[12.0, 0.0, 0.5]))
+    wait_for(lambda: len(sink.of("poses")) > before["poses"])
+    time.sleep(0.6)
+    assert len(sink.of("tf")) == before["tf"] + 1 and len(sink.of("poses")) == before["poses"] + 1
+
+
 def test_a_newcomer_is_welcomed_while_another_keeps_subscribing(running):
     """Paused, a client re-subscribing every 20 ms pushed the welcome back each time: nobody got
     the world. A burst of re-subscriptions to a latched topic re-sends it once, not each time."""

@@ -552,7 +552,7 @@ class Broadcaster:
             if now < job.wall_due:
                 continue
             job.wall_due = now + job.period
-            if name in PAUSED_ON_CHANGE and snapshot is job.published:
+            if name in PAUSED_ON_CHANGE and job.published is not None and snapshot.version == job.published.version:
                 continue
             self._run(job, snapshot)
 

@@ -69,6 +69,9 @@ class Snapshot:
     scenery: "Scenery" = None
     robot_specs: list = field(default_factory=list)  # World.robot_specs (URDF robots; shared)
     robot_joints: dict = field(default_factory=dict)  # URDF robot name -> World.joint_states of its joints
+    # Counts the states: a snapshot taken after a command that changed nothing (a query) keeps
+    # the one before's, and what goes out only on change while paused is not sent again.
+    version: int = 0
 
 
 # The static world as the publisher draws it (shared by snapshots until it changes):
@@ -369,8 +372,13 @@ class Simulation:
             return []
 
     def _publish(self, readings=()):
-        self.snapshot = self._take_snapshot()
-        self.snapshot.readings = list(readings)
+        before, snapshot = self.snapshot, self._take_snapshot()
+        snapshot.readings = list(readings)
+        if before is not None:
+            # A query while paused had sent /tf again at the stamp it had gone out with, which
+            # tf2 refuses with a TF_REPEATED_DATA warning each time (Foxglove polls).
+            snapshot.version = before.version + (0 if same_state(snapshot, before) else 1)
+        self.snapshot = snapshot
         for listener in self._listeners:
             try:
                 listener(self.snapshot)
@@ -446,3 +454,24 @@ class Simulation:
                 {name: world.vehicle(name) for name in vehicle_names},
                 {name: world.body_id(name) for name in vehicle_names}, scenery, world.robot_specs)
         return layout
+
+
+def same_state(a, b):
+    """Whether two snapshots show the same world (readings aside: they belong to a step)."""
+    return all(same_value(getattr(a, key), getattr(b, key)) for key in Snapshot.__dataclass_fields__
+               if key not in ("readings", "version"))
+
+
+def same_value(a, b):
+    """Equal values, arrays element by element and containers item by item (a NaN differs)."""
+    if a is b:
+        return True
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return (isinstance(a, np.ndarray) and isinstance(b, np.ndarray) and a.shape == b.shape
+                and bool(np.array_equal(a, b)))
+    if isinstance(a, dict):
+        return isinstance(b, dict) and a.keys() == b.keys() and all(same_value(a[k], b[k]) for k in a)
+    if isinstance(a, (list, tuple)):
+        return (type(a) is type(b) and len(a) == len(b)
+                and all(same_value(x, y) for x, y in zip(a, b)))
+    return bool(a == b)
