@@ -120,6 +120,24 @@ def test_a_removed_sensor_is_not_found_by_an_edit(requests):
     assert requests.edit("{entity: tmp_imu, rate: 20}") == (False, "RESULT_NOT_FOUND: no entity named tmp_imu")
 
 
+@pytest.mark.parametrize("payload, message", [
+    ("{name: kimu, type: imu, parent: world, rate: 1.0e-320}", "spawn.rate: must be >= 0.001"),
+    ("{name: kcam, type: camera, parent: world, horizontal_fov: 5.0e-324}", "spawn.horizontal_fov: must be >= 0.001"),
+    ("[{name: kbox}, {name: kimu, type: imu, parent: kbox, rate: 1.0e-300}]", "[1].rate: must be >= 0.001"),
+])
+def test_sensors_with_tiny_rates_or_fields_of_view_are_refused(requests, payload, message):
+    """Answered OK, these once killed the simulation thread (an overflow in the schedule, a
+    division by zero in the camera's intrinsics), or never published; spawned or edited in,
+    they are refused naming the key and the bound, and nothing changes."""
+    assert requests.spawn("{name: kimu_ok, type: imu, parent: world}")[0]
+    before = snapshot(requests.sim.world), list(requests.sim.world.sensor_specs)
+    ok, reply = requests.spawn(payload)
+    assert not ok and reply.startswith(f"RESULT_OPERATION_FAILED: {message}"), reply
+    ok, reply = requests.edit("{entity: kimu_ok, rate: 1.0e-320}")
+    assert (ok, reply.split(", got")[0]) == (False, "RESULT_OPERATION_FAILED: kimu_ok.rate: must be >= 0.001"), reply
+    assert unchanged(requests, before[0]) and requests.sim.world.sensor_specs == before[1]
+
+
 def test_remove_by_name_filter_and_all(requests):
     requests.spawn("[{name: crate_1}, {name: crate_2}, {name: barrel}]")
     assert requests.remove("{entity: barrel}") == (True, "RESULT_OK: barrel")

@@ -5,7 +5,7 @@ import re
 import numpy as np
 import pytest
 
-from vplayground_ros.physics import World
+from vplayground_ros.physics import World, specs
 from vplayground_ros.scene import SceneError, load_world, world_to_scene
 from vplayground_ros.sensors import Sensors, camera_intrinsics, lidar_2d_angles, validate_sensor
 
@@ -289,7 +289,25 @@ def test_a_sensor_goes_with_its_parent_even_when_another_body_takes_its_name(cap
     ({"name": "s", "type": "lidar_2d", "parent": "world", "range_min": 5, "range_max": 2},
      "sensors[0].range_max: must be > range_min"),
     ({"name": "s", "type": "camera", "parent": "world", "channels": 4}, "sensors[0].channels: unknown key"),
-    ({"name": "s", "type": "imu", "parent": "world", "rate": 0}, "sensors[0].rate: must be > 0"),
+    ({"name": "s", "type": "imu", "parent": "world", "rate": 0}, "sensors[0].rate: must be >= 0.001"),
+    # Tiny positive values: a rate of 1e-320 Hz overflowed the schedule, a field of view of
+    # 5e-324 rad divided by zero (both killed the node's simulation thread), 1e-310 gave K = inf.
+    ({"name": "s", "type": "imu", "parent": "world", "rate": 1.0e-320}, "sensors[0].rate: must be >= 0.001"),
+    ({"name": "s", "type": "imu", "parent": "world", "rate": 1.0e-300}, "sensors[0].rate: must be >= 0.001"),
+    ({"name": "s", "type": "camera", "parent": "world", "horizontal_fov": 5.0e-324},
+     "sensors[0].horizontal_fov: must be >= 0.001"),
+    ({"name": "s", "type": "depth_camera", "parent": "world", "horizontal_fov": 1.0e-310},
+     "sensors[0].horizontal_fov: must be >= 0.001"),
+    # Degenerate scans: beams on one angle, rings on one elevation, an image taller than 170 deg.
+    ({"name": "s", "type": "lidar_2d", "parent": "world", "angle_min": 0.5, "angle_max": 0.5, "samples": 10},
+     "sensors[0].angle_max: must exceed angle_min (0.5) by at least 0.001 rad with 10 samples"),
+    ({"name": "s", "type": "lidar_3d", "parent": "world", "vertical_min": 0.1, "vertical_max": 0.1, "channels": 4},
+     "sensors[0].vertical_max: must exceed vertical_min (0.1) by at least 0.001 rad with 4 channels"),
+    ({"name": "s", "type": "depth_camera", "parent": "world", "width": 1, "height": 20000},
+     "sensors[0].height: 20000 rows at width 1 give a vertical field of view of 179.99 deg (square pixels), "
+     "more than 170 (at most 11 rows"),
+    ({"name": "s", "type": "lidar_2d", "parent": "world", "angle_max": 3.2},
+     "sensors[0].angle_max: must be within [-pi, pi]"),
     ({"name": "b", "type": "imu", "parent": "world"}, "sensors[0].name: duplicate name 'b'"),
     ({"name": "s", "type": "imu", "parent": [1]}, "sensors[0].parent: expected a string, got list"),
     ({"name": "s", "type": "imu", "parent": {"a": 1}}, "sensors[0].parent: expected a string, got dict"),
@@ -369,6 +387,36 @@ def test_a_full_turn_scan_given_as_plus_minus_pi_to_eight_places_does_not_repeat
     spec = {"type": "lidar_2d", "angle_min": -3.14159265, "angle_max": 3.14159265, "samples": 360}
     angles = lidar_2d_angles(spec)
     assert np.diff(angles) == pytest.approx(np.full(359, math.radians(1.0)), abs=1e-10)
+
+
+def test_degenerate_scans_of_one_beam_ring_or_row_are_still_accepted():
+    """One beam, one ring, a one-row camera, a camera at the vertical cap: nothing repeats."""
+    beam = validate_sensor({"name": "s", "type": "lidar_2d", "parent": "world", "angle_min": 0.3,
+                            "angle_max": 0.3, "samples": 1}, "s", {})
+    assert lidar_2d_angles(beam) == pytest.approx([0.3])
+    ring = {"name": "s", "type": "lidar_3d", "parent": "world", "vertical_min": 0.0, "vertical_max": 0.0, "channels": 1}
+    assert validate_sensor(ring, "s", {})["channels"] == 1
+    line = {"name": "s", "type": "camera", "parent": "world", "width": 20000, "height": 1}
+    assert validate_sensor(line, "s", {})["height"] == 1
+    # tan(85 deg) / tan(45 deg) = 11.43: 11 rows a column at 90 deg across, not 12.
+    tall = {"name": "s", "type": "camera", "parent": "world", "width": 1, "height": 11}
+    assert validate_sensor(tall, "s", {})["height"] == 11
+    with pytest.raises(specs.SpecError, match=re.escape("s.height: 12 rows at width 1 give a vertical field of view of 170.47")):
+        validate_sensor({**tall, "height": 12}, "s", {})
+
+
+@pytest.mark.parametrize("low, high", [(-3.14159, 3.14159), (-3.1416, 3.1416), (-3.1415, 3.14163)])
+def test_plus_minus_pi_to_four_places_is_a_full_turn(low, high):
+    """+-pi written with fewer decimals (within 1e-4) is +-pi: 360 beams one degree apart
+    (+-3.14159 was a partial scan whose last beam nearly repeated its first; 3.1416 was
+    refused as more than pi)."""
+    spec = validate_sensor({"name": "s", "type": "lidar_2d", "parent": "world", "angle_min": low,
+                            "angle_max": high, "samples": 360}, "s", {})
+    assert (spec["angle_min"], spec["angle_max"]) == (-math.pi, math.pi)
+    assert np.diff(lidar_2d_angles(spec)) == pytest.approx(np.full(359, math.radians(1.0)), abs=1e-10)
+    half = validate_sensor({"name": "s", "type": "lidar_2d", "parent": "world", "angle_min": 0.0,
+                            "angle_max": high, "samples": 181}, "s", {})
+    assert half["angle_max"] == math.pi and lidar_2d_angles(half)[-1] == math.pi
 
 
 def test_noisy_returns_stay_within_the_ranges():

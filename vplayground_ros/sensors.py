@@ -59,6 +59,15 @@ DEFAULTS = {
 }
 MAX_RAYS = 4_000_000  # per sensor and scan: beyond this one scan would stall the simulation
 MAX_RATE = 1000.0
+# Lower bounds no sensor needs to go under: a reading every ~17 minutes, a field of view or a
+# scan's span of 0.06 degrees. Tiny positive values got through a mere "> 0" and broke what
+# follows: a rate of 1e-320 Hz overflowed the schedule, a field of view of 5e-324 rad divided by
+# zero (the simulation thread died of both), one of 1e-310 gave CameraInfo K = inf.
+MIN_RATE = 1.0e-3  # Hz
+MIN_SPAN = 1.0e-3  # rad: horizontal_fov, and a 2D scan's or a 3D lidar's span between beams
+MAX_FOV = math.radians(170.0)  # a camera's, horizontal and the vertical one its size implies
+# +-pi written with fewer places (3.1416, 3.14159) is +-pi: a full turn when both ends are.
+PI_SLACK = 1.0e-4
 WORLD = "world"
 
 # The camera's fixed light: from above, a little from the front-left, so faces of one box differ.
@@ -98,31 +107,63 @@ def validate_sensor(raw, path, parents):
             out[key] = raw[key]
     value = lambda key: raw.get(key, DEFAULTS[key])  # noqa: E731
     out["pose"] = specs.vector(value("pose"), at("pose"), 6, -specs.MAX_COORDINATE, specs.MAX_COORDINATE)
-    out["rate"] = specs.number(value("rate"), at("rate"), 0.0, MAX_RATE, low_open=True)
+    out["rate"] = specs.number(value("rate"), at("rate"), MIN_RATE, MAX_RATE)
     keys = TYPE_KEYS[kind]
     for key in sorted(keys & {"range_min", "range_max", "noise_stddev", "gyro_noise", "accel_noise"}):
         out[key] = specs.number(value(key), at(key), 0.0, 1.0e4)
     for key in sorted(keys & {"samples", "horizontal_samples", "channels", "width", "height"}):
         out[key] = specs.integer(value(key), at(key), 1, 100_000)
     for key in sorted(keys & {"angle_min", "angle_max"}):
-        out[key] = specs.number(value(key), at(key), -math.pi, math.pi)
+        out[key] = angle(value(key), at(key))
     for key in sorted(keys & {"vertical_min", "vertical_max"}):
         out[key] = specs.number(value(key), at(key), -math.pi / 2, math.pi / 2)
     if "horizontal_fov" in keys:
-        out["horizontal_fov"] = specs.number(value("horizontal_fov"), at("horizontal_fov"), 0.0,
-                                             math.radians(170.0), low_open=True)
+        out["horizontal_fov"] = specs.number(value("horizontal_fov"), at("horizontal_fov"), MIN_SPAN, MAX_FOV)
     for key in sorted(keys & {"gyro_bias", "accel_bias"}):
         out[key] = specs.vector(value(key), at(key), 3, -1.0e3, 1.0e3)
     if "range_max" in out and not out["range_min"] < out["range_max"]:
         raise specs.SpecError(at("range_max"), f"must be > range_min ({out['range_min']:g}), "
                                                f"got {out['range_max']:g}")
-    for low, high in (("angle_min", "angle_max"), ("vertical_min", "vertical_max")):
-        if low in out and not out[low] <= out[high]:
+    for low, high, count in (("angle_min", "angle_max", "samples"), ("vertical_min", "vertical_max", "channels")):
+        if low not in out:
+            continue
+        if not out[low] <= out[high]:
             raise specs.SpecError(at(high), f"must be >= {low} ({out[low]:g}), got {out[high]:g}")
+        if out[count] > 1 and out[high] - out[low] < MIN_SPAN:
+            # Beams (rings) on one angle: LaserScan's angle_increment 0, or duplicate rings.
+            raise specs.SpecError(at(high), f"must exceed {low} ({out[low]:g}) by at least {MIN_SPAN:g} rad "
+                                            f"with {out[count]} {count} (one alone takes {count}: 1), "
+                                            f"got {out[high]:g}")
+    if "horizontal_fov" in out:
+        check_vertical_fov(out, at("height"))
     rays = ray_count(out)
     if rays > MAX_RAYS:
         raise specs.SpecError(path, f"{rays} rays a scan, more than {MAX_RAYS}")
     return out
+
+
+def angle(raw, path):
+    """A 2D scan's end, in [-pi, pi]; within PI_SLACK of +-pi it is +-pi."""
+    value = specs.number(raw, path)
+    if abs(abs(value) - math.pi) <= PI_SLACK:
+        return math.copysign(math.pi, value)
+    if abs(value) > math.pi:
+        raise specs.SpecError(path, f"must be within [-pi, pi] (rad; values within {PI_SLACK:g} of +-pi "
+                                    f"count as +-pi), got {value:g}")
+    return value
+
+
+def check_vertical_fov(spec, path):
+    """A camera's vertical field of view, which its size and horizontal_fov imply (square
+    pixels), must be within MAX_FOV as its horizontal one is: a 1 x 20,000 image at 90 degrees
+    across saw 179.99 degrees up and down."""
+    ratio = spec["height"] / spec["width"]
+    vertical = 2.0 * math.atan(ratio * math.tan(0.5 * spec["horizontal_fov"]))
+    if vertical > MAX_FOV:
+        rows = math.floor(spec["width"] * math.tan(0.5 * MAX_FOV) / math.tan(0.5 * spec["horizontal_fov"]))
+        raise specs.SpecError(path, f"{spec['height']} rows at width {spec['width']} give a vertical field of view "
+                                    f"of {math.degrees(vertical):.2f} deg (square pixels), more than "
+                                    f"{math.degrees(MAX_FOV):g} (at most {rows} rows at this width and horizontal_fov)")
 
 
 def validate_sensors(raw, parents, path="sensors"):
