@@ -1,4 +1,5 @@
 """Sensors against geometry with known answers: walls, boxes, the ground, a body at rest."""
+import logging
 import math
 import re
 
@@ -6,7 +7,9 @@ import numpy as np
 import pytest
 
 from vplayground_ros.physics import World, specs
+from vplayground_ros.interfaces import decoder
 from vplayground_ros.scene import SceneError, load_world, world_to_scene
+from vplayground_ros.sensor_messages import build
 from vplayground_ros.sensors import Sensors, camera_intrinsics, lidar_2d_angles, validate_sensor
 
 G = 9.81
@@ -251,6 +254,67 @@ def test_samples_do_not_depend_on_how_the_steps_are_batched():
         return out
 
     assert run(1) == run(16) == run(1000)
+
+
+def run_sensors(world, sensors, until, out):
+    """Steps `world` to each sample until `until` s, appending (name, reading) to `out`."""
+    while world.time < until - 1e-9:
+        world.step(sensors.steps_until_due(world))
+        out += [(s.name, r) for s, r in sensors.sample(world)]
+    return out
+
+
+@pytest.mark.parametrize("before, after", [(100, 400), (400, 100), (128, 1000), (1000, 128)])
+def test_sensors_keep_their_rates_when_steps_per_second_changes(before, after):
+    """Sample n is read at the first step at or after n / rate of simulated time, whatever the
+    step rate was on the way there. Scheduled at step n x steps_per_second / rate, the steps
+    taken at the old rate counted as if at the new one: after 1 s at 100 steps/s, 400 steps/s
+    silenced every sensor for 0.75 s. No gap, no burst, whichever way the rate changes."""
+    imu = {"name": "imu", "type": "imu", "parent": "world", "rate": 50.0}
+    lidar = {"name": "scan", "type": "lidar_2d", "parent": "world", "samples": 8, "rate": 10.0}
+    world = load_world(scene(imu, lidar, steps_per_second=before))
+    sensors, readings = Sensors(), []
+    run_sensors(world, sensors, 1.0, readings)
+    world.update_settings({"steps_per_second": after})
+    run_sensors(world, sensors, 3.0, readings)
+    late = 1.0 / min(before, after) + 1e-9  # a sample is read at the first step at or after its time
+    for name, rate in (("imu", 50.0), ("scan", 10.0)):
+        times = np.array([r["time"] for n, r in readings if n == name])
+        due = np.arange(1, len(times) + 1) / rate
+        assert len(times) == pytest.approx(3.0 * rate, abs=1)
+        assert np.all(times >= due - 1e-9) and np.all(times - due < late), (name, times)
+        assert np.all(np.abs(np.diff(times) - 1.0 / rate) < late), (name, np.diff(times))
+
+
+def test_a_rate_above_steps_per_second_reads_once_a_step_and_says_so(caplog):
+    """A stepped simulator has one state a step: a 1,000 Hz lidar in a 100 steps/s world is read
+    every step. Its LaserScan's scan_time says the 0.01 s between the scans published (it said
+    1 / rate), and the log warns when such a sensor starts and whenever steps_per_second drops
+    under a sensor's rate (not while the step rate keeps up)."""
+    fast = {"name": "fast", "type": "lidar_2d", "parent": "world", "samples": 8, "rate": 1000.0}
+    slow = {"name": "slow", "type": "lidar_2d", "parent": "world", "samples": 8, "rate": 20.0}
+    world = load_world(scene(fast, slow, steps_per_second=100))
+    sensors, readings = Sensors(), []
+    with caplog.at_level(logging.WARNING, logger="vplayground_ros.sensors"):
+        run_sensors(world, sensors, 0.1, readings)
+    assert [round(r["time"], 9) for n, r in readings if n == "fast"] == [round(0.01 * k, 9) for k in range(1, 11)]
+    warnings = [record.getMessage() for record in caplog.records]
+    assert len(warnings) == 1 and warnings[0].startswith("sensor fast: rate 1000 Hz is above steps_per_second "
+                                                         "(100): it is read once a step, at 100 Hz"), warnings
+    decode = decoder("sensor_msgs/msg/LaserScan")
+    scans = {n: decode(build(world.sensor_specs[k], r, r["time"], n)[0][1])
+             for n, r in readings[-2:] for k in [[s["name"] for s in world.sensor_specs].index(n)]}
+    assert scans["fast"].scan_time == pytest.approx(0.01) and scans["slow"].scan_time == pytest.approx(0.05)
+    assert scans["fast"].time_increment == 0.0  # every beam of a scan is cast at one instant
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="vplayground_ros.sensors"):
+        world.update_settings({"steps_per_second": 2000})
+        run_sensors(world, sensors, 0.2, readings)
+        assert caplog.records == []
+        world.update_settings({"steps_per_second": 500})
+        run_sensors(world, sensors, 0.3, readings)
+    assert [record.getMessage()[:60] for record in caplog.records] == [
+        "sensor fast: rate 1000 Hz is above steps_per_second (500): i"]
 
 
 def test_sensors_are_saved_with_the_scene_and_go_with_a_removed_parent(caplog):

@@ -82,7 +82,7 @@ def build(spec, reading, seconds, frame):
     sensor's (a camera's messages are in its optical frame)."""
     kind = spec["type"]
     if kind == "lidar_2d":
-        return [("scan", laser_scan(spec, reading["ranges"], seconds, frame))]
+        return [("scan", laser_scan(spec, reading["ranges"], seconds, frame, reading["period"]))]
     if kind == "lidar_3d":
         return [("points", lidar_cloud(frame, reading, seconds))]
     if kind == "depth_camera":
@@ -94,13 +94,15 @@ def build(spec, reading, seconds, frame):
     return [("data", imu(spec, reading, seconds, frame))]
 
 
-def laser_scan(spec, ranges, seconds, frame):
-    """sensor_msgs/LaserScan: ranges as read (+inf no return, -inf nearer than range_min)."""
+def laser_scan(spec, ranges, seconds, frame, scan_time):
+    """sensor_msgs/LaserScan: ranges as read (+inf no return, -inf nearer than range_min).
+    scan_time is the time between the scans published (1 / rate, or a step when the rate is
+    above steps_per_second); time_increment 0: every beam is cast from one state."""
     angles = lidar_2d_angles(spec)
     increment = float(angles[1] - angles[0]) if len(angles) > 1 else 0.0
     w = cdr.Writer()
     w.header(cdr.split_stamp(seconds), frame)
-    w.f32s([angles[0], angles[-1], increment, 0.0, 1.0 / spec["rate"], spec["range_min"], spec["range_max"]])
+    w.f32s([angles[0], angles[-1], increment, 0.0, scan_time, spec["range_min"], spec["range_max"]])
     w.u32(len(ranges))
     w.data += np.ascontiguousarray(ranges, "<f4").tobytes()
     w.u32(0)  # intensities: none

@@ -3,8 +3,10 @@ from the World by its ray casts. ROS-free: readings are numpy arrays (sensor_mes
 them ROS messages). Scene files take the `sensors` key and keep it on saving.
 
 Sampling runs on simulation time: a sensor of rate r is read after the step that first reaches
-each multiple of 1/r, from the state after that step. The Simulation ends its batches on those
-steps (steps_until_due), so a run at any real-time factor reads the same scans. Noise comes from
+each multiple of 1/r, from the state after that step, also across a change of steps_per_second
+(a Clock maps times to steps). A rate above steps_per_second is read once a step, with a
+warning. The Simulation ends its batches on those steps (steps_until_due), so a run at any
+real-time factor reads the same scans. Noise comes from
 one generator per sensor seeded from `settings.seed` and the sensor's name: the same scene gives
 bit-identical readings.
 
@@ -255,6 +257,26 @@ def pose_matrix(xyz, quaternion):
     return m
 
 
+class Clock:
+    """Simulated time against the world's step count: the steps from `step` on, taken at
+    `steps_per_second`, each last 1 / steps_per_second after `time`. A change of the step rate
+    starts another from then (so the steps taken before at the old rate are not counted as
+    if at the new one); while the rate stays, a step's time is its count over the rate."""
+
+    # A time reached within this fraction of a step counts as reached (float rounding).
+    SLACK = 1e-6
+
+    def __init__(self, step, time, steps_per_second):
+        self.step, self.time, self.steps_per_second = step, time, steps_per_second
+
+    def time_of(self, step):
+        return self.time + (step - self.step) / self.steps_per_second
+
+    def step_at(self, time):
+        """The first step at or after simulated `time` (not before this clock's start)."""
+        return self.step + max(0, math.ceil((time - self.time) * self.steps_per_second - self.SLACK))
+
+
 class Sensor:
     """One sensor: its spec, its rays in its own frame and its noise generator."""
 
@@ -277,9 +299,13 @@ class Sensor:
         self.last_time = None      # when it was made (None: its parent was not there then)
         self.parent_id = None      # World.body_id of the body it was put on (None: the world's)
 
-    def due_step(self, steps_per_second):
+    def due_step(self, clock):
         """The step count at which the next sample is read: the first step at or after n / rate."""
-        return math.ceil(self.samples_taken * steps_per_second / self.spec["rate"] - 1e-9)
+        return clock.step_at(self.samples_taken / self.spec["rate"])
+
+
+class SensorError(RuntimeError):
+    """A sensor could not be made or scheduled (Sensors.follow: the others go on)."""
 
 
 class Sensors:
@@ -290,14 +316,27 @@ class Sensors:
     def __init__(self, on_reading=None):
         self.on_reading = on_reading
         self.sensors = []
+        self.clock = None  # the world's Clock since it came or last changed its step rate
         self._world, self._specs, self._step = None, None, -1
 
     def follow(self, world):
         """New sensors for a new world, or when its time went back; when only its sensor specs
         changed, new ones for the specs replaced (another dict: an edit, a reset restoring the
         bodies they hang on) while the others go on (their noise, schedule and IMU history:
-        spawning a sensor does not reset the rest)."""
+        spawning a sensor does not reset the rest). A new step rate starts a new Clock: the
+        sensors' next samples stay at their times, now reached in steps of the new length.
+
+        A sensor that cannot be made or scheduled (a spec no validation let through) is left
+        out, the others are made, and then a SensorError names it: the Simulation counts that
+        as a fault and goes on, and the spec is tried again when the specs change."""
         fresh = world is not self._world or world.step_count < self._step
+        rate = world.settings["steps_per_second"]
+        if fresh or self.clock is None or rate != self.clock.steps_per_second:
+            self.clock = Clock(world.step_count, world.time, rate)
+            if not fresh:
+                for sensor in self.sensors:
+                    self.warn_if_too_fast(sensor.spec, rate)
+        failed = []
         if fresh or world.sensor_specs is not self._specs:
             kept = {} if fresh else {id(sensor.spec): sensor for sensor in self.sensors}
             self._world, self._specs = world, world.sensor_specs
@@ -305,17 +344,32 @@ class Sensors:
             for spec in world.sensor_specs:
                 sensor = kept.get(id(spec))
                 if sensor is None:
-                    sensor = Sensor(spec, world.settings["seed"])
-                    self.start(sensor, world)
+                    try:
+                        sensor = Sensor(spec, world.settings["seed"])
+                        self.start(sensor, world)
+                    except Exception as error:
+                        failed.append((spec.get("name"), error))
+                        continue
+                    self.warn_if_too_fast(spec, rate)
                 self.sensors.append(sensor)
         self._step = world.step_count
+        if failed:
+            raise SensorError("; ".join(f"sensor {name} left out: {type(error).__name__}: {error}"
+                                        for name, error in failed)) from failed[0][1]
+
+    @staticmethod
+    def warn_if_too_fast(spec, steps_per_second):
+        """At most one reading a step (one state a step to read): a faster rate is said."""
+        if spec["rate"] > steps_per_second:
+            log.warning("sensor %s: rate %g Hz is above steps_per_second (%d): it is read once a step, "
+                        "at %d Hz", spec["name"], spec["rate"], steps_per_second, steps_per_second)
 
     def start(self, sensor, world):
         """A new sensor's first sample is the next one after now; an IMU measures its
         acceleration from now on."""
-        rate = world.settings["steps_per_second"]
-        sensor.samples_taken = math.floor(world.step_count * sensor.spec["rate"] / rate) + 1
-        while sensor.due_step(rate) <= world.step_count:
+        now = self.clock.time_of(world.step_count)
+        sensor.samples_taken = math.floor(now * sensor.spec["rate"]) + 1
+        while sensor.due_step(self.clock) <= world.step_count:
             sensor.samples_taken += 1
         if sensor.parent != WORLD:
             try:
@@ -330,8 +384,7 @@ class Sensors:
         self.follow(world)
         if not self.sensors:
             return math.inf
-        rate = world.settings["steps_per_second"]
-        return max(1, min(s.due_step(rate) for s in self.sensors) - world.step_count)
+        return max(1, min(s.due_step(self.clock) for s in self.sensors) - world.step_count)
 
     def sample(self, world):
         """Reads the sensors due at the world's current step and returns [(sensor, reading)]
@@ -339,12 +392,12 @@ class Sensors:
         reading (the world stepped past it) are skipped, not read late. A sensor whose parent
         is gone goes with it, with a warning (also when another body took its name since)."""
         self.follow(world)
-        rate, now = world.settings["steps_per_second"], world.step_count
+        clock, now = self.clock, world.step_count
         due = []
         for sensor in list(self.sensors):
-            while sensor.due_step(rate) < now:
+            while sensor.due_step(clock) < now:
                 sensor.samples_taken += 1
-            if sensor.due_step(rate) != now:
+            if sensor.due_step(clock) != now:
                 continue
             sensor.samples_taken += 1
             if sensor.parent != WORLD:
@@ -400,8 +453,11 @@ class Sensors:
         depth_camera: depth (H, W) float32 along the optical axis (REP 118, with REP 117's
         -inf nearer than range_min and +inf no return);
         camera: rgb (H, W, 3) uint8; imu: orientation (xyzw), angular_velocity,
-        linear_acceleration (specific force, sensor frame)."""
+        linear_acceleration (specific force, sensor frame). Each has its `time`; a 2D scan its
+        `period` too (LaserScan's scan_time): 1 / rate, or a step when that is longer."""
         time = world.time
+        # The time between this sensor's readings: 1 / rate, or a step when that is longer.
+        period = max(1.0 / sensor.spec["rate"], 1.0 / world.settings["steps_per_second"])
         if sensor.kind == "imu":
             return {"time": time, **self.read_imu(sensor, world)}
         origin, directions, reach = self.rays(sensor, world)
@@ -428,7 +484,7 @@ class Sensors:
         ranges[far] = np.inf
         ranges[near] = -np.inf
         if sensor.kind == "lidar_2d":
-            return {"time": time, "ranges": ranges}
+            return {"time": time, "ranges": ranges, "period": period}
         return {"time": time, "depth": ranges.reshape(spec["height"], spec["width"])}
 
     @staticmethod

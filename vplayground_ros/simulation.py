@@ -354,11 +354,20 @@ class Simulation:
             self._publish()
 
     def _next_due_time(self, world):
-        """Where the batch ends: the next time a listener publishes at or a sensor is read."""
+        """Where the batch ends: the next time a listener publishes at or a sensor is read (a
+        sensor that cannot be made or scheduled is survived like a failing read: a fault, and
+        the batch ends where the others are due)."""
         if not world.sensor_specs:
             return self.next_publish_time
-        return min(self.next_publish_time, world.time + self.sensors.steps_until_due(world)
-                   / world.settings["steps_per_second"])
+        try:
+            steps = self.sensors.steps_until_due(world)
+        except Exception as error:
+            self.fault("sensors", error)
+            try:  # the sensors made (a SensorError leaves out only the failing ones)
+                steps = self.sensors.steps_until_due(world)
+            except Exception:
+                return self.next_publish_time
+        return min(self.next_publish_time, world.time + steps / world.settings["steps_per_second"])
 
     def _read_sensors(self, world):
         """The sensors due at this step, read from the state after it (a failing read is
