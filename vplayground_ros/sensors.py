@@ -273,8 +273,9 @@ class Clock:
         return self.time + (step - self.step) / self.steps_per_second
 
     def step_at(self, time):
-        """The first step at or after simulated `time` (not before this clock's start)."""
-        return self.step + max(0, math.ceil((time - self.time) * self.steps_per_second - self.SLACK))
+        """The first step at or after simulated `time` (for a time before this clock's start,
+        as if the steps had been this long: one already passed, so skipped, not read late)."""
+        return self.step + math.ceil((time - self.time) * self.steps_per_second - self.SLACK)
 
 
 class Sensor:
