@@ -104,8 +104,9 @@ def number(value, path, low=-math.inf, high=math.inf, low_open=False):
 
 
 def integer(value, path, low, high):
-    if isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_)) \
-            and math.isfinite(value) and float(value).is_integer():
+    if isinstance(value, numbers.Integral) and not isinstance(value, bool):
+        value = int(value)  # numpy's integers too (an int of any size stays itself)
+    elif isinstance(value, numbers.Real) and math.isfinite(value) and float(value).is_integer():
         value = int(value)
     if not isinstance(value, int) or isinstance(value, bool):
         raise SpecError(path, f"expected an integer, got {type(value).__name__} {quote(value)}")
