@@ -12,8 +12,10 @@ import numpy as np
 import pytest
 import yaml
 
+from vplayground_ros.api import Requests
 from vplayground_ros.interfaces import decoder
 from vplayground_ros.scene import SceneError, load_world, world_to_scene
+from vplayground_ros.simulation import Simulation
 from vplayground_ros.frame_names import DEFAULT_FRAMES
 from vplayground_ros.urdf_robots import RobotControl, WheelOdometry, add_robot_entry, drive_joints
 from helpers import SPEC_CAR, wait_for
@@ -501,6 +503,52 @@ def test_a_sensor_may_not_publish_on_a_urdf_robots_topic():
     with pytest.raises(SceneError, match="the frame 'lbr_iiwa_link_7' is a link of the robot kuka"):
         load_world({"version": 1, "robots": [{"name": "kuka", "urdf": KUKA}],
                     "sensors": [{**imu, "topic": "arm_imu", "frame_id": "lbr_iiwa_link_7"}]})
+
+
+ROVER = {"name": "rover", "urdf": "rover.urdf", "drive": {"left_wheel_names": ["left_wheel_joint"],
+                                                          "right_wheel_names": ["right_wheel_joint"],
+                                                          "wheel_separation": 0.48, "wheel_radius": 0.1}}
+
+
+def test_no_body_or_sensor_takes_a_robots_link_frame_nor_a_robot_a_bodys_name():
+    """A robot in the root namespace publishes its links' frames by their names (`left_wheel`,
+    `lidar_link`): a body of that name (its frame on /tf when it carries a sensor, or with
+    publish_body_frames) or a sensor would give that frame two parents. Refused whichever comes
+    first, in a scene file, ~/spawn (allow_renaming picks another name for a body or a sensor)
+    and a robot spawned where such a body is, naming both; what was there stays."""
+    crate = {"name": "left_wheel", "size": [0.3, 0.3, 0.3], "position": [3, 0, 0.15]}
+    imu = {"name": "wheel_imu", "type": "imu", "parent": "left_wheel"}
+    with pytest.raises(SceneError, match=re.escape("robots[0].namespace: the robot rover's link 'left_wheel' would be "
+                                                   "the frame 'left_wheel', which is the name of the body 'left_wheel'")):
+        load_world({"version": 1, "robots": [ROVER], "bodies": [crate], "sensors": [imu]})
+    with pytest.raises(SceneError, match=re.escape("the frame 'lidar_link' is the frame of the link 'lidar_link' of "
+                                                   "the robot rover")):
+        load_world({"version": 1, "robots": [ROVER], "sensors": [{"name": "lidar_link", "type": "imu",
+                                                                    "parent": "world"}]})
+    # In the robot's own namespace its frames are rover/left_wheel...: the body may be left_wheel.
+    load_world({"version": 1, "robots": [{**ROVER, "namespace": "rover"}], "bodies": [crate], "sensors": [imu]})
+
+    requests = Requests(Simulation(load_world({"version": 1, "robots": [ROVER]})), scene_directories=[])
+    before = requests.sim.world.body_names()
+    pair = [{"name": "lidar_link", "size": [0.3, 0.3, 0.3], "position": [3, 0, 0.15]},
+            {"name": "box_imu", "type": "imu", "parent": "lidar_link"}]
+    ok, message = requests.spawn(yaml.safe_dump(pair))
+    assert not ok and message.startswith("NAME_NOT_UNIQUE: [0].name: 'lidar_link' is the frame of the link "
+                                         "'lidar_link' of the robot rover"), message
+    ok, message = requests.spawn(yaml.safe_dump({"name": "left_wheel", "type": "imu", "parent": "world"}))
+    assert not ok and message.startswith("NAME_NOT_UNIQUE: spawn.name: 'left_wheel' is the frame of the link"), message
+    assert requests.sim.world.body_names() == before and requests.sim.world.sensor_specs == []
+    renamed = [{**pair[0], "allow_renaming": True}, pair[1]]
+    assert requests.spawn(yaml.safe_dump(renamed)) == (True, "RESULT_OK: lidar_link_2, box_imu")
+    assert requests.sim.world.sensor_specs[0]["parent"] == "lidar_link_2"
+
+    # The other way round: the robot comes second, into the root namespace (no vehicle has it).
+    requests = Requests(Simulation(load_world({"version": 1, "bodies": [crate]})), scene_directories=[])
+    ok, message = requests.spawn(yaml.safe_dump({"name": "rover", "urdf": "rover.urdf"}))
+    assert not ok and message.startswith("NAME_NOT_UNIQUE: spawn.namespace: the robot rover's link 'left_wheel' would "
+                                         "be the frame 'left_wheel', which is the name of the body 'left_wheel'"), message
+    assert requests.sim.world.body_names() == ["left_wheel"] and requests.sim.world.robot_specs == []
+    assert requests.spawn(yaml.safe_dump({"name": "rover", "urdf": "rover.urdf", "namespace": "rover"}))[0]
 
 
 def test_robots_are_drawn_by_their_visual_elements_locked_to_their_links(run):

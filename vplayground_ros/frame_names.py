@@ -3,6 +3,7 @@ no body, vehicle or sensor may take one. A body's name is its frame on /tf and a
 its frame too, so such a name would give a frame two parents, or a loop. A namespaced robot's
 frames hold a '/', which no entity name does."""
 from .parameters import FRAMES, Frames
+from .physics.specs import SpecError
 from .robots import STACK_FRAMES, frames_of, namespace_prefix, robot_frames
 from .sensor_messages import optical_frame
 from .sensors import CAMERAS, WORLD
@@ -32,16 +33,55 @@ def sensor_frames(spec):
     return [frame] + ([optical_frame(frame)] if spec["type"] in CAMERAS else [])
 
 
+def urdf_robot_frames(robot_specs, frames=DEFAULT_FRAMES):
+    """{frame: what it is} of the URDF robots' frames (World.robot_specs): each link's, after its
+    robot's namespace (`left_wheel` in the root namespace, `rover/left_wheel` in rover's), and
+    with a drive its odom frame. No body or sensor may take one: /tf would give it two parents."""
+    out = {}
+    for spec in robot_specs:
+        prefix = namespace_prefix(spec["namespace"])
+        out.update({prefix + link: f"the frame of the link {link!r} of the robot {spec['name']}"
+                    for link in spec["model"].link_frames})
+        if spec.get("drive"):
+            out.setdefault(prefix + frames.odom, f"the odom frame of the robot {spec['name']}")
+    return out
+
+
+def frames_taken(frames, world):
+    """{frame: what it is} of every frame a new body's or sensor's name may not be, beside the
+    names of the entities there: the node's own (node_frames), the sensors' that are not their
+    names (sensor_frames_taken) and the URDF robots' (urdf_robot_frames). The one rule of
+    ~/spawn (and SpawnEntity), a sensor's edit and a scene's names (check_robot_frames is its
+    other side: a robot added where a body has one of its frames' names)."""
+    return {**node_frames(frames), **sensor_frames_taken(world.sensor_specs),
+            **urdf_robot_frames(world.robot_specs, frames)}
+
+
+class FrameTaken(SpecError):
+    """A name that is another entity's frame (NAME_NOT_UNIQUE over the services)."""
+
+
+def check_robot_frames(world, name, model, namespace, path):
+    """Refuses (FrameTaken) a URDF robot whose frames in `namespace` (its links', after the
+    namespace) would be a body's name in `world`: a body's name is its frame on /tf (with a
+    sensor, or publish_body_frames), so that frame would have two parents. The sensors' frames
+    are checked against the robots' once it is added (check_sensor_frames)."""
+    prefix = namespace_prefix(namespace)
+    bodies = set(world.body_names())
+    clash = next((link for link in model.link_frames if prefix + link in bodies), None)
+    if clash is not None:
+        frame = prefix + clash
+        raise FrameTaken(f"{path}.namespace", f"the robot {name}'s link {clash!r} would be the frame {frame!r}, which "
+                                              f"is the name of the body {frame!r} (names are frames: give the body "
+                                              "another name, or the robot a namespace)")
+
+
 def check_sensor_frames(sensor_specs, robots, robot_specs=()):
     """Refuses a sensor whose frame (or optical frame) is a robot's (`car_b/base_link` as a
     frame_id, or a robot spawned onto a sensor's `car_c/odom`; a URDF robot's link frames and,
     with a drive, its odom, of `robot_specs`): that frame would have two parents. Names the
     sensor's frame_id."""
-    from .physics.specs import SpecError
-    taken = frames_of(robots)
-    for spec in robot_specs:
-        prefix = namespace_prefix(spec["namespace"])
-        taken.update({prefix + link: f"a link of the robot {spec['name']}" for link in spec["model"].link_frames})
+    taken = {**frames_of(robots), **urdf_robot_frames(robot_specs)}
     frame_of = sensor_frame(robots, link_carriers(robot_specs))
     for spec in sensor_specs:
         frame = frame_of(spec)

@@ -10,7 +10,8 @@ import numpy as np
 import yaml
 
 from ..broadcast import check_sensors
-from ..frame_names import node_frames, sensor_frames, sensor_frames_taken
+from ..frame_names import (frames_taken as frames_of_world, node_frames, sensor_frames, sensor_frames_taken,
+                           urdf_robot_frames)
 from ..physics import specs
 from ..physics.math3d import matrix_to_quaternion, rpy_to_quat
 from ..physics.world import prepare_body
@@ -175,8 +176,9 @@ class EntityRequests:
         if len(existing) + adding > cap:
             raise RequestError(FAILED, f"spawn of {len(prepared)} entities ({adding} bodies): the world has "
                                        f"{len(existing)} bodies and max_bodies is {cap}")
-        # Names are frames (a body's on /tf, a sensor's), so the node's own frames are taken too.
-        frames_taken = {**node_frames(frames), **sensor_frames_taken(world.sensor_specs)}
+        # Names are frames (a body's on /tf, a sensor's), so the node's own frames are taken too,
+        # and the URDF robots' link frames.
+        frames_taken = frames_of_world(frames, world)
         names, suffixes = (set(existing) | {s["name"] for s in world.sensor_specs} | set(frames_taken)
                            | {robot["name"] for robot in world.robot_specs}), {}
         # Bodies and vehicles first: a sensor of the request rides the body of the request that
@@ -409,7 +411,8 @@ class EntityRequests:
         edited = validate_sensor({**spec, **fields}, name, parents)
         others = [s for s in world.sensor_specs if s is not spec]
         if sensor_frames(edited) != sensor_frames(spec):
-            taken = {**node_frames(frames), **sensor_frames_taken(others), **dict.fromkeys(parents, "a body's name"),
+            taken = {**node_frames(frames), **sensor_frames_taken(others),
+                     **urdf_robot_frames(world.robot_specs, frames), **dict.fromkeys(parents, "a body's name"),
                      **{s["name"]: "a sensor's name" for s in others}}
             clash = next((frame for frame in sensor_frames(edited) if frame in taken), None)
             if clash is not None:

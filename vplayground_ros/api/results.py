@@ -6,6 +6,7 @@ in their text.
 """
 import functools
 
+from ..frame_names import FrameTaken
 from ..physics import specs
 from ..scene import MissingMesh, UnsupportedMesh
 
@@ -62,10 +63,12 @@ def handled(fn):
 
 
 def spec_error_code(error):
-    """The code of a refused value, by its type: a bad name, a mesh file missing or of a type
-    no reader takes, else FAILED."""
+    """The code of a refused value, by its type: a bad name, a name that is another entity's
+    frame, a mesh file missing or of a type no reader takes, else FAILED."""
     if isinstance(error, specs.InvalidName):
         return NAME_INVALID
+    if isinstance(error, FrameTaken):
+        return NAME_NOT_UNIQUE
     if isinstance(error, MissingMesh):
         return MISSING_ASSETS
     if isinstance(error, UnsupportedMesh):
