@@ -521,8 +521,7 @@ def test_no_body_or_sensor_takes_a_robots_link_frame_nor_a_robot_a_bodys_name():
     with pytest.raises(SceneError, match=re.escape("robots[0].namespace: the robot rover's link 'left_wheel' would be "
                                                    "the frame 'left_wheel', which is the name of the body 'left_wheel'")):
         load_world({"version": 1, "robots": [ROVER], "bodies": [crate], "sensors": [imu]})
-    with pytest.raises(SceneError, match=re.escape("the frame 'lidar_link' is the frame of the link 'lidar_link' of "
-                                                   "the robot rover")):
+    with pytest.raises(SceneError, match=re.escape("the frame 'lidar_link' is a link of the robot rover")):
         load_world({"version": 1, "robots": [ROVER], "sensors": [{"name": "lidar_link", "type": "imu",
                                                                     "parent": "world"}]})
     # In the robot's own namespace its frames are rover/left_wheel...: the body may be left_wheel.
@@ -533,10 +532,10 @@ def test_no_body_or_sensor_takes_a_robots_link_frame_nor_a_robot_a_bodys_name():
     pair = [{"name": "lidar_link", "size": [0.3, 0.3, 0.3], "position": [3, 0, 0.15]},
             {"name": "box_imu", "type": "imu", "parent": "lidar_link"}]
     ok, message = requests.spawn(yaml.safe_dump(pair))
-    assert not ok and message.startswith("NAME_NOT_UNIQUE: [0].name: 'lidar_link' is the frame of the link "
-                                         "'lidar_link' of the robot rover"), message
+    assert not ok and message.startswith("NAME_NOT_UNIQUE: [0].name: 'lidar_link' is a link of the robot rover, "
+                                         "a frame the node publishes"), message
     ok, message = requests.spawn(yaml.safe_dump({"name": "left_wheel", "type": "imu", "parent": "world"}))
-    assert not ok and message.startswith("NAME_NOT_UNIQUE: spawn.name: 'left_wheel' is the frame of the link"), message
+    assert not ok and message.startswith("NAME_NOT_UNIQUE: spawn.name: 'left_wheel' is a link of the robot rover"), message
     assert requests.sim.world.body_names() == before and requests.sim.world.sensor_specs == []
     renamed = [{**pair[0], "allow_renaming": True}, pair[1]]
     assert requests.spawn(yaml.safe_dump(renamed)) == (True, "RESULT_OK: lidar_link_2, box_imu")

@@ -40,8 +40,7 @@ def urdf_robot_frames(robot_specs, frames=DEFAULT_FRAMES):
     out = {}
     for spec in robot_specs:
         prefix = namespace_prefix(spec["namespace"])
-        out.update({prefix + link: f"the frame of the link {link!r} of the robot {spec['name']}"
-                    for link in spec["model"].link_frames})
+        out.update({prefix + link: f"a link of the robot {spec['name']}" for link in spec["model"].link_frames})
         if spec.get("drive"):
             out.setdefault(prefix + frames.odom, f"the odom frame of the robot {spec['name']}")
     return out
