@@ -236,6 +236,22 @@ def test_filters(ros):
     assert call(ros, GetEntities, "get_entities", filters=EntityFilters(bounds=one_point)).result.result == FAILED
 
 
+def test_a_filter_finds_a_urdf_robot_by_its_name_to_list_and_to_remove(ros):
+    """A filter is searched in the entities' names, a URDF robot's among them: GetEntities and
+    ~/remove find the same (~/remove had looked at bodies and sensors alone: NOT_FOUND), and a
+    robot found goes whole, its links once even where the filter matched them too."""
+    for pattern in ("^filter_arm$", "^filter_arm"):  # the robot alone; the robot and its links (filter_arm.*)
+        ok, message = ros.text("spawn", "{name: filter_arm, urdf: arm.urdf, position: [-6, 6, 0]}")
+        assert ok, message
+        links = ros.sim.call(lambda world: next(r["bodies"] for r in world.robot_specs if r["name"] == "filter_arm"))
+        listed = call(ros, GetEntities, "get_entities", filters=EntityFilters(filter=pattern)).entities
+        assert "filter_arm" in listed
+        ok, message = ros.text("remove", f"{{filter: '{pattern}'}}")
+        assert (ok, message) == (True, f"RESULT_OK: {', '.join(links)}")  # its links' bodies, each once
+        assert call(ros, GetEntities, "get_entities", filters=EntityFilters(filter=pattern)).entities == []
+        assert call(ros, GetEntityState, "get_entity_state", entity="filter_arm").result.result == NOT_FOUND
+
+
 def test_simulation_states_and_stepping(ros):
     play(ros)
     assert set_state(ros, SimulationState.STATE_PLAYING).result == SetSimulationState.Response.ALREADY_IN_TARGET_STATE

@@ -434,7 +434,10 @@ class EntityRequests:
             if not isinstance(pattern, str) or not pattern or len(pattern) > MAX_FILTER:
                 raise RequestError(FAILED, f"remove.filter: expected a regular expression of 1-{MAX_FILTER} "
                                            f"characters, got {specs.quote(pattern)}")
-            names = self.sim.call(lambda world: world.body_names() + [s["name"] for s in world.sensor_specs])
+            # The names GetEntities filters too (entity_table): bodies, sensors and URDF robots,
+            # a robot matched taking its links with it.
+            names = self.sim.call(lambda world: world.body_names() + [s["name"] for s in world.sensor_specs]
+                                  + [robot["name"] for robot in world.robot_specs])
             doomed = match_names(pattern, names)  # here, not on the simulation thread
             if not doomed:
                 raise RequestError(NOT_FOUND, f"no entity matches {specs.quote(pattern)}")
@@ -455,7 +458,8 @@ class EntityRequests:
     @staticmethod
     def _remove(world, doomed, strict):
         robots = {robot["name"]: robot["bodies"] for robot in world.robot_specs}
-        doomed = [body for name in doomed for body in robots.get(name, [name])]  # a URDF robot: its links
+        # A URDF robot: its links (once, should a filter have matched them too).
+        doomed = list(dict.fromkeys(body for name in doomed for body in robots.get(name, [name])))
         present = set(world.body_names())
         sensors = {s["name"] for s in world.sensor_specs} & set(doomed)
         if strict and doomed and doomed[0] not in present and doomed[0] not in sensors:
