@@ -150,6 +150,27 @@ def test_spawn_from_a_file_in_the_scene_directories_and_relative_to_a_frame(ros)
     play(ros)
 
 
+def test_a_description_uri_is_found_as_the_yaml_spawns_urdf_is(ros):
+    """SpawnEntity's `uri` and ~/spawn's `urdf` find a description alike (one lookup): a bare
+    `car.urdf` is the package's built-in car (its config/, looked in last), as the README shows
+    the two side by side (the uri had answered "no file at 'car.urdf'"); a name found nowhere
+    is NOT_FOUND saying where it was looked for, and `..` never leads into the package."""
+    try:
+        reply = call(ros, SpawnEntity, "spawn_entity", name="uri_car", uri="car.urdf",
+                     initial_pose=pose(-20.0, -20.0, 1.0))
+        assert reply.result.result == OK, reply.result.error_message
+        ok, message = ros.text("spawn", "{name: urdf_car, urdf: car.urdf, position: [-20, -26, 1]}")
+        assert ok, message
+        assert {"uri_car", "urdf_car"} <= set(ros.sim.world.vehicle_names())
+        assert ros.sim.world.vehicle("uri_car")["wheels"] == ros.sim.world.vehicle("urdf_car")["wheels"]
+        for uri in ("no_such_robot.urdf", "../config/car.urdf"):
+            missing = call(ros, SpawnEntity, "spawn_entity", name="stray", uri=uri)
+            assert missing.result.result == NOT_FOUND and "not found" in missing.result.error_message, uri
+    finally:
+        for name in ("uri_car", "urdf_car"):
+            ros.text("remove", f"{{entity: {name}}}")
+
+
 def test_spawn_entities_reports_each(ros):
     def entry(name, text, x=0.0):  # SpawnEntities takes the SpawnEntity message: its resource a Resource
         return SpawnEntityMessage(name=name, entity_resource=Resource(resource_string=text), initial_pose=pose(x, 5.0, 3.0))

@@ -16,7 +16,7 @@ import numpy as np
 from . import messages
 from .api import INVALID_MAP_DATA, MAP_DOES_NOT_EXIST, MAP_SUCCESS
 from .api.entity_queries import category_of
-from .api.file_access import SCENE_SUFFIXES, confine, local_path
+from .api.file_access import SCENE_SUFFIXES, confine, find_description, local_path
 from .api.payload import MAX_PAYLOAD, parse
 from .api.results import (FAILED, FEATURE_UNSUPPORTED, INCORRECT_STATE, NAME_INVALID, NO_RESOURCE, NO_WORLD_LOADED,
                           NOT_FOUND, RESOURCE_PARSE_ERROR, UNSUPPORTED_FORMAT, RequestError, handled)
@@ -75,7 +75,8 @@ def plain_pose(pose):
 
 
 # What SpawnEntity's uri may name: this package's YAML entity spec, or a robot description.
-SPAWN_SUFFIXES = (".yaml", ".yml", ".urdf", ".xacro")
+DESCRIPTION_SUFFIXES = (".urdf", ".xacro")
+SPAWN_SUFFIXES = (".yaml", ".yml", *DESCRIPTION_SUFFIXES)
 
 
 def is_urdf(uri, text):
@@ -83,7 +84,7 @@ def is_urdf(uri, text):
     UNSUPPORTED_FORMAT for XML of another kind (SDFormat, MJCF), which had been read as a URDF
     that failed to parse."""
     if uri:
-        return uri.lower().endswith((".urdf", ".xacro"))
+        return uri.lower().endswith(DESCRIPTION_SUFFIXES)
     if not is_description_text(text):
         return False
     root = XML_ROOT.search(text)
@@ -194,13 +195,13 @@ class StandardServices:
         it is the default, the origin in no frame, which leaves the spec's pose) override it."""
         uri, text = resource_of(request)
         if uri:
-            text = self._read_resource(uri)
+            uri, text = self._read_resource(uri)
         elif not text:
             raise RequestError(NO_RESOURCE, "both uri and resource_string are empty")
         if is_urdf(uri, text):  # a robot description: the file's path (confined above), or the text
             if len(text.encode("utf-8", "surrogatepass")) > MAX_PAYLOAD:
                 raise RequestError(FAILED, f"the description is more than {MAX_PAYLOAD} bytes")
-            spec = {"urdf": str(local_path(uri)) if uri else text}
+            spec = {"urdf": uri or text}
             if not request.name:
                 spec["name"] = robot_name(text)
         else:
@@ -237,19 +238,28 @@ class StandardServices:
         return self.requests.spawn_entities(spec)
 
     def _read_resource(self, uri):
+        """(the file's path, its text) of a SpawnEntity uri: a robot description found as
+        ~/spawn's `urdf` is (find_description: the package's config/ last, so `car.urdf` is
+        the built-in car's), an entity spec in the scene directories; NOT_FOUND where none is."""
         suffix = Path(local_path(uri)).suffix.lower()
         if suffix not in SPAWN_SUFFIXES:
             raise RequestError(UNSUPPORTED_FORMAT, f"uri: {specs.quote(uri)}: entity files end in "
                                                    f"{' or '.join(SPAWN_SUFFIXES)} (spawn_formats {SPAWN_FORMATS})")
-        try:
-            target = confine(local_path(uri), "uri", self.requests.scene_directories, SPAWN_SUFFIXES,
-                             "entity files")
-        except RequestError as error:
-            raise RequestError(NOT_FOUND, str(error).partition(": ")[2]) from None
+        if suffix in DESCRIPTION_SUFFIXES:
+            try:
+                target = find_description(local_path(uri), self.requests.scene_directories, "uri")
+            except specs.SpecError as error:
+                raise RequestError(NOT_FOUND, str(error)) from None
+        else:
+            try:
+                target = confine(local_path(uri), "uri", self.requests.scene_directories, SPAWN_SUFFIXES,
+                                 "entity files")
+            except RequestError as error:
+                raise RequestError(NOT_FOUND, str(error).partition(": ")[2]) from None
         if not target.is_file():
             raise RequestError(NOT_FOUND, f"uri: no file at {specs.quote(uri)}")
         try:  # ValueError: larger than a request may be, a device, not UTF-8 (UnicodeDecodeError)
-            return read_capped(target, MAX_PAYLOAD, "uri").decode("utf-8")
+            return str(target), read_capped(target, MAX_PAYLOAD, "uri").decode("utf-8")
         except ValueError as error:
             raise RequestError(RESOURCE_PARSE_ERROR, f"uri: cannot read {target}: {str(error)[:300]}") from None
 

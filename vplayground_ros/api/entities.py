@@ -16,12 +16,12 @@ from ..physics import specs
 from ..physics.math3d import matrix_to_quaternion, rpy_to_quat
 from ..physics.world import prepare_body
 from ..robots import validate_robot, world_robots
-from ..scene import body_mesh_points, resolve_mesh
+from ..scene import body_mesh_points
 from ..sensors import TYPES as SENSOR_TYPES, pose_matrix, validate_sensor
 from ..urdf_robots import (add_robot_entry, check_against_model, description_source, is_description_text, robot_spec,
                            validate_entry, vehicle_entry)
 from .descriptions import describe, describe_robot, describe_sensor
-from .file_access import allowed_directories
+from .file_access import allowed_directories, find_description
 from .frames import frame_pose, pose_in_world
 from .name_filter import MAX_FILTER, match_names
 from .naming import unique_name
@@ -146,7 +146,7 @@ class EntityRequests:
         from ..urdf_import import read_description
         source = description_source(item, path)
         if not is_description_text(source):
-            source = str(resolve_mesh(source, Path.cwd(), self.scene_directories, f"{path}.urdf", "config"))
+            source = str(find_description(source, self.scene_directories, f"{path}.urdf"))
         description = described(lambda: read_description(source, f"{path}.urdf", allow_xacro=False))
         return source, description, described(lambda: vehicle_entry({**item, "urdf": source}, path, description[0],
                                                                     f"{path}.urdf"))

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from ..physics import specs
 from ..resources import find_shared
+from ..scene import resolve_mesh
 from .results import FAILED, RequestError
 
 MAX_PATH = 4096  # characters of a scene path (PATH_MAX)
@@ -68,6 +69,14 @@ def confine(raw, what, directories, suffixes=SCENE_SUFFIXES, kind="scene files")
     if resolved.suffix.lower() not in suffixes:
         raise RequestError(FAILED, f"{what}: {specs.quote(raw)}: {kind} end in {' or '.join(suffixes)}")
     return resolved
+
+
+def find_description(name, directories, key):
+    """The file of a robot description a request names (~/spawn's `urdf`, SpawnEntity's `uri`),
+    found as a scene's robot is (scene.resolve_mesh): absolute, else from the working directory,
+    inside `directories` (the scene directories), else the package's config/ (`car.urdf` is the
+    built-in car's; never a name with `..`). MissingMesh, naming `key`, where it looked."""
+    return resolve_mesh(name, Path.cwd(), directories, key, "config")
 
 
 def write_file(target, data, overwrite):
