@@ -630,3 +630,40 @@ def test_remaps_and_a_namespace_name_the_bag_and_foxglove_channels_as_the_graph(
     assert {"/wheel_odom", "/sim/joint_states", "/sim/vplayground/state", "/sim/vplayground/car/ground_truth",
             "/clock", "/tf"} <= names, sorted(names)
     assert "/sim/odom" not in names and "/odom" not in names
+
+
+def test_a_removed_robots_and_sensors_topics_are_no_longer_advertised(ros):
+    """A robot (a vehicle, a URDF robot) or a sensor that is removed takes its topics off the
+    graph: spawning and removing under new names had left every publisher advertised for ever.
+    A topic another robot still publishes on stays, and one spawned again under the same name
+    has its topics again. (Last in this file: the default car goes and comes back.)"""
+    car_c = ["/car_c/odom", "/car_c/joint_states", f"{NS}/car_c/ground_truth", f"{NS}/car_c/command",
+             f"{NS}/car_c/markers"]
+    others = ["/arm_c/joint_states", "/c_imu/data"]
+    root = ["/odom", "/joint_states", "/scan"]  # the default car's, and its lidar's
+
+    def advertised(topics, count=1):
+        return lambda: all(ros.client.count_publishers(topic) == count for topic in topics)
+
+    def explain(topics):
+        return lambda: {topic: ros.client.count_publishers(topic) for topic in topics}
+    for spec in ("{name: car_c, urdf: car.urdf, position: [0, -20, 1]}",
+                 "{name: arm_c, urdf: arm.urdf, position: [-10, 12, 0]}",
+                 "{name: c_imu, type: imu, parent: world, pose: [0, 0, 3, 0, 0, 0]}"):
+        ok, message = ros.text("spawn", spec)
+        assert ok, message
+    assert wait_for(advertised(car_c + others + root), explain=explain(car_c + others + root))
+    for name in ("car_c", "arm_c", "c_imu"):
+        assert ros.text("remove", f"{{entity: {name}}}")[0]
+    assert wait_for(advertised(car_c + others, 0), explain=explain(car_c + others))
+    assert all(ros.client.count_publishers(topic) == 1 for topic in root)  # the default car's stay
+    # Spawned again under its name: advertised again.
+    assert ros.text("spawn", "{name: car_c, urdf: car.urdf, position: [0, -20, 1]}")[0]
+    assert wait_for(advertised(car_c), explain=explain(car_c))
+    assert ros.text("remove", "{entity: car_c}")[0]
+    assert wait_for(advertised(car_c, 0), explain=explain(car_c))
+    # The root namespace's topics go with its robot, and come back with the next that takes it.
+    assert ros.text("remove", "{entity: car}")[0]
+    assert wait_for(advertised(root + [f"{NS}/car/ground_truth"], 0), explain=explain(root))
+    assert ros.text("spawn", "{name: car, urdf: car.urdf, position: [10, -10, 1]}")[0]
+    assert wait_for(advertised(["/odom", "/joint_states", f"{NS}/car/ground_truth"]), explain=explain(root))

@@ -185,7 +185,9 @@ class Broadcaster:
         self._descriptions = {}         # robot_description topic key -> the URDF last sent
         self._visuals_sent = ([], [])   # the URDF robots' frame prefixes and Visual lists last drawn
         self._sensor_topics = {}        # (sensor name, type, suffix) -> topic key
+        self._present = None            # (vehicle specs, robot specs, sensor specs) _withdraw_gone last saw
         self._sensor_job = Job("sensors", math.inf, self.publish_readings)  # errors counted like a job's
+        self._withdrawals = Job("withdrawals", math.inf, self._withdraw_gone)  # the same
         self._jobs = {
             "state": Job("state", 1.0 / parameters["publish_rate"], self.publish_state),
             "markers": Job("markers", 1.0 / parameters["marker_rate"], self.publish_markers),
@@ -253,7 +255,7 @@ class Broadcaster:
         key = self._sensor_topics.get(ident)
         if key is None:
             topic = next(t for t in sensor_messages.topics(spec, robot) if t.suffix == suffix)
-            key = f"sensor:{topic.name}:{topic.type}"
+            key = sensor_key(topic)
             self.topics[key] = Topic(key, self.resolve_name(topic.name), topic.type, SENSOR_QOS)
             self._sensor_topics[ident] = key
         return key
@@ -268,6 +270,40 @@ class Broadcaster:
             self.topics[topic.key] = topic
             self._robot_topics[ident] = key = topic.key
         return key
+
+    def _withdraw_gone(self, snapshot):
+        """The topics of the robots and sensors that are gone (removed, another scene) no longer
+        advertised: each sink that advertises (the ROS publishers: `withdraw`) drops them, so
+        spawning and removing under new names does not grow the node's publishers for ever.
+        A topic an entity of the snapshot publishes on stays (the root namespace's /odom, taken
+        over by another robot), and a robot or sensor spawned again gets its topics again on
+        first use. The latched ones (robot_description) are retracted where they are sent;
+        the bag keeps its channels. On the thread that publishes these topics (the publisher's,
+        or the simulation's while it drains), when the snapshot's entities changed."""
+        present = (snapshot.vehicle_specs, snapshot.robot_specs, snapshot.sensor_specs)
+        if self._present is not None and all(a is b for a, b in zip(present, self._present)):
+            return
+        self._present = present
+        robots = self.robots(snapshot)
+        live = {topic.key for r in (*robots, *self.urdf_robots(snapshot))
+                for topic in robot_topics(r, self.resolve_name).values()}
+        carriers = {**link_carriers(snapshot.robot_specs), **{r.name: r for r in robots}}
+        live.update(sensor_key(topic) for spec in snapshot.sensor_specs
+                    for topic in sensor_messages.topics(spec, carriers.get(spec["parent"])))
+        robot_keys, sensor_keys = dict(self._robot_topics), dict(self._sensor_topics)  # (the simulation thread adds)
+        kept_robots = {ident: key for ident, key in robot_keys.items()
+                       if key in live or self.topics[key].qos == "latched"}
+        kept_sensors = {ident: key for ident, key in sensor_keys.items() if key in live}
+        gone = ({*robot_keys.values(), *sensor_keys.values()} - {*kept_robots.values(), *kept_sensors.values()})
+        if not gone:
+            return
+        self._robot_topics, self._sensor_topics = kept_robots, kept_sensors
+        for key in gone:
+            topic = self.topics.pop(key)
+            self._sent_empty.discard(key)
+            for sink in self.sinks:
+                if hasattr(sink, "withdraw"):
+                    sink.withdraw(topic)
 
     def robots(self, snapshot):
         """The robots (robots.Robot) of the snapshot's vehicles, in the World's order; made again
@@ -488,6 +524,7 @@ class Broadcaster:
 
     def _publish_round(self, item):
         snapshot, jobs, cells = item
+        self._run(self._withdrawals, snapshot)
         for job in jobs:
             self._run(job, snapshot)
         if cells is not None:
@@ -547,6 +584,7 @@ class Broadcaster:
 
     def _publish_paused(self):
         now, snapshot = time.monotonic(), self.sim.snapshot
+        self._run(self._withdrawals, snapshot)
         for name in PAUSED_JOBS:
             job = self._jobs[name]
             if now < job.wall_due:
@@ -913,6 +951,11 @@ def check_topics(sensor_specs, robots, robot_specs=()):
         for topic in sensor_messages.topics(spec, carriers.get(spec["parent"])):
             claim(resolve(topic.name), f"the sensor {spec['name']}'s", f"{spec['name']}.topic",
                   " (give the sensor a `topic`)")
+
+
+def sensor_key(topic):
+    """The topic table's key of a sensor's topic (sensor_messages.SensorTopic): its name and type."""
+    return f"sensor:{topic.name}:{topic.type}"
 
 
 def robot_topics(robot, resolve_name=resolve):

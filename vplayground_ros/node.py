@@ -122,6 +122,11 @@ class RosSink:
 
     def retract(self, topic):
         """A latched topic that ended: its transient-local publisher would serve it for ever."""
+        self.withdraw(topic)
+
+    def withdraw(self, topic):
+        """A topic nothing publishes on any longer (its robot or sensor gone): no longer
+        advertised (made again should it come back)."""
         publisher = self.publishers.pop(topic.key, None)
         if publisher is not None:
             self.node.destroy_publisher(publisher)

@@ -69,6 +69,7 @@ class Snapshot:
     scenery: "Scenery" = None
     robot_specs: list = field(default_factory=list)  # World.robot_specs (URDF robots; shared)
     robot_joints: dict = field(default_factory=dict)  # URDF robot name -> World.joint_states of its joints
+    sensor_specs: list = field(default_factory=list)  # World.sensor_specs (shared: a new list when they change)
     # Counts the states: a snapshot taken after a command that changed nothing (a query) keeps
     # the one before's, and what goes out only on change while paused is not sent again.
     version: int = 0
@@ -414,7 +415,7 @@ class Simulation:
             vehicles={name: world.vehicle_state(name) for name in layout.vehicle_names},
             contacts=world.contacts() if self.with_contacts else None,
             vehicle_specs=layout.vehicle_specs, vehicle_ids=layout.vehicle_ids, scenery=layout.scenery,
-            robot_specs=layout.robot_specs,
+            robot_specs=layout.robot_specs, sensor_specs=world.sensor_specs,
             robot_joints={robot["name"]: world.joint_states(robot["model"].joint_names.values())
                           for robot in layout.robot_specs})
 
