@@ -550,6 +550,32 @@ def test_no_body_or_sensor_takes_a_robots_link_frame_nor_a_robot_a_bodys_name():
     assert requests.spawn(yaml.safe_dump({"name": "rover", "urdf": "rover.urdf", "namespace": "rover"}))[0]
 
 
+def test_a_teleported_drive_starts_its_odometry_again_where_it_stands(run):
+    """A URDF robot with a drive moved by ~/edit (it could not have driven there) starts its
+    wheel odometry again at its true pose, world -> odom as at its spawn, as a vehicle's does:
+    its wheels did not turn, and the odometry had stayed where it was left (odom jumped)."""
+    runtime, sink = run({"version": 1, "robots": [ROVER]})
+    advance(runtime, 0.5)
+
+    def odom_in_world():
+        edge = next(t for t in sink.of("tf", TF)[-1][1].transforms if t.child_frame_id == "odom")
+        assert edge.header.frame_id == "world"
+        return edge.transform.translation
+    spawned = odom_in_world()
+    start = runtime.sim.call(lambda world: world.body("rover.base_footprint")["position"])
+    ok, message = runtime.requests.edit(yaml.safe_dump({"entity": "rover",
+                                                        "position": [start[0] + 5.0, start[1] + 2.0, start[2]]}))
+    assert ok, message
+    advance(runtime, 0.5)
+    truth = runtime.sim.call(lambda world: world.body("rover.base_footprint")["position"])
+    assert wait_for(lambda: abs(latest(sink, "/odom", ODOMETRY).pose.pose.position.x - truth[0]) < 0.05,
+                    explain=lambda: (latest(sink, "/odom", ODOMETRY).pose.pose.position, truth))
+    odometry = latest(sink, "/odom", ODOMETRY).pose.pose.position
+    assert math.hypot(odometry.x - truth[0], odometry.y - truth[1]) < 0.05
+    moved = odom_in_world()
+    assert math.hypot(moved.x - spawned.x, moved.y - spawned.y) < 0.05, (moved, spawned)
+
+
 def test_robots_are_drawn_by_their_visual_elements_locked_to_their_links(run):
     """~/robots/visuals (latched) draws each link's <visual> (meshes as triangles, in the
     description's colours) in the link's frame, frame-locked so /tf moves it; the robots' bodies

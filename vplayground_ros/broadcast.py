@@ -171,7 +171,7 @@ class Broadcaster:
         self._tf_frames = None   # (key, rows of the bodies on /tf, parents, children) last made
         self._robots = None      # (key, [robots.Robot]) last made
         self._urdf_robots = None  # (key, [urdf_robots.UrdfRobot]) last made
-        self._wheel_odometry = {}  # URDF robot name -> its WheelOdometry
+        self._wheel_odometry = {}  # URDF robot name -> (its WheelOdometry, the root position it last saw)
         self._odometry = {}      # robot name -> (OdometryTracker, its error model, the car's body id)
         self._last_clock = -math.inf
         self._last_clock_step = None  # (world, step) of the last batch's /clock
@@ -692,13 +692,19 @@ class Broadcaster:
         """A drive's odometry from its wheel joints (odom -> root, the message), and the true
         pose over it (<world_frame> -> odom) with ground_truth localization."""
         wheels = [positions[r.joint_names.index(joint)] for joint in drive_joints(r.drive)]
-        odometry = self._wheel_odometry.get(r.name)
-        if odometry is None or odometry.drive is not r.drive or snap.time < odometry.time:
+        odometry, seen = self._wheel_odometry.get(r.name, (None, None))
+        velocity = snap.state["linear_velocities"][r.body_rows[0]]
+        # Started at the true pose (world -> odom as at spawn) when the robot is new, its drive
+        # changed, time went back or it was put where it could not have driven to (a teleport:
+        # ~/edit, SetEntityState), as a vehicle's odometry (odometry_tracker).
+        if (odometry is None or odometry.drive is not r.drive
+                or not drove(seen, odometry.time, root[:3], velocity, snap.time)):
             level = footprint_pose(root[:3], root[3:], 0.0)[1]  # the heading alone
             yaw = 2.0 * math.atan2(level[2], level[3])
-            odometry = self._wheel_odometry[r.name] = WheelOdometry(r.drive, (root[0], root[1], yaw), wheels, snap.time)
+            odometry = WheelOdometry(r.drive, (root[0], root[1], yaw), wheels, snap.time)
         else:
             odometry.update(wheels, snap.time)
+        self._wheel_odometry[r.name] = (odometry, root[:3])
         measured = odometry.pose()
         odom = r.frame(self.frames.odom)
         edges = []
@@ -726,7 +732,7 @@ class Broadcaster:
         if entry is not None:
             tracker, last_model, last_id = entry
             if (last_model == model and last_id == body_id
-                    and (tracker.noiseless or drove(tracker, truth, velocity, snap.time))):
+                    and (tracker.noiseless or drove(tracker.position, tracker.time, truth[0], velocity, snap.time))):
                 return tracker
         tracker = OdometryTracker(name, model)
         tracker.reset(*truth, snap.time)
@@ -899,14 +905,15 @@ class Broadcaster:
                 self.send(keys[suffix], data, reading["time"])
 
 
-def drove(tracker, truth, velocity, seconds):
-    """Whether a robot could have driven from where its odometry last saw it to its true pose
-    now (not when time went back, or it was put somewhere else)."""
-    dt = seconds - tracker.time
+def drove(seen, seen_time, position, velocity, seconds):
+    """Whether a robot could have driven from where its odometry last saw it (`seen`, at
+    `seen_time`) to its true `position` now, at `velocity` (not when time went back, or it was
+    put somewhere else)."""
+    dt = seconds - seen_time
     if dt < 0.0:
         return False
     reach = (float(np.linalg.norm(velocity)) + MAX_ACCELERATION * dt) * dt + TELEPORT_SLACK
-    return float(np.linalg.norm(np.subtract(truth[0], tracker.position))) <= reach
+    return float(np.linalg.norm(np.subtract(position, seen))) <= reach
 
 
 def check_sensors(sensor_specs, robots, robot_specs=()):
