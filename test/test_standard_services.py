@@ -123,7 +123,7 @@ def test_spawn_entity_and_its_result_codes(ros):
         assert refused not in names
 
 
-def test_spawn_from_a_file_in_the_scene_directories_and_relative_to_a_frame(ros):
+def test_spawn_from_a_file_in_the_scene_directories_and_relative_to_a_frame(ros, tmp_path):
     (ros.scene_directory / "crate.yaml").write_text("shape: box\nsize: [0.4, 0.4, 0.4]\nmass: 1.0\n")
     assert set_state(ros, SimulationState.STATE_PAUSED).result == OK  # si_box stays where it is read
     reply = call(ros, SpawnEntity, "spawn_entity", name="crate", uri=str(ros.scene_directory / "crate.yaml"),
@@ -144,9 +144,11 @@ def test_spawn_from_a_file_in_the_scene_directories_and_relative_to_a_frame(ros)
     (ros.scene_directory / "notes.txt").write_text("shape: box\n")
     other = call(ros, SpawnEntity, "spawn_entity", name="notes", uri=str(ros.scene_directory / "notes.txt"))
     assert other.result.result == SpawnEntity.Response.UNSUPPORTED_FORMAT and ".urdf" in other.result.error_message
-    outside = call(ros, SpawnEntity, "spawn_entity", name="outside",
-                   uri=str(Path(__file__).parent.parent / "config" / "arm.urdf"))
-    assert outside.result.result == NOT_FOUND and "outside the scene directories" in outside.result.error_message
+    # (The package's own config/arm.urdf is not outside: found by any path to it, as by its name,
+    # for the uri as for ~/spawn's urdf.)
+    (tmp_path / "arm.urdf").write_text((Path(__file__).parent.parent / "config" / "arm.urdf").read_text())
+    outside = call(ros, SpawnEntity, "spawn_entity", name="outside", uri=str(tmp_path / "arm.urdf"))
+    assert outside.result.result == NOT_FOUND and "outside the allowed directories" in outside.result.error_message
     play(ros)
 
 
