@@ -548,6 +548,13 @@ def test_no_body_or_sensor_takes_a_robots_link_frame_nor_a_robot_a_bodys_name():
                                          "be the frame 'left_wheel', which is the name of the body 'left_wheel'"), message
     assert requests.sim.world.body_names() == ["left_wheel"] and requests.sim.world.robot_specs == []
     assert requests.spawn(yaml.safe_dump({"name": "rover", "urdf": "rover.urdf", "namespace": "rover"}))[0]
+    # ... or where a sensor's frame is.
+    requests = Requests(Simulation(load_world({"version": 1, "sensors": [{"name": "lidar_link", "type": "imu",
+                                                                          "parent": "world"}]})), scene_directories=[])
+    ok, message = requests.spawn(yaml.safe_dump({"name": "rover", "urdf": "rover.urdf"}))
+    assert not ok and message.startswith("NAME_NOT_UNIQUE: spawn.namespace: the robot rover's link 'lidar_link' would "
+                                         "be the frame 'lidar_link', which is the frame of the sensor lidar_link"), message
+    assert requests.sim.world.body_names() == [] and [s["name"] for s in requests.sim.world.sensor_specs] == ["lidar_link"]
 
 
 def test_a_teleported_drive_starts_its_odometry_again_where_it_stands(run):

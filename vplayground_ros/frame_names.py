@@ -4,7 +4,7 @@ its frame too, so such a name would give a frame two parents, or a loop. A names
 frames hold a '/', which no entity name does."""
 from .parameters import FRAMES, Frames
 from .physics.specs import SpecError
-from .robots import STACK_FRAMES, frames_of, namespace_prefix, robot_frames
+from .robots import STACK_FRAMES, frames_of, namespace_prefix, robot_frames, world_robots
 from .sensor_messages import optical_frame
 from .sensors import CAMERAS, WORLD
 from .urdf_robots import link_carriers
@@ -49,9 +49,10 @@ def urdf_robot_frames(robot_specs, frames=DEFAULT_FRAMES):
 def frames_taken(frames, world):
     """{frame: what it is} of every frame a new body's or sensor's name may not be, beside the
     names of the entities there: the node's own (node_frames), the sensors' that are not their
-    names (sensor_frames_taken) and the URDF robots' (urdf_robot_frames). The one rule of
-    ~/spawn (and SpawnEntity), a sensor's edit and a scene's names (check_robot_frames is its
-    other side: a robot added where a body has one of its frames' names)."""
+    names (sensor_frames_taken) and the URDF robots' (urdf_robot_frames). ~/spawn's (and so
+    SpawnEntity's) and a sensor edit's rule; its other side is check_robot_frames (a robot
+    added where a body's or sensor's frame has one of its frames' names), which a scene's
+    robots meet as they are added, and check_sensor_frames its sensors."""
     return {**node_frames(frames), **sensor_frames_taken(world.sensor_specs),
             **urdf_robot_frames(world.robot_specs, frames)}
 
@@ -60,19 +61,25 @@ class FrameTaken(SpecError):
     """A name that is another entity's frame (NAME_NOT_UNIQUE over the services)."""
 
 
-def check_robot_frames(world, name, model, namespace, path):
+def check_robot_frames(world, name, model, namespace, path, frames=DEFAULT_FRAMES):
     """Refuses (FrameTaken) a URDF robot whose frames in `namespace` (its links', after the
-    namespace) would be a body's name in `world`: a body's name is its frame on /tf (with a
-    sensor, or publish_body_frames), so that frame would have two parents. The sensors' frames
-    are checked against the robots' once it is added (check_sensor_frames)."""
+    namespace) would be a body's name in `world` (a body's name is its frame on /tf, with a
+    sensor or publish_body_frames) or a sensor's frame there: that frame would have two
+    parents. Names the link, the frame and whose it is."""
     prefix = namespace_prefix(namespace)
-    bodies = set(world.body_names())
-    clash = next((link for link in model.link_frames if prefix + link in bodies), None)
+    taken = {body: f"the name of the body {body!r}" for body in world.body_names()}
+    frame_of = sensor_frame(world_robots(world, frames), link_carriers(world.robot_specs))
+    for spec in world.sensor_specs:
+        frame = frame_of(spec)
+        taken[frame] = f"the frame of the sensor {spec['name']}"
+        if spec["type"] in CAMERAS:
+            taken[optical_frame(frame)] = f"the optical frame of the sensor {spec['name']}"
+    clash = next((link for link in model.link_frames if prefix + link in taken), None)
     if clash is not None:
         frame = prefix + clash
         raise FrameTaken(f"{path}.namespace", f"the robot {name}'s link {clash!r} would be the frame {frame!r}, which "
-                                              f"is the name of the body {frame!r} (names are frames: give the body "
-                                              "another name, or the robot a namespace)")
+                                              f"is {taken[frame]} (names are frames: another name for that, or a "
+                                              "namespace for the robot)")
 
 
 def check_sensor_frames(sensor_specs, robots, robot_specs=()):

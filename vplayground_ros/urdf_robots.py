@@ -207,8 +207,8 @@ def add_robot_entry(world, entry, model, path, frames):
     world.robot_specs with its namespace: the entry's, else the root one if no vehicle or robot
     has it (and none of its links would be a reserved frame there), else its name's. `frames`
     (parameters.Frames): no link may be the world frame, a stack's or, with a drive, the odom
-    frame, nor a body's name (frame_names.check_robot_frames: FrameTaken). Returns the bodies
-    added."""
+    frame, nor a body's name or a sensor's frame (frame_names.check_robot_frames: FrameTaken).
+    Returns the bodies added."""
     from .frame_names import check_robot_frames  # (it imports this module)
     from .urdf_import import add_robot
     taken = world.robot_namespaces()
@@ -225,7 +225,7 @@ def add_robot_entry(world, entry, model, path, frames):
     if clash is not None:
         raise specs.SpecError(f"{path}.namespace", f"its link {clash!r} would be the frame {prefix + clash!r}, which "
                                                    "the node or a stack publishes: give the robot a namespace")
-    check_robot_frames(world, entry["name"], model, namespace, path)
+    check_robot_frames(world, entry["name"], model, namespace, path, frames)
     added = add_robot(world, model)
     limits = {spec["name"]: (spec["motor"]["max_effort"], spec["motor"]["max_speed"]) for spec in model.joints}
     if entry.get("hold"):  # powered on: position motors hold where the joints start (a mimic follows its own)
