@@ -1,7 +1,7 @@
 """The entity services: ~/spawn, ~/edit, ~/remove, ~/get_entity, ~/get_entities. Bodies,
 vehicles and sensors are entities; their names are unique among all three, and are frames, so
 they are none of the frames the node publishes besides (world, odom, base_link, the wheels', the
-cameras' optical frames). A pose's frame_id may be any frame the node publishes (frames.py).
+cameras' optical frames, a URDF robot's links': frame_names.frames_taken). A pose's frame_id may be any frame the node publishes (frames.py).
 """
 import logging
 from pathlib import Path
