@@ -387,6 +387,27 @@ def test_a_fast_car_steers_steadily(speed, yaw_rate):
     assert np.abs(np.diff(yaw_rates)).max() < 1e-3 and np.abs(roll_rates).max() < 0.01
 
 
+def test_the_steering_turns_at_its_rate_to_the_bicycle_angle():
+    """An actuator turns at a rate: the steering had snapped to any angle within a step. The
+    centre-line steer goes at max_steer_rate to the bicycle model's angle and stays there; an
+    edited rate acts; a rate that is no rate is refused."""
+    world = car_world(freezing=False)
+    world.drive("car", 2.0, 0.5, timeout=100)  # atan(0.5 x 2.6 / 2) = 0.576 rad
+    steers = []
+    for _ in range(64):
+        world.step(1)
+        steers.append(world.vehicle_state("car")["steer"])
+    steps = np.diff([0.0, *steers])
+    assert np.all(steps <= 1.5 / 128 + 1e-12) and steps[:40] == pytest.approx(1.5 / 128, rel=1e-9)
+    assert steers[-1] == pytest.approx(math.atan(0.5 * 2.6 / 2.0), abs=0.01)
+    world.edit_vehicle("car", max_steer_rate=6.0)
+    world.drive("car", 2.0, -0.5, timeout=100)
+    world.step(1)
+    assert world.vehicle_state("car")["steer"] == pytest.approx(steers[-1] - 6.0 / 128, abs=1e-9)
+    with pytest.raises(ValueError, match="max_steer_rate: must be >= 0.001"):
+        world.edit_vehicle("car", max_steer_rate=0.0)
+
+
 def test_a_slow_command_keeps_the_car_from_freezing():
     """0.03 m/s re-sent once a second (Foxglove Teleop's default): below the freezing speed,
     the car froze for a third of the time between commands."""

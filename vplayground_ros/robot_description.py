@@ -35,7 +35,7 @@ STEER_LIMIT = 0.5 * math.pi  # the inner wheel of an Ackermann turn goes beyond 
 ZERO = (0.0, 0.0, 0.0)
 # The description's own element for what makes it a ray-cast vehicle here, and what it keeps.
 EXTENSION = "vplayground"
-VEHICLE_NUMBERS = ("engine_power", "brake_power", "max_steer")
+VEHICLE_NUMBERS = ("engine_power", "brake_power", "max_steer", "max_steer_rate")
 CHASSIS_KEYS = ("elasticity", "static_friction", "dynamic_friction", "immovable", "allow_freezing")
 CHASSIS_FLAGS = ("immovable", "allow_freezing")
 MOUNT_TOLERANCE = 1.0e-9  # m: a wheel's mount against its suspension joint's origin and limit
@@ -116,7 +116,7 @@ def text(value):
 
 
 def vehicle_from_description(description, label):
-    """The vehicle spec (chassis, wheels, engine_power, brake_power, max_steer; as a scene's
+    """The vehicle spec (chassis, wheels, engine_power, brake_power, max_steer, max_steer_rate; as a scene's
     `vehicles` entry has them) of a description with a <vplayground><vehicle> element, as
     ray_cast_vehicle writes it; None for a description without one. UrdfError naming the
     element for one that does not hold together."""

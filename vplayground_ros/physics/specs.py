@@ -354,9 +354,10 @@ WHEEL_DEFAULTS = {
 }
 VEHICLE_DEFAULTS = {
     "position": [0.0, 0.0, 1.0], "engine_power": 6000.0, "brake_power": 9000.0, "max_steer": 0.6,
+    "max_steer_rate": 1.5,
 }
 VEHICLE_KEYS = {"name", "position", "rpy", "quaternion", "linear_velocity", "angular_velocity",
-                "chassis", "engine_power", "brake_power", "max_steer", "wheels"}
+                "chassis", "engine_power", "brake_power", "max_steer", "max_steer_rate", "wheels"}
 # What a vehicle is as a ROS robot (vplayground_ros.robots): kept with it, no physics. Its
 # `odometry` error model is a mapping whose keys vplayground_ros.odometry checks (scene files and
 # ~/spawn do, before the World is asked).
@@ -403,11 +404,11 @@ def validate_wheel_fields(raw, path):
     return {key: full[key] for key in raw}
 
 
-VEHICLE_EDIT_KEYS = {"engine_power", "brake_power", "max_steer", "wheels"}
+VEHICLE_EDIT_KEYS = {"engine_power", "brake_power", "max_steer", "max_steer_rate", "wheels"}
 
 
 def validate_vehicle_edit(raw, path):
-    """A partial vehicle edit: engine_power, brake_power, max_steer, and wheels as a mapping
+    """A partial vehicle edit: engine_power, brake_power, max_steer, max_steer_rate, and wheels as a mapping
     from wheel index (0-3: front-left, front-right, rear-left, rear-right) to wheel keys."""
     mapping(raw, path, VEHICLE_EDIT_KEYS)
     full = validate_vehicle({"chassis": {"size": [1, 1, 1], "mass": 1},
@@ -449,6 +450,8 @@ def validate_vehicle(raw, path="vehicle"):
             out[key] = number(value, p, 0.0, 1.0e9)
         elif key == "max_steer":
             out[key] = number(value, p, 0.0, 1.5)
+        elif key == "max_steer_rate":  # rad/s: the steering's actuator (0.001 to a turn a step at 1,000 Hz)
+            out[key] = number(value, p, 1.0e-3, 1.0e4)
         elif key == "namespace":
             if not isinstance(value, str) or not NAMESPACE_PATTERN.fullmatch(value):
                 raise SpecError(p, f"{quote(value)} is not a relative ROS namespace (letters, digits and '_' in "

@@ -35,7 +35,7 @@ WHEELS = 4
 
 VehicleArrays = namedtuple("VehicleArrays", [
     "active", "chassis",          # (V,) bool, body slot of the chassis
-    "engine_power", "brake_power", "max_steer",  # (V,) N, N per wheel, rad
+    "engine_power", "brake_power", "max_steer", "max_steer_rate",  # (V,) N, N per wheel, rad, rad/s
     "wheelbase", "rear_axle",     # (V,) m along the chassis x axis (from the mounts)
     # Wheels (V, 4): mount (V, 4, 3) in the chassis frame, then the SPEC 3 wheel properties.
     "mount", "radius", "power_gain", "steered", "stiffness", "damper", "spring_length",
@@ -65,7 +65,7 @@ def allocate_vehicles(capacity):
     f = lambda *shape: np.zeros((capacity,) + shape)  # noqa: E731
     return VehicleArrays(
         active=np.zeros(capacity, np.bool_), chassis=np.zeros(capacity, np.int64),
-        engine_power=f(), brake_power=f(), max_steer=f(), wheelbase=f(), rear_axle=f(),
+        engine_power=f(), brake_power=f(), max_steer=f(), max_steer_rate=f(), wheelbase=f(), rear_axle=f(),
         mount=f(WHEELS, 3), radius=f(WHEELS), power_gain=f(WHEELS),
         steered=np.zeros((capacity, WHEELS), np.bool_), stiffness=f(WHEELS), damper=f(WHEELS),
         spring_length=f(WHEELS), static_friction=f(WHEELS), dynamic_friction=f(WHEELS),
@@ -120,16 +120,20 @@ def control(vehicles, v, speed, yaw_rate, hold, dt):
     else:
         curvature, model = 0.0, (limit if wanted_yaw > 0.0 else (-limit if wanted_yaw < 0.0 else 0.0))
     # The yaw-rate loop adds what the tyres' slip takes off, YAW_LOOP_SHARE of the error a step
-    # (integrating: no error left in a steady turn), within the steering's reach.
+    # (integrating: no error left in a steady turn). The steering turns at most max_steer_rate
+    # (an actuator: it had snapped to any angle within a step) within its reach; the loop keeps
+    # only what the steering could follow (no wind-up while it turns).
     correction = 0.0
     if abs(speed) > YAW_LOOP_SPEED and target != 0.0:
         error = curvature * speed - yaw_rate
         correction = vehicles.steer_correction[v] + YAW_LOOP_SHARE * error * wheelbase / speed
-        correction = min(max(model + correction, -limit), limit) - model
-    vehicles.steer_correction[v] = correction
+    reach = vehicles.max_steer_rate[v] * dt
+    previous = vehicles.steer[v]
+    steer = min(max(model + correction, -limit, previous - reach), limit, previous + reach)
+    vehicles.steer_correction[v] = steer - model if correction != 0.0 else 0.0
     vehicles.throttle[v] = throttle
     vehicles.brake[v] = brake
-    vehicles.steer[v] = min(max(model + correction, -limit), limit)
+    vehicles.steer[v] = steer
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, no_cpython_wrapper=True)

@@ -7,6 +7,7 @@ from . import specs
 from .vehicle import allocate_vehicles, grow_vehicles
 
 DEFAULT_COMMAND_TIMEOUT = 1.2  # s: SPEC 6.4 cmd_vel_timeout
+VEHICLE_NUMBERS = ("engine_power", "brake_power", "max_steer", "max_steer_rate")  # spec key = array
 
 # Kernel state that starts at zero for a new vehicle (a reused row must not inherit any).
 RESET_FIELDS = ("command_speed", "command_yaw_rate", "command_age", "speed_integral",
@@ -37,7 +38,7 @@ class VehicleRegistry:
             free = np.nonzero(~rows.active)[0]
         row = int(free[0])
         rows.active[row], rows.chassis[row] = True, chassis_slot
-        for key in ("engine_power", "brake_power", "max_steer"):
+        for key in VEHICLE_NUMBERS:
             getattr(rows, key)[row] = vehicle[key]
         self._load_wheels(row, vehicle["wheels"])
         for field in RESET_FIELDS:
@@ -52,12 +53,12 @@ class VehicleRegistry:
             self.arrays.active[self._rows.pop(name)] = False
 
     def edit(self, name, fields):
-        """Changes only the given vehicle keys: engine_power, brake_power, max_steer, and wheels
+        """Changes only the given vehicle keys: engine_power, brake_power, max_steer, max_steer_rate, and wheels
         as {index: {wheel keys}} (0-3: front-left, front-right, rear-left, rear-right)."""
         row = self._row(name)
         edit = specs.validate_vehicle_edit(fields, name)
         spec = self._specs[name]
-        for key in ("engine_power", "brake_power", "max_steer"):
+        for key in VEHICLE_NUMBERS:
             if key in edit:
                 spec[key] = edit[key]
                 getattr(self.arrays, key)[row] = edit[key]

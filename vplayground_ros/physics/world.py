@@ -263,7 +263,7 @@ class World(WorldQueries):
         return name
 
     def edit_vehicle(self, name, /, **fields):
-        """Changes only the given vehicle keys: engine_power, brake_power, max_steer, and wheels
+        """Changes only the given vehicle keys: engine_power, brake_power, max_steer, max_steer_rate, and wheels
         as {index: {wheel keys}} (0-3: front-left, front-right, rear-left, rear-right). The
         chassis is edited as a body (edit_body)."""
         edit = specs.validate_vehicle_edit(fields, name)
