@@ -104,7 +104,9 @@ def number(value, path, low=-math.inf, high=math.inf, low_open=False):
 
 
 def integer(value, path, low, high):
-    if isinstance(value, numbers.Integral) and not isinstance(value, bool):
+    if isinstance(value, bool):
+        pass  # refused below: True is no count
+    elif isinstance(value, numbers.Integral):
         value = int(value)  # numpy's integers too (an int of any size stays itself)
     elif isinstance(value, numbers.Real) and math.isfinite(value) and float(value).is_integer():
         value = int(value)
