@@ -226,6 +226,14 @@ def test_a_refused_command_leaves_a_trajectory_running_and_an_ended_one_holds():
     control.hold(world, "kuka", [joint])
     position, velocity, _ = run_for(2.0)
     assert position[0] == pytest.approx(moving, abs=0.02) and abs(velocity[0]) < 1e-3
+    # One stamped so that it ended before it came is refused, as joint_trajectory_controller
+    # refuses it (run at once, it sent the joint to its last point at its velocity limit).
+    with pytest.raises(ValueError, match="ended at .* before now"):
+        control.follow(world, "kuka", [joint], world.time - 5.0, [1.0], [[1.5]], None)
+    position, velocity, _ = run_for(1.0)
+    assert position[0] == pytest.approx(moving, abs=0.02) and abs(velocity[0]) < 1e-3
+    control.follow(world, "kuka", [joint], world.time - 0.5, [1.0], [[moving + 0.1]], None)  # still running
+    assert run_for(1.0)[0][0] == pytest.approx(moving + 0.1, abs=math.radians(0.2))
 
 
 def test_a_trajectory_is_followed_within_a_degree(run):

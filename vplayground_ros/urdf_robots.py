@@ -574,6 +574,11 @@ class RobotControl:
         following = [joint for joint in joints if joint in mimics]
         if following:
             raise ValueError(f"{name}'s joint {following[0]!r} mimics {mimics[following[0]][0]!r}: command that one")
+        if start is not None and len(times) and start + times[-1] < world.time:
+            # As joint_trajectory_controller: a trajectory over before it came is refused (run
+            # at once, it had sent the joints to its last point at their velocity limits).
+            raise ValueError(f"the trajectory for {name} ended at {start + times[-1]:.3f} s, before now "
+                             f"({world.time:.3f} s of simulated time): stamp it 0 to start on receipt")
         current = world.joint_states([entities[joint] for joint in joints])[0]
         trajectory = Trajectory(joints, world.time if start is None else start, current, times, positions, velocities)
         for joint in joints:
