@@ -94,6 +94,9 @@ class BagSink:
     def new_timeline(self):
         self.recorder.new_timeline()
 
+    def round_begins(self, seconds):
+        self.recorder.round_begins(seconds)
+
     def retract(self, topic):
         self.recorder.retract(topic.name)
 
@@ -375,8 +378,18 @@ class Broadcaster:
             self._removed_reported += 1
             self.log.warning(f"removed {name}: its state went non-finite or it left the world")
         seconds = snapshot.time
+        frames_changed = None
         if seconds < self._schedule_time:
             self._end_timeline()
+            # Before anything of the new time: a robot gone is retracted before the bag's new
+            # file opens with the latched topics, and so are other static frames than the new
+            # world's (it had opened with the old scene's car's robot_description and sensor
+            # frames: static transforms add up, an empty /tf_static after them removes none).
+            frames_changed = self._static_frames_changed(snapshot)
+            if frames_changed:
+                for sink in self.sinks:
+                    if hasattr(sink, "new_timeline"):
+                        sink.retract(self.topics["tf_static"])
         self._send_clock(snapshot)
         if seconds < self._schedule_time or self.sim.world is not self._scheduled_world:
             # A new scene or a reset of the time: every job at once, the schedule from here.
@@ -391,7 +404,7 @@ class Broadcaster:
             self._scenery.advance(seconds)
             cells = self.sim.world.octree_cells() if self.parameters["show_octree"] else ()
             self._scenery_pending = True
-        self._send_state(seconds, self._static_frames_changed(snapshot))
+        self._send_state(seconds, self._static_frames_changed(snapshot) if frames_changed is None else frames_changed)
         self.sim.next_publish_time = min(job.due for job in (*self._jobs.values(), self._scenery))
         if due or cells is not None or snapshot.readings:
             self._hand_over((snapshot, due, cells))
@@ -524,6 +537,9 @@ class Broadcaster:
 
     def _publish_round(self, item):
         snapshot, jobs, cells = item
+        for sink in self.sinks:
+            if hasattr(sink, "round_begins"):
+                sink.round_begins(snapshot.time)
         self._run(self._withdrawals, snapshot)
         for job in jobs:
             self._run(job, snapshot)

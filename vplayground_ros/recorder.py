@@ -291,6 +291,11 @@ def offered_qos_profiles(qos):
 
 NEW_TIMELINE = object()  # in the recorder's queue: what follows starts again in time
 Retract = namedtuple("Retract", "topic")  # in the queue: a latched topic that ended (a robot gone)
+# In the queue: a round of messages (one snapshot's) begins at `stamp` (ns). A file grown past the
+# split size is split here: every message after it is of its time or later. (Split at any
+# message, it had split at a /clock the simulation thread sent ahead of rounds the publisher had
+# yet to send: their earlier times came after the latched copies, which went back in time.)
+Round = namedtuple("Round", "stamp")
 
 
 class Recorder:
@@ -305,6 +310,7 @@ class Recorder:
         self.error = None        # the first failure (disk full, unwritable path); then nothing is written
         self.files = []
         self._latched = {}       # topic -> (type, data, qos) as far as the writer got: re-written into a new file
+        self._rounds = False     # whether a round_begins came: size splits wait for one
         # Appended by any thread, taken by the writer (deque operations are atomic): a
         # queue.Queue's lock and condition per message cost more than the rest of write().
         self._queue = deque()
@@ -334,6 +340,12 @@ class Recorder:
         """The messages after this one start again in time: they go to a new file."""
         self._queue.append(NEW_TIMELINE)
 
+    def round_begins(self, seconds):
+        """The messages after this one are of a round at `seconds` or later (where a file grown
+        past split_size is split); without rounds, as a recorder used alone, at any message."""
+        self._rounds = True
+        self._queue.append(Round(int(round(seconds * 1e9))))
+
     def retract(self, topic):
         """A latched topic ended (its robot is gone): a later file does not open with it."""
         self._queue.append(Retract(topic))
@@ -349,6 +361,7 @@ class Recorder:
         self._file = open(path, "wb")
         self._writer = BagWriter(self._file, self.chunk_size, PROFILE, "vplayground_ros")
         self._channels, self._schemas = {}, {}  # ids of this file: each file opens on its own
+        self._types = {}  # topic -> its type in this file
         self.files.append(path)
 
     def _finish(self):
@@ -362,6 +375,7 @@ class Recorder:
     def _channel(self, topic, type_name, qos):
         key = (topic, type_name)
         if key not in self._channels:
+            self._types[topic] = type_name
             if type_name not in self._schemas:
                 self._schemas[type_name] = self._writer.register_schema(name=type_name, encoding="ros2msg",
                                                                         data=schema(type_name).encode("utf-8"))
@@ -407,8 +421,16 @@ class Recorder:
                 if self.error is not None:
                     continue  # the disk failed: keep draining so nobody blocks, record nothing
                 try:
-                    if (new_timeline and self._writer.has_messages) or (
-                            self.split_size and self._file.tell() > self.split_size):
+                    full = self.split_size and self._file.tell() > self.split_size
+                    if isinstance(item, Round):
+                        if full and not new_timeline:
+                            self._split(item.stamp)
+                        continue
+                    # A topic that comes back with another type (a sensor of another kind spawned
+                    # on a removed one's topic) starts a file: a file has one type a topic, as a
+                    # player of bags (rosbag2) takes it.
+                    if (new_timeline and self._writer.has_messages) or (full and not self._rounds) or \
+                            self._types.get(item[0], item[1]) != item[1]:
                         self._split(item[3])
                     new_timeline = False
                     self._add(*item)
