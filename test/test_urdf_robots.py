@@ -565,6 +565,32 @@ def test_no_body_or_sensor_takes_a_robots_link_frame_nor_a_robot_a_bodys_name():
     assert requests.sim.world.body_names() == [] and [s["name"] for s in requests.sim.world.sensor_specs] == ["lidar_link"]
 
 
+def test_a_sensor_rides_a_link_a_fixed_joint_lumps_into_its_parent():
+    """The rover's lidar_link is lumped into base_footprint's body by fixed joints (0.12 m up,
+    then 0.2 forward and 0.1 up): a lidar on it, the most natural mount, had been refused as
+    'no vehicle or body named rover.lidar_link'. It rides that body, its pose composed with the
+    link's there, in a scene file, ~/spawn and ~/edit alike; saved so, it loads the same."""
+    scan = {"name": "front_scan", "type": "lidar_2d", "parent": "rover.lidar_link", "pose": [0.05, 0, 0.02, 0, 0, 0.5]}
+    world = load_world({"version": 1, "robots": [ROVER], "sensors": [scan]})
+    (spec,) = world.sensor_specs
+    assert spec["parent"] == "rover.base_footprint"
+    assert spec["pose"] == pytest.approx([0.25, 0.0, 0.24, 0.0, 0.0, 0.5], abs=1e-12)
+    again = load_world(world_to_scene(world))
+    assert again.sensor_specs[0]["parent"] == spec["parent"] and again.sensor_specs[0]["pose"] == pytest.approx(spec["pose"])
+
+    requests = Requests(Simulation(load_world({"version": 1, "robots": [ROVER]})), scene_directories=[])
+    ok, message = requests.spawn(yaml.safe_dump(scan))
+    assert ok, message
+    assert requests.sim.world.sensor_specs[0]["pose"] == pytest.approx(spec["pose"], abs=1e-12)
+    ok, message = requests.edit(yaml.safe_dump({"entity": "front_scan", "parent": "rover.base_link",
+                                                "pose": [0, 0, 0, 0, 0, 0]}))
+    assert ok, message
+    edited = requests.sim.world.sensor_specs[0]
+    assert edited["parent"] == "rover.base_footprint" and edited["pose"] == pytest.approx([0, 0, 0.12, 0, 0, 0], abs=1e-12)
+    with pytest.raises(SceneError, match="no vehicle or body named 'rover.no_such_link'"):
+        load_world({"version": 1, "robots": [ROVER], "sensors": [{**scan, "parent": "rover.no_such_link"}]})
+
+
 def test_a_teleported_drive_starts_its_odometry_again_where_it_stands(run):
     """A URDF robot with a drive moved by ~/edit (it could not have driven there) starts its
     wheel odometry again at its true pose, world -> odom as at its spawn, as a vehicle's does:

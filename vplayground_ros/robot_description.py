@@ -28,7 +28,7 @@ from .messages import COLOURS, WHEEL_JOINTS, WHEEL_NAMES, WHEEL_WIDTH
 from .physics.shapes import box, cylinder
 from .robots import robot_frames
 from .sensor_messages import OPTICAL_ROTATION, optical_frame
-from .sensors import CAMERAS
+from .sensors import CAMERAS, quat_to_rpy
 
 AXLE_RPY = (0.5 * math.pi, 0.0, 0.0)  # turns a cylinder's axis (its z) onto the axle (y)
 STEER_LIMIT = 0.5 * math.pi  # the inner wheel of an Ackermann turn goes beyond max_steer
@@ -40,14 +40,6 @@ CHASSIS_KEYS = ("elasticity", "static_friction", "dynamic_friction", "immovable"
 CHASSIS_FLAGS = ("immovable", "allow_freezing")
 MOUNT_TOLERANCE = 1.0e-9  # m: a wheel's mount against its suspension joint's origin and limit
 WHEEL_KEYS = ("power_gain", "steered", "spring_stiffness", "damper", "static_friction", "dynamic_friction")
-
-
-def quat_to_rpy(q):
-    """(x, y, z, w) -> roll, pitch, yaw (fixed axes X, Y, Z: URDF's and math3d.rpy_to_quat's)."""
-    x, y, z, w = q
-    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))  # rounding may pass 1
-    return (math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y)), pitch,
-            math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
 
 
 OPTICAL_RPY = quat_to_rpy(OPTICAL_ROTATION)

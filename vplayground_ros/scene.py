@@ -21,7 +21,7 @@ from .physics.math3d import rpy_to_quat
 from .physics.math3d import quaternions_to_matrices
 from .resources import find_shared, is_file
 from .robots import validate_robot, world_robots
-from .sensors import validate_sensors
+from .sensors import lumped_links, validate_sensors
 from .urdf_robots import (ENTRY_KEYS, VEHICLE_ENTRY_KEYS, add_robot_entry, check_against_model, description_source,
                           is_description_text, validate_entry, vehicle_entry)
 
@@ -416,7 +416,8 @@ def validate_scene(scene, base, max_bodies=None, directories=None, frames=DEFAUL
     if max_bodies is not None and count > max_bodies:
         raise specs.SpecError("robots", f"the scene has {count} bodies (vehicles and the robots' links counted), "
                                         f"more than max_bodies ({max_bodies})")
-    sensors = validate_sensors(scene.get("sensors"), owners)
+    sensors = validate_sensors(scene.get("sensors"), owners,
+                               links=lumped_links((entry["name"], model) for _, (entry, model) in robots))
     # The names against the node's frames and the optical frames of the cameras named by them;
     # a frame_id is checked against everything below, naming the sensor's key.
     reserved = {**node_frames(frames), **sensor_frames_taken([s for s in sensors if "frame_id" not in s])}

@@ -80,8 +80,10 @@ SKY = np.array([0.62, 0.75, 0.90])
 log = logging.getLogger(__name__)
 
 
-def validate_sensor(raw, path, parents):
-    """A normalised sensor spec (defaults filled in); `parents` are the names that may carry it."""
+def validate_sensor(raw, path, parents, links=None):
+    """A normalised sensor spec (defaults filled in); `parents` are the names that may carry it.
+    A parent among `links` (lumped_links) becomes the body the link is lumped into, the pose
+    composed with the link's there (a lumped link has no body of its own to ride)."""
     specs.mapping(raw, path, COMMON_KEYS | set().union(*TYPE_KEYS.values()))
     for key in ("name", "type", "parent"):
         if key not in raw:
@@ -95,7 +97,8 @@ def validate_sensor(raw, path, parents):
     parent = raw["parent"]
     if not isinstance(parent, str):  # `parents` is a set or dict: a list would not even hash
         raise specs.SpecError(specs.child(path, "parent"), f"expected a string, got {type(parent).__name__}")
-    if parent != WORLD and parent not in parents:
+    link = (links or {}).get(parent) if parent not in parents else None
+    if parent != WORLD and parent not in parents and link is None:
         raise specs.SpecError(specs.child(path, "parent"), f"no vehicle or body named "
                                                            f"{specs.quote(parent)} (or 'world')")
     out = {"name": name, "type": kind, "parent": parent}
@@ -109,6 +112,10 @@ def validate_sensor(raw, path, parents):
             out[key] = raw[key]
     value = lambda key: raw.get(key, DEFAULTS[key])  # noqa: E731
     out["pose"] = specs.vector(value("pose"), at("pose"), 6, -specs.MAX_COORDINATE, specs.MAX_COORDINATE)
+    if link is not None:
+        body, on_body = link
+        pose = on_body @ pose_matrix(out["pose"][:3], rpy_to_quat(out["pose"][3:]))
+        out["parent"], out["pose"] = body, [*map(float, pose[:3, 3]), *quat_to_rpy(matrix_to_quaternion(pose))]
     out["rate"] = specs.number(value("rate"), at("rate"), MIN_RATE, MAX_RATE)
     keys = TYPE_KEYS[kind]
     for key in sorted(keys & {"range_min", "range_max", "noise_stddev", "gyro_noise", "accel_noise"}):
@@ -168,17 +175,18 @@ def check_vertical_fov(spec, path):
                                     f"{math.degrees(MAX_FOV):g} (at most {rows} rows at this width and horizontal_fov)")
 
 
-def validate_sensors(raw, parents, path="sensors"):
+def validate_sensors(raw, parents, path="sensors", links=None):
     """The scene's `sensors` list, validated; names are unique among the sensors and the bodies
     (a sensor's name is its frame, beside the bodies' frames). `parents` maps every body's and
-    vehicle's name to what has it (e.g. "bodies[0]'s name"), for the messages."""
+    vehicle's name to what has it (e.g. "bodies[0]'s name"), for the messages; `links` as
+    validate_sensor's."""
     raw = [] if raw is None else raw
     if not isinstance(raw, list):
         raise specs.SpecError(path, f"expected a list, got {type(raw).__name__}")
     out, owners = [], {**parents, WORLD: "the world frame"}
     for k, entry in enumerate(raw):
         at = specs.child(path, k)
-        sensor = validate_sensor(entry, at, parents)
+        sensor = validate_sensor(entry, at, parents, links)
         if sensor["name"] in owners:
             raise specs.SpecError(specs.child(at, "name"),
                                   f"duplicate name {specs.quote(sensor['name'])}: already "
@@ -248,6 +256,26 @@ def local_directions(spec):
     right, down = (u - cx) / fx, (v - cy) / fy
     d = np.stack([np.ones_like(right), -right, -down], axis=-1).reshape(-1, 3)
     return d / np.linalg.norm(d, axis=1)[:, None]
+
+
+def quat_to_rpy(q):
+    """(x, y, z, w) -> roll, pitch, yaw (fixed axes X, Y, Z: URDF's and math3d.rpy_to_quat's)."""
+    x, y, z, w = q
+    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))  # rounding may pass 1
+    return (math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y)), pitch,
+            math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
+
+
+def lumped_links(models):
+    """{'<robot>.<link>': (its body, its pose in that body's frame, 4x4)} of the URDF links that
+    fixed joints lump into another link's body (the Husky's base_link into base_footprint's):
+    `models` are (robot name, urdf_import.RobotModel)."""
+    out = {}
+    for robot, model in models:
+        for link, (body, pose) in model.link_frames.items():
+            if body != f"{robot}.{link}":
+                out[f"{robot}.{link}"] = (body, pose)
+    return out
 
 
 def pose_matrix(xyz, quaternion):

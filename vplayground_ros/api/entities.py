@@ -17,7 +17,7 @@ from ..physics.math3d import matrix_to_quaternion, rpy_to_quat
 from ..physics.world import prepare_body
 from ..robots import validate_robot, world_robots
 from ..scene import body_mesh_points
-from ..sensors import TYPES as SENSOR_TYPES, pose_matrix, validate_sensor
+from ..sensors import TYPES as SENSOR_TYPES, lumped_links, pose_matrix, validate_sensor
 from ..urdf_robots import (add_robot_entry, check_against_model, description_source, is_description_text, robot_spec,
                            validate_entry, vehicle_entry)
 from .descriptions import describe, describe_robot, describe_sensor
@@ -214,7 +214,9 @@ class EntityRequests:
                 continue
             if isinstance(spec.get("parent"), str):
                 spec = {**spec, "parent": renamed.get(spec["parent"], spec["parent"])}
-            sensor = validate_sensor(spec, path, parents)
+            sensor = validate_sensor(spec, path, parents, lumped_links(
+                [(robot["name"], robot["model"]) for robot in world.robot_specs]
+                + [(entry["name"], model) for _, entry, model in robots]))
             wanted = sensor["name"]
             while True:
                 frame_names = sensor_frames(sensor)
@@ -408,7 +410,8 @@ class EntityRequests:
                 raise RequestError(FAILED, f"{name}.{key}: a sensor's {key} cannot be edited "
                                            "(remove it and spawn another)")
         parents = set(world.body_names())
-        edited = validate_sensor({**spec, **fields}, name, parents)
+        edited = validate_sensor({**spec, **fields}, name, parents,
+                                 lumped_links((robot["name"], robot["model"]) for robot in world.robot_specs))
         others = [s for s in world.sensor_specs if s is not spec]
         if sensor_frames(edited) != sensor_frames(spec):
             taken = {**node_frames(frames), **sensor_frames_taken(others),
