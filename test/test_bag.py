@@ -699,11 +699,13 @@ def test_size_split_files_go_forward_and_open_with_what_a_seek_needs(tmp_path):
     round, with the latched topics first, and every channel goes forward."""
     scene = tmp_path / "one.yaml"
     scene.write_text("version: 1\nbodies: [{name: crate, position: [0, 0, 0.5]}]\n")
-    run("--scene", str(scene), "--duration", "40", "--real-time-factor", "0", "--record",
+    run("--scene", str(scene), "--duration", "300", "--real-time-factor", "0", "--record",
         str(tmp_path / "split.mcap"), "--record-split-size", "65536",
         "--ros-args", "-p", "static_republish_period:=0.1")
     files = sorted(tmp_path.glob("split*.mcap"), key=lambda f: (len(f.name), f.name))
-    assert len(files) >= 3
+    # How many files: as the chunks happen to fill. 300 s give many splits: before the change,
+    # 40 s met a split at a /clock ahead of the rounds one run in two, 300 s in each of 2 runs.
+    assert len(files) >= 2
     for f in files:
         _, _, messages = read_all(f)
         assert_channels_go_forward(f.name, messages)
