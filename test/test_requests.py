@@ -248,7 +248,7 @@ HONOURED = {
     "AVAILABLE_WORLDS": lambda r: [scene_file(r)] == [path for path, _ in r.available_worlds()],
     "WORLD_LOADING": lambda r: (r.load_scene(str(scene_file(r)), stopped=True)[0] == MAP_SUCCESS
                                 and r.sim.world.body_names() == ["a", "b"] and r.sim.state == STOPPED),
-    "WORLD_INFO_GETTING": lambda r: r.current_world() == str(scene_file(r)),
+    "WORLD_INFO_GETTING": lambda r: r.current_world() == (str(scene_file(r)), ""),
     "WORLD_UNLOADING": lambda r: r.unload_world()[0] and r.sim.state == NO_WORLD and r.current_world() is None,
     "WORLD_RESOURCE_STRING": lambda r: (r.load_scene_text(yaml.safe_dump(SCENE))[0] == MAP_SUCCESS
                                         and r.sim.world.body_names() == ["a", "b"]),

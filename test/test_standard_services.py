@@ -398,11 +398,24 @@ def test_worlds_load_unload_and_list(ros):
     text = call(ros, LoadWorld, "load_world", resource_string=scene.read_text())
     assert text.result.result == OK, text.result.error_message
     assert state(ros) == SimulationState.STATE_STOPPED
+    # Resource.msg: "If uri field is empty, resource_string must not be empty" (both had been).
+    for world in (text.world, call(ros, GetCurrentWorld, "get_current_world").world):
+        assert (world.world_resource.uri, world.world_resource.resource_string) == ("", scene.read_text())
     play(ros)
     assert wait_for(lambda: ros.sim.world.step_count > 10)
 
 
 def test_reset_scopes(ros):
+    # SCOPE_STATE puts back the scene's bodies removed since, and now their sensors too (a
+    # removed IMU had stayed gone while its body came back).
+    scene = ("version: 1\nbodies: [{name: crate, position: [0, 0, 0.5]}]\n"
+             "sensors: [{name: crate_imu, type: imu, parent: crate}]\n")
+    assert call(ros, LoadWorld, "load_world", resource_string=scene).result.result == OK
+    for entity in ("crate_imu", "crate"):
+        assert call(ros, DeleteEntity, "delete_entity", entity=entity).result.result == OK
+    assert list(call(ros, GetEntities, "get_entities").entities) == []
+    assert call(ros, ResetSimulation, "reset_simulation", scope=ResetSimulation.Request.SCOPE_STATE).result.result == OK
+    assert sorted(call(ros, GetEntities, "get_entities").entities) == ["crate", "crate_imu"]
     play(ros)
     assert spawn(ros, "spawned_then_reset").result.result == OK
     assert call(ros, ResetSimulation, "reset_simulation", scope=ResetSimulation.Request.SCOPE_SPAWNED).result.result == OK

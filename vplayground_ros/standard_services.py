@@ -406,7 +406,7 @@ class StandardServices:
                 name = code
             return {"result": failed(name, detail, LOAD_WORLD_CODES)}
         self.runtime.broadcaster.scene_changed()
-        return {"result": SUCCESS, "world": self._world_resource(self.requests.current_world())}
+        return {"result": SUCCESS, "world": self._world_resource(*self.requests.current_world())}
 
     def unload_world(self, _request):
         reply = self.requests.unload_world()
@@ -415,10 +415,10 @@ class StandardServices:
         return {"result": result(reply, NO_WORLD_CODES)}
 
     def get_current_world(self, _request):
-        label = self.requests.current_world()
-        if label is None:
+        current = self.requests.current_world()
+        if current is None:
             return {"result": failed(NO_WORLD_LOADED, "no world is loaded (unload_world)", NO_WORLD_CODES)}
-        return {"result": SUCCESS, "world": self._world_resource(label)}
+        return {"result": SUCCESS, "world": self._world_resource(*current)}
 
     def get_available_worlds(self, request):
         if list(request.filter.tags):
@@ -429,13 +429,15 @@ class StandardServices:
         except RequestError as error:
             return {"result": refused(error)}
         return {"result": SUCCESS,
-                "worlds": [self._world_resource(str(path), description) for path, description in found]}
+                "worlds": [self._world_resource(str(path), description=description) for path, description in found]}
 
     @staticmethod
-    def _world_resource(label, description=""):
-        """WorldResource of a scene file (1.x: `world_resource` is a Resource in both)."""
+    def _world_resource(label, text="", description=""):
+        """WorldResource of a scene file, or of the YAML `text` a scene was loaded from (a
+        Resource's uri or its resource_string is not empty; 1.x: `world_resource` is a Resource
+        in both)."""
         name = Path(label).stem if label else "scene"
-        return {"name": name, "world_resource": {"uri": label, "resource_string": ""},
+        return {"name": name, "world_resource": {"uri": label, "resource_string": "" if label else text},
                 "description": description, "tags": []}
 
 

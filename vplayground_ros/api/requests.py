@@ -30,13 +30,15 @@ class Requests(EntityRequests, QueryRequests, ControlRequests, SceneRequests):
     replace them at any time, and each request reads them once. `settings` owns the physics
     settings (parameters.Parameters in the Runtime; without one, the World's own): ~/set_freezing
     sets `freezing.enabled` through it, and a scene load or reset hands it the new settings.
-    `initial` is the loaded scene (what ~/reset returns to), `scene_label` its file."""
+    `initial` is the loaded scene (what ~/reset returns to), `scene_label` its file, or
+    `scene_text` the YAML it was loaded from."""
 
     def __init__(self, simulation, scene_label="", scene_directories=None, bag_directory=None,
                  max_bodies=DEFAULT_MAX_BODIES, settings=None):
         self.sim = simulation
         self.settings = settings if settings is not None else WorldSettings(simulation)
         self.scene_label = scene_label
+        self.scene_text = ""
         self.scene_directories = ([Path(d) for d in scene_directories] if scene_directories is not None
                                   else default_scene_directories(bag_directory))
         self.max_bodies = max_bodies

@@ -42,9 +42,9 @@ class SceneRequests:
         if not isinstance(scene, dict):
             return INVALID_MAP_DATA, (f"{UNSUPPORTED_FORMAT}: a world is this package's scene YAML (a mapping "
                                       f"of settings, bodies, vehicles...), got {type(scene).__name__}")
-        return self._load(scene, "", stopped)
+        return self._load(scene, "", stopped, text)
 
-    def _load(self, source, label, stopped):
+    def _load(self, source, label, stopped, text=""):
         try:
             world = load_world(source, max_bodies=int(self.max_bodies),
                                directories=allowed_directories(self.scene_directories), frames=self.frames())
@@ -57,7 +57,7 @@ class SceneRequests:
             self.sim.clear_steps()  # none queued for the old world run on the new one
             self.initial = initial
             self.initial_robots = list(world.robot_specs)
-            self.scene_label = label
+            self.scene_label, self.scene_text = label, text
             self.sim.world_loaded = True
             if stopped:
                 self.sim.paused = self.sim.stopped = True
@@ -80,7 +80,7 @@ class SceneRequests:
             self.sim.clear_steps()
             self.initial = copy.deepcopy(world_to_scene(empty))
             self.initial_robots = []
-            self.scene_label = ""
+            self.scene_label = self.scene_text = ""
             self.sim.world_loaded, self.sim.paused, self.sim.stopped = False, True, False
             return reply(OK, "unloaded: every entity removed")
         answer = self.sim.call(unload)
@@ -88,9 +88,9 @@ class SceneRequests:
         return answer
 
     def current_world(self):
-        """(file of the loaded scene, '' for one from text or the built-in default), or None
-        when no world is loaded."""
-        return self.sim.call(lambda world: self.scene_label if self.sim.world_loaded else None)
+        """(file of the loaded scene, or '' and the YAML it was loaded from), or None when no
+        world is loaded."""
+        return self.sim.call(lambda world: (self.scene_label, self.scene_text) if self.sim.world_loaded else None)
 
     def available_worlds(self, sources=()):
         """The scene files (.yaml, .yml that declare a `version:`) directly inside the scene

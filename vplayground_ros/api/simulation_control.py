@@ -15,6 +15,7 @@ import yaml
 from ..parameters import SCOPE_ALL, SCOPE_SPAWNED, SCOPE_STATE, SCOPE_TIME, reset_scope
 from ..physics import specs
 from ..scene import load_world
+from ..sensors import WORLD
 from ..simulation import PAUSED, PLAYING, QUITTING, STOPPED
 from ..urdf_robots import add_robot_entry
 from .entities import drop_sensors_of
@@ -180,8 +181,13 @@ class ControlRequests:
             for robot in robots.values():  # as loaded: its links where they stood, its joints, its motors
                 world.remove_bodies([body for body in robot["bodies"] if body in present])
                 add_robot_entry(world, robot, robot["model"], f"robots.{robot['name']}", self.frames())
-            # The sensors start again on the bodies as restored (the robots' are new bodies).
-            world.sensor_specs = [dict(spec) for spec in world.sensor_specs]
+            # The sensors start again on the bodies as restored (the robots' are new bodies), and
+            # the scene's sensors removed since come back on them (the bodies did: the sensors
+            # had stayed gone), unless a body spawned since has taken a removed one's name.
+            names, kept = set(world.body_names()), {spec["name"] for spec in world.sensor_specs}
+            back = [copy.deepcopy(spec) for spec in self.initial.get("sensors", [])
+                    if spec["name"] not in kept | names and spec["parent"] in names | {WORLD}]
+            world.sensor_specs = [dict(spec) for spec in world.sensor_specs] + back
             done.append("states restored")
         if scope & SCOPE_TIME:
             world.time, world.step_count = 0.0, 0
