@@ -672,24 +672,29 @@ def test_a_removed_robots_description_does_not_open_the_next_file(tmp_path):
     assert "/car_b/robot_description" not in topics(second) and "/robot_description" in topics(second)
 
 
-def test_another_scene_opens_its_file_without_the_old_ones_robots_and_frames(tmp_path):
-    """~/load_scene of a world with one box: its file had opened with the old scene's car's
-    robot_description and its sensor frames on /tf_static (the retraction came after the split,
-    and static transforms add up: an empty /tf_static after them removes none)."""
+@pytest.mark.parametrize("other", ["bodies: [{name: crate, position: [0, 0, 2]}]",
+                                   "robots: [{name: car, urdf: car.urdf, position: [0, 0, 1]}]"])
+def test_another_scene_opens_its_file_without_the_old_ones_robots_and_frames(tmp_path, other):
+    """~/load_scene of a world with one box, or with the car and none of its sensors: its file
+    had opened with the old scene's car's robot_description and its sensor frames on /tf_static
+    (the old file's latched topics were copied into it; static transforms add up: the new
+    world's /tf_static removed none of them)."""
     path = tmp_path / "run.mcap"
     with recording(path, 4.0) as runtime:
         assert wait_for(lambda: runtime.sim.snapshot.time > 0.5)
-        other = tmp_path / "other.yaml"
-        other.write_text("version: 1\nbodies: [{name: crate, position: [0, 0, 2]}]\n")
-        assert runtime.requests.load_scene(str(other))[0] == 0
+        scene = tmp_path / "other.yaml"
+        scene.write_text(f"version: 1\n{other}\n")
+        assert runtime.requests.load_scene(str(scene))[0] == 0
         assert wait_for(lambda: len(runtime.recorder.files) == 2)
         assert wait_for(lambda: runtime.sim.snapshot.time > 0.5)
     _, _, before = read_all(path)
     _, _, after = read_all(tmp_path / "run_1.mcap")
-    assert "/robot_description" in {topic for topic, *_ in before}
-    assert "/robot_description" not in {topic for topic, *_ in after}
-    frames = [t.child_frame_id for topic, _, _, msg in after if topic == "/tf_static" for t in msg.transforms]
-    assert frames == [] and "/tf_static" in {topic for topic, *_ in after}
+    frames = lambda messages: {t.child_frame_id for topic, _, _, msg in messages if topic == "/tf_static"  # noqa: E731
+                               for t in msg.transforms}
+    assert "laser" in frames(before) and "laser" not in frames(after)
+    descriptions = [msg.data for topic, _, _, msg in after if topic == "/robot_description"]
+    assert all("laser" not in text for text in descriptions) and bool(descriptions) == ("robots" in other)
+    assert {"/tf_static", "/vplayground/state", "/vplayground/scene/markers"} <= {topic for topic, *_ in after}
 
 
 def test_size_split_files_go_forward_and_open_with_what_a_seek_needs(tmp_path):

@@ -57,6 +57,7 @@ HAND_OVER_TIMEOUT = 1.0
 MAX_CLOCK_FILL = 16
 PAUSED_JOBS = ("state", "markers", "diagnostics")  # what goes out while paused, by the wall clock
 PAUSED_ON_CHANGE = ("state", "markers")            # ... and only when the snapshot changed
+ROUND_LATCHED = ("resting_markers", "scene_markers")  # latched topics the publisher thread's rounds send
 WELCOME_GATHER = 0.05  # s: a new client's subscriptions gather this long before it gets the world
 SENSOR_QOS = "reliable_10"  # a reliable publisher serves best-effort (sensor data) subscribers too
 # A robot whose base moved farther between two rounds than its speed, this acceleration (m/s^2)
@@ -378,18 +379,10 @@ class Broadcaster:
             self._removed_reported += 1
             self.log.warning(f"removed {name}: its state went non-finite or it left the world")
         seconds = snapshot.time
-        frames_changed = None
-        if seconds < self._schedule_time:
+        new_timeline = seconds < self._schedule_time
+        if new_timeline:
             self._end_timeline()
-            # Before anything of the new time: a robot gone is retracted before the bag's new
-            # file opens with the latched topics, and so are other static frames than the new
-            # world's (it had opened with the old scene's car's robot_description and sensor
-            # frames: static transforms add up, an empty /tf_static after them removes none).
-            frames_changed = self._static_frames_changed(snapshot)
-            if frames_changed:
-                for sink in self.sinks:
-                    if hasattr(sink, "new_timeline"):
-                        sink.retract(self.topics["tf_static"])
+            latched_before = dict(self._latched)
         self._send_clock(snapshot)
         if seconds < self._schedule_time or self.sim.world is not self._scheduled_world:
             # A new scene or a reset of the time: every job at once, the schedule from here.
@@ -404,10 +397,25 @@ class Broadcaster:
             self._scenery.advance(seconds)
             cells = self.sim.world.octree_cells() if self.parameters["show_octree"] else ()
             self._scenery_pending = True
-        self._send_state(seconds, self._static_frames_changed(snapshot) if frames_changed is None else frames_changed)
+        self._send_state(seconds, self._static_frames_changed(snapshot))
+        if new_timeline:
+            self._open_timeline(seconds, latched_before)
         self.sim.next_publish_time = min(job.due for job in (*self._jobs.values(), self._scenery))
         if due or cells is not None or snapshot.readings:
             self._hand_over((snapshot, due, cells))
+
+    def _open_timeline(self, seconds, latched_before):
+        """The bag's new file (new_timeline: it opens with nothing of the time before) gets the
+        latched topics of the simulation thread that this batch did not send again, at the new
+        time: what is gone was retracted, and what changed went out already. (Copied from the
+        file before, it had opened with the old scene's car's robot_description and sensor
+        frames, and static transforms add up: the new world's empty /tf_static removed none.)
+        The markers' latched topics come with the first round, every job being due."""
+        for key, entry in list(self._latched.items()):
+            if latched_before.get(key) is entry and key not in ROUND_LATCHED:
+                for sink in self.sinks:
+                    if hasattr(sink, "new_timeline"):
+                        sink.publish(self.topics[key], entry[0], seconds)
 
     def _send_clock(self, snapshot):
         """/clock at every step (capped by clock_rate): a batch of several steps (two in real

@@ -337,7 +337,8 @@ class Recorder:
         self._queue.append((topic, type_name, data, stamp, qos))
 
     def new_timeline(self):
-        """The messages after this one start again in time: they go to a new file."""
+        """The messages after this one start again in time: they go to a new file, which opens
+        with none of the latched topics before it (the writer of the new time sends its own)."""
         self._queue.append(NEW_TIMELINE)
 
     def round_begins(self, seconds):
@@ -414,6 +415,7 @@ class Recorder:
                     break
                 if item is NEW_TIMELINE:
                     new_timeline = True
+                    self._latched.clear()
                     continue
                 if isinstance(item, Retract):
                     self._latched.pop(item.topic, None)
