@@ -299,6 +299,31 @@ def test_runner_steps_in_real_time_and_applies_commands_between_batches():
     assert seen == sorted(seen) and seen[-1] == pytest.approx(1.0)
 
 
+def test_a_new_real_time_factor_counts_from_when_it_is_set():
+    """The factor had been applied back to the last anchor: 1 -> 0.5 after a while stood the
+    simulation still (it was "ahead"), and 0 (as fast as possible) -> 1 froze it until the wall
+    clock caught up with the time run ahead; a higher factor ran a debt of late ticks."""
+    sim = Simulation(load_world(SCENE), real_time_factor=1.0)
+    sim.start()
+    try:
+        def advance_over(seconds):
+            start = sim.world.time
+            time.sleep(seconds)
+            return sim.world.time - start
+        time.sleep(1.0)
+        sim.real_time_factor = 0.5
+        assert advance_over(1.0) == pytest.approx(0.5, abs=0.15)
+        sim.real_time_factor = 0.0
+        time.sleep(0.3)  # far ahead of the wall clock
+        sim.real_time_factor = 1.0
+        assert advance_over(1.0) == pytest.approx(1.0, abs=0.2)
+        late = sim.late_ticks
+        sim.real_time_factor = 2.0
+        assert advance_over(1.0) == pytest.approx(2.0, abs=0.3) and sim.late_ticks - late < 20
+    finally:
+        sim.stop()
+
+
 def test_a_slow_first_batch_is_start_up_not_late_ticks():
     # A cold Numba cache makes a world's first step take about a minute; real time starts after
     # it. Later slow batches are still counted.

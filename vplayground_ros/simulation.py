@@ -237,12 +237,15 @@ class Simulation:
             self._finished.set()
 
     def _loop(self):
-        world, origin_sim = None, 0.0
+        world, origin_sim, factor, first_batch = None, 0.0, None, False
         while not self._stop.is_set():
             self._apply_commands()
-            if self.world is not world or world.time < origin_sim:
-                # Started, or a command loaded another scene or reset the time.
-                world, first_batch = self.world, True
+            if self.world is not world or world.time < origin_sim or self.real_time_factor != factor:
+                # Started, or a command loaded another scene or reset the time, or the real-time
+                # factor changed: it counts from now (applied back to the last anchor, a lower
+                # one had stalled the simulation and a higher one run a debt of late ticks).
+                first_batch = first_batch or self.world is not world or world.time < origin_sim
+                world, factor = self.world, self.real_time_factor
                 origin_wall, origin_sim = time.perf_counter(), world.time
                 rtf_wall, rtf_sim, rtf_measured = origin_wall, world.time, False
             if world.solver_threads != self.solver_threads:
