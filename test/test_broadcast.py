@@ -469,6 +469,33 @@ def test_clock_goes_out_for_every_step_as_fast_as_possible(running):
     assert np.allclose(times[times > 0.0], steps)
 
 
+def test_clock_rate_caps_clock_in_the_new_time_after_a_reset(running):
+    """With clock_rate, /clock had stayed silent after ~/reset until the new time passed the
+    last one sent before it (use_sim_time nodes hung): the cap now counts in the new time."""
+    runtime, sink = running(SCENE, "--real-time-factor", "4")
+    assert runtime.parameters.set({"clock_rate": 10.0})[0]
+    assert wait_for(lambda: runtime.sim.snapshot.time > 3.0)
+    sent = len(sink.of("clock"))
+    assert runtime.requests.reset(255)[0]
+    assert wait_for(lambda: 1.0 < runtime.sim.snapshot.time < 3.0)
+    times = [t for t, _ in sink.of("clock")[sent:]]
+    assert len(times) >= 8 and max(times) < 3.0 and np.all(np.diff(times) >= 0.1 - 1e-9)
+
+
+def test_a_new_publish_rate_counts_from_now(running):
+    """publish_rate 30 -> 0.1 -> 30: ~/bodies/poses had waited for the time the 0.1 Hz period
+    made due (10 s) before it went out again."""
+    runtime, sink = running(SCENE, "--real-time-factor", "4")
+    assert wait_for(lambda: runtime.sim.snapshot.time > 0.5)
+    assert runtime.parameters.set({"publish_rate": 0.1})[0]
+    started = runtime.sim.snapshot.time
+    assert wait_for(lambda: runtime.sim.snapshot.time > started + 0.5)
+    assert runtime.parameters.set({"publish_rate": 30.0})[0]
+    back = runtime.sim.snapshot.time
+    assert wait_for(lambda: runtime.sim.snapshot.time > back + 1.0)
+    assert len([t for t, _ in sink.of("poses") if back < t <= back + 1.0]) >= 25
+
+
 def test_tf_carries_every_vehicles_wheels(running):
     """SPEC 7, issue 39: /tf has each robot's wheels, the first robot's under base_link, every
     other's under its namespace's (<name>/base_link: only the driven car's were sent once)."""

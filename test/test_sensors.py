@@ -286,6 +286,25 @@ def test_sensors_keep_their_rates_when_steps_per_second_changes(before, after):
         assert np.all(np.abs(np.diff(times) - 1.0 / rate) < late), (name, np.diff(times))
 
 
+def test_a_sensor_spawned_after_the_step_rate_went_and_came_back_keeps_its_times():
+    """The sensors' clock followed the step rate only while a sensor was there: 100 -> 50 -> 100
+    steps/s with none, then an IMU spawned, read between the multiples of 1 / rate (a review)."""
+    imu = {"name": "imu", "type": "imu", "parent": "world", "rate": 10.0}
+    world = load_world(scene(imu, steps_per_second=100))
+    sensors, readings = Sensors(), []
+    run_sensors(world, sensors, 0.2, readings)
+    spec, world.sensor_specs = world.sensor_specs[0], []  # removed: nothing follows the world now
+    world.update_settings({"steps_per_second": 50})
+    world.step(27)
+    world.update_settings({"steps_per_second": 100})
+    world.step(3)
+    world.sensor_specs = [dict(spec)]  # spawned again
+    readings.clear()
+    run_sensors(world, sensors, 1.2, readings)
+    assert world.time == pytest.approx(1.2)  # 0.2 + 27 / 50 + 3 / 100 = 0.77 s when it came back
+    assert [r["time"] for _, r in readings] == pytest.approx([0.8, 0.9, 1.0, 1.1, 1.2])
+
+
 def test_a_rate_above_steps_per_second_reads_once_a_step_and_says_so(caplog):
     """A stepped simulator has one state a step: a 1,000 Hz lidar in a 100 steps/s world is read
     every step. Its LaserScan's scan_time says the 0.01 s between the scans published (it said

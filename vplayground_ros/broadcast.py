@@ -247,7 +247,8 @@ class Broadcaster:
             if not self._newcomers:
                 self._welcome_due = time.monotonic() + WELCOME_GATHER
             keys = self._newcomers.setdefault(sink, set())
-            if key is not None and self.topics[key].qos == "latched":
+            topic = self.topics.get(key)  # None: withdrawn (a robot gone) while a viewer keeps its channel
+            if topic is not None and topic.qos == "latched":
                 keys.add(key)
             self._ready.notify_all()
 
@@ -343,14 +344,24 @@ class Broadcaster:
         return period
 
     def _on_parameters(self, changed):
+        # A new period counts from now: the job next goes out at its first multiple after the
+        # time last scheduled (it had waited for the time the old period made due: 10 s after
+        # publish_rate 0.1 and back, an hour after static_republish_period 3600 and back).
         if "publish_rate" in changed:
             self._jobs["state"].period = 1.0 / changed["publish_rate"]
+            self._reschedule(self._jobs["state"])
         if "marker_rate" in changed:
             self._jobs["markers"].period = 1.0 / changed["marker_rate"]
+            self._reschedule(self._jobs["markers"])
         if {"show_octree", "static_republish_period", "marker_rate"} & set(changed):
             self._scenery.period = self._scenery_period()
+            self._reschedule(self._scenery)
         if "show_octree" in changed:
             self.request_scenery()
+
+    def _reschedule(self, job):
+        if math.isfinite(self._schedule_time):  # before the first snapshot every job is due anyway
+            job.advance(self._schedule_time)
 
     def request_scenery(self):
         """The scenery goes out at the next snapshot, which the command itself brings about
@@ -383,6 +394,8 @@ class Broadcaster:
         if new_timeline:
             self._end_timeline()
             latched_before = dict(self._latched)
+            self._last_clock = -math.inf  # clock_rate's cap counts in the new time (it had held /clock back
+            # until the new time passed the old one's last: a reset after an hour, an hour)
         self._send_clock(snapshot)
         if seconds < self._schedule_time or self.sim.world is not self._scheduled_world:
             # A new scene or a reset of the time: every job at once, the schedule from here.
@@ -608,6 +621,9 @@ class Broadcaster:
 
     def _publish_paused(self):
         now, snapshot = time.monotonic(), self.sim.snapshot
+        for sink in self.sinks:  # where a bag grown past its split size may split while paused
+            if hasattr(sink, "round_begins"):
+                sink.round_begins(snapshot.time)
         self._run(self._withdrawals, snapshot)
         for name in PAUSED_JOBS:
             job = self._jobs[name]
@@ -901,7 +917,8 @@ class Broadcaster:
             age = snap.vehicles[r.name]["command_age"]
             statuses.append((f"robot {r.name}", OK, f"{r.name}: last command {age:.1f} s ago",
                              {"command_age": round(age, 3), "namespace": r.namespace, "localization": r.localization}))
-        failed = [job for job in (*self._jobs.values(), self._scenery, self._sensor_job) if job.errors]
+        failed = [job for job in (*self._jobs.values(), self._scenery, self._sensor_job, self._withdrawals)
+                  if job.errors]
         statuses.append(("publisher", ERROR if failed else (WARN if self.skipped else OK),
                          "; ".join(f"{job.name} failed {job.errors} times: {job.last_error}" for job in failed)
                          or f"publishing, {self.skipped} snapshots skipped",

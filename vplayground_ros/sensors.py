@@ -360,7 +360,10 @@ class Sensors:
         as a fault and goes on, and the spec is tried again when the specs change."""
         fresh = world is not self._world or world.step_count < self._step
         rate = world.settings["steps_per_second"]
-        if fresh or self.clock is None or rate != self.clock.steps_per_second:
+        # Also when the clock no longer tells the world's time (the step rate changed and came
+        # back while no sensor followed it: sensors spawned then read at the wrong times).
+        if fresh or self.clock is None or rate != self.clock.steps_per_second or \
+                abs(self.clock.time_of(world.step_count) - world.time) > 0.5 / rate:
             self.clock = Clock(world.step_count, world.time, rate)
             if not fresh:
                 for sensor in self.sensors:
