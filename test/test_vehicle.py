@@ -406,6 +406,13 @@ def test_the_steering_turns_at_its_rate_to_the_bicycle_angle():
     assert world.vehicle_state("car")["steer"] == pytest.approx(steers[-1] - 6.0 / 128, abs=1e-9)
     with pytest.raises(ValueError, match="max_steer_rate: must be >= 0.001"):
         world.edit_vehicle("car", max_steer_rate=0.0)
+    for yaw_rate in (2.0, -2.0):  # at the limit either way, then a lower limit holds at once
+        world.edit_vehicle("car", max_steer=0.6)
+        world.drive("car", 2.0, yaw_rate, timeout=100)
+        world.step(128)
+        world.edit_vehicle("car", max_steer=0.3)
+        world.step(1)
+        assert world.vehicle_state("car")["steer"] == pytest.approx(math.copysign(0.3, yaw_rate))
 
 
 def test_a_slow_command_keeps_the_car_from_freezing():

@@ -129,7 +129,9 @@ def control(vehicles, v, speed, yaw_rate, hold, dt):
         correction = vehicles.steer_correction[v] + YAW_LOOP_SHARE * error * wheelbase / speed
     reach = vehicles.max_steer_rate[v] * dt
     previous = vehicles.steer[v]
-    steer = min(max(model + correction, -limit, previous - reach), limit, previous + reach)
+    # The rate first, then the reach: a max_steer lowered mid-turn holds at once, left or right
+    # alike (the other order had held a left turn and let a right one unwind at the rate).
+    steer = min(max(min(max(model + correction, previous - reach), previous + reach), -limit), limit)
     vehicles.steer_correction[v] = steer - model if correction != 0.0 else 0.0
     vehicles.throttle[v] = throttle
     vehicles.brake[v] = brake
