@@ -544,7 +544,7 @@ def test_a_query_while_paused_sends_nothing_again_and_an_edit_once(running):
     time: paused, every query (~/get_entity, Foxglove's polling) had sent /tf again at the
     paused stamp. What changed nothing goes out no more; an edit goes out (once)."""
     runtime, sink = running(SCENE, "--start-paused")
-    wait_for(lambda: sink.of("tf") and sink.of("poses"))
+    assert wait_for(lambda: sink.of("tf") and sink.of("poses"))
     time.sleep(0.6)  # past the paused jobs' period
     before = {key: len(sink.of(key)) for key in ("tf", "poses", "scene_markers")}
     for _ in range(5):

@@ -26,6 +26,7 @@ import xml.etree.ElementTree as ET
 from .frame_names import DEFAULT_FRAMES
 from .messages import COLOURS, WHEEL_JOINTS, WHEEL_NAMES, WHEEL_WIDTH
 from .physics.shapes import box, cylinder
+from .physics.vehicle_registry import VEHICLE_NUMBERS
 from .robots import robot_frames
 from .sensor_messages import OPTICAL_ROTATION, optical_frame
 from .sensors import CAMERAS, quat_to_rpy
@@ -35,7 +36,6 @@ STEER_LIMIT = 0.5 * math.pi  # the inner wheel of an Ackermann turn goes beyond 
 ZERO = (0.0, 0.0, 0.0)
 # The description's own element for what makes it a ray-cast vehicle here, and what it keeps.
 EXTENSION = "vplayground"
-VEHICLE_NUMBERS = ("engine_power", "brake_power", "max_steer", "max_steer_rate")
 CHASSIS_KEYS = ("elasticity", "static_friction", "dynamic_friction", "immovable", "allow_freezing")
 CHASSIS_FLAGS = ("immovable", "allow_freezing")
 MOUNT_TOLERANCE = 1.0e-9  # m: a wheel's mount against its suspension joint's origin and limit

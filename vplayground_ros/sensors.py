@@ -66,7 +66,7 @@ MAX_RATE = 1000.0
 # follows: a rate of 1e-320 Hz overflowed the schedule, a field of view of 5e-324 rad divided by
 # zero (the simulation thread died of both), one of 1e-310 gave CameraInfo K = inf.
 MIN_RATE = 1.0e-3  # Hz
-MIN_SPAN = 1.0e-3  # rad: horizontal_fov, and a 2D scan's or a 3D lidar's span between beams
+MIN_SPAN = 1.0e-3  # rad: horizontal_fov, and a 2D scan's or a 3D lidar's span, first beam to last
 MAX_FOV = math.radians(170.0)  # a camera's, horizontal and the vertical one its size implies
 # +-pi written with fewer places (3.1416, 3.14159) is +-pi: a full turn when both ends are.
 PI_SLACK = 1.0e-4
