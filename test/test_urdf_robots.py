@@ -773,9 +773,9 @@ def test_mutated_descriptions_and_hostile_commands_leave_the_world_whole(run):
     # The corpus as it was before max_steer_rate joined the car's description. That attribute
     # shifted every mutation, and in the new corpus m47's link (a MIMIC linkage among ~20
     # mutants spawned into one another at y = 20) reached 60-170 m/s within 2.5 s and its
-    # debris threw rc and lk out of the world, in about one run in five: an open defect (not
-    # diagnosed: the overlapping spawns or the commands; alone, or beside one car, it stays
-    # still), reported in the session's note, not what this test is about.
+    # debris threw rc and lk out of the world, in about one run in five: an open defect (the
+    # spawns into the running crowd alone do it; loaded at once with the cars it overlapped, it
+    # stays still), README *Joints*, not what this test is about.
     car = car.replace(' max_steer_rate="1.5"', "")
     added = 0
     for k in range(300):
