@@ -556,12 +556,17 @@ class Broadcaster:
             self._in_round -= 1
             self._ready.notify_all()
 
-    def _publish_round(self, item):
-        snapshot, jobs, cells = item
+    def _begin_round(self, snapshot):
+        """Before a round's messages (and a paused round's): the sinks that split files there
+        are told, and the topics of entities gone are withdrawn."""
         for sink in self.sinks:
             if hasattr(sink, "round_begins"):
                 sink.round_begins(snapshot.time)
         self._run(self._withdrawals, snapshot)
+
+    def _publish_round(self, item):
+        snapshot, jobs, cells = item
+        self._begin_round(snapshot)
         for job in jobs:
             self._run(job, snapshot)
         if cells is not None:
@@ -621,10 +626,7 @@ class Broadcaster:
 
     def _publish_paused(self):
         now, snapshot = time.monotonic(), self.sim.snapshot
-        for sink in self.sinks:  # where a bag grown past its split size may split while paused
-            if hasattr(sink, "round_begins"):
-                sink.round_begins(snapshot.time)
-        self._run(self._withdrawals, snapshot)
+        self._begin_round(snapshot)  # (a bag grown past its split size may split while paused too)
         for name in PAUSED_JOBS:
             job = self._jobs[name]
             if now < job.wall_due:

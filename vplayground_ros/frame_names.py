@@ -46,15 +46,16 @@ def urdf_robot_frames(robot_specs, frames=DEFAULT_FRAMES):
     return out
 
 
-def frames_taken(frames, world):
+def frames_taken(frames, world, sensor_specs=None):
     """{frame: what it is} of every frame a new body's or sensor's name may not be, beside the
     names of the entities there: the node's own (node_frames), the sensors' that are not their
-    names (sensor_frames_taken) and the URDF robots' (urdf_robot_frames). ~/spawn's (and so
-    SpawnEntity's) and a sensor edit's rule; its other side is check_robot_frames (a robot
-    added where a body's or sensor's frame has one of its frames' names), which a scene's
-    robots meet as they are added, and check_sensor_frames its sensors."""
-    return {**node_frames(frames), **sensor_frames_taken(world.sensor_specs),
-            **urdf_robot_frames(world.robot_specs, frames)}
+    names (sensor_frames_taken; of `sensor_specs`, else the world's: an edited sensor's own are
+    not taken) and the URDF robots' (urdf_robot_frames). ~/spawn's (and so SpawnEntity's) and a
+    sensor edit's rule; its other side is check_robot_frames (a robot added where a body's or
+    sensor's frame has one of its frames' names), which a scene's robots meet as they are
+    added, and check_sensor_frames its sensors."""
+    sensors = world.sensor_specs if sensor_specs is None else sensor_specs
+    return {**node_frames(frames), **sensor_frames_taken(sensors), **urdf_robot_frames(world.robot_specs, frames)}
 
 
 class FrameTaken(SpecError):

@@ -10,8 +10,7 @@ import numpy as np
 import yaml
 
 from ..broadcast import check_sensors
-from ..frame_names import (frames_taken as frames_of_world, node_frames, sensor_frames, sensor_frames_taken,
-                           urdf_robot_frames)
+from ..frame_names import frames_taken as frames_of_world, sensor_frames
 from ..physics import specs
 from ..physics.math3d import matrix_to_quaternion, rpy_to_quat
 from ..physics.world import prepare_body
@@ -414,8 +413,7 @@ class EntityRequests:
                                  lumped_links((robot["name"], robot["model"]) for robot in world.robot_specs))
         others = [s for s in world.sensor_specs if s is not spec]
         if sensor_frames(edited) != sensor_frames(spec):
-            taken = {**node_frames(frames), **sensor_frames_taken(others),
-                     **urdf_robot_frames(world.robot_specs, frames), **dict.fromkeys(parents, "a body's name"),
+            taken = {**frames_of_world(frames, world, others), **dict.fromkeys(parents, "a body's name"),
                      **{s["name"]: "a sensor's name" for s in others}}
             clash = next((frame for frame in sensor_frames(edited) if frame in taken), None)
             if clash is not None:
