@@ -22,7 +22,7 @@ hinge drifted into a growing wobble within 2 s, a 10-link chain came apart at 10
 10 kg weight on a 1 kg arm wandered off its plane: sequential impulses converge slowly across
 mass ratios, and correcting the drift in full each step feeds what they leave back. Islands of
 more than MAX_DIRECT_JOINTS solve each joint's block alone (6x6), one after the other.
-Rows 6-8 are bounded, solved one by one before the block, each with its effective mass
+Rows 6-8 are bounded, solved one by one after the block, each with its effective mass
 through the island's equalities (what moving the axis moves: a motor turning a light link that
 carries a heavy one feels the heavy one) and its change carried through them by a response
 computed once a step, so one such row is exact in one sweep (the motor first, the limits after:
@@ -824,12 +824,17 @@ def apply_island_impulses(velocity, joints, impulse, first, size, change, scale)
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
 def solve_island(velocity, joints, target, impulse, island, with_motors):
-    """One sweep over an island solved whole: each motor and limit row, its change carried
-    through the equalities by its precomputed velocity changes (so the equalities hold as before
-    it; the equality impulses that takes are booked at the pass's end, settle_island_impulses);
-    then the equalities, K^-1 times what they lack (what the contacts changed since)."""
+    """One sweep over an island solved whole: the equalities, K^-1 times what they lack (what
+    the contacts changed since); then each motor and limit row, its change carried through the
+    equalities by its precomputed velocity changes (so they hold as before it; the equality
+    impulses that takes are booked at the pass's end, settle_island_impulses). In that order
+    each bounded row's effective mass through the equalities is its true one: solved before
+    them, a limit measured a speed the equalities were about to change, with a mass several
+    times its own, and a 1 kg link pinned at its limit under a 1,200 kg car took energy
+    from every sweep (1,359 m/s within 0.7 s)."""
     first, last = joints.islands[ISLAND_START, island], joints.islands[ISLAND_START, island + 1]
     size = last - first
+    solve_island_equalities(velocity, joints, target, impulse, island)
     for p in range(size):
         j = joints.islands[ISLAND_JOINTS, first + p]
         for which in MOTOR_FIRST:
@@ -845,7 +850,6 @@ def solve_island(velocity, joints, target, impulse, island, with_motors):
                     body = joints.islands[ISLAND_BODIES, place]
                     for e in range(6):
                         velocity[body, e] += change * moved[place - bodies_first, e]
-    solve_island_equalities(velocity, joints, target, impulse, island)
 
 
 @njit(cache=True, nogil=True, no_cfunc_wrapper=True, inline="always")
