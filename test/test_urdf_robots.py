@@ -565,6 +565,28 @@ def test_no_body_or_sensor_takes_a_robots_link_frame_nor_a_robot_a_bodys_name():
     assert requests.sim.world.body_names() == [] and [s["name"] for s in requests.sim.world.sensor_specs] == ["lidar_link"]
 
 
+def test_a_sensor_may_not_take_a_robots_odom_frame_under_the_nodes_frame_names():
+    """A URDF robot with a drive publishes its odom frame under the odom_frame parameter's name
+    (`rover/odometry` here): a sensor's frame_id there gives it two parents. A scene's sensors
+    and a robot spawned onto a sensor's frame were checked against the default name alone
+    (`rover/odom`, which nothing publishes here, refused; `rover/odometry` let through), where
+    ~/spawn's sensors met the parameter's."""
+    frames = DEFAULT_FRAMES._replace(odom="odometry")
+    rover = {**ROVER, "namespace": "rover"}
+    sensor = {"name": "s", "type": "imu", "parent": "world", "frame_id": "rover/odometry"}
+    with pytest.raises(SceneError, match=re.escape("sensors: s.frame_id: the frame 'rover/odometry' is the odom "
+                                                   "frame of the robot rover")):
+        load_world({"version": 1, "robots": [rover], "sensors": [sensor]}, frames=frames)
+    load_world({"version": 1, "robots": [rover], "sensors": [{**sensor, "frame_id": "rover/odom"}]}, frames=frames)
+
+    requests = Requests(Simulation(load_world({"version": 1, "sensors": [sensor]}, frames=frames)),
+                        scene_directories=[], settings={"world_frame": "world", "odom_frame": "odometry",
+                                                        "footprint_frame": "base_footprint", "base_frame": "base_link"})
+    ok, message = requests.spawn(yaml.safe_dump(rover))
+    assert not ok and "the frame 'rover/odometry' is the odom frame of the robot rover" in message, message
+    assert requests.sim.world.body_names() == [] and requests.sim.world.robot_specs == []
+
+
 def test_a_sensor_rides_a_link_a_fixed_joint_lumps_into_its_parent():
     """The rover's lidar_link is lumped into base_footprint's body by fixed joints (0.12 m up,
     then 0.2 forward and 0.1 up): a lidar on it, the most natural mount, had been refused as

@@ -22,7 +22,8 @@ from .parameters import frames as frame_names
 from .odometry import OdometryTracker
 from .physics.math3d import quaternions_to_matrices
 from .robot_description import robot_description
-from .robots import as_pose, compose, footprint_pose, inverse, namespace_prefix, robot, robot_transforms
+from .robots import (as_pose, compose, footprint_pose, inverse, namespace_prefix, robot, robot_transforms,
+                     world_robots)
 from .urdf_robots import (WHEEL_ODOMETRY_COVARIANCE, WheelOdometry, drive_joints, fixed_edges, link_carriers,
                           link_edges, publishing_view, root_pose)
 
@@ -959,11 +960,13 @@ def drove(seen, seen_time, position, velocity, seconds):
     return float(np.linalg.norm(np.subtract(position, seen))) <= reach
 
 
-def check_sensors(sensor_specs, robots, robot_specs=()):
+def check_sensors(sensor_specs, world, frames):
     """The robots' and sensors' topics against each other's and the node's (check_topics), and
-    the sensors' frames against each other's and the robots' (SpecError naming the key)."""
-    check_topics(sensor_specs, robots, robot_specs)
-    check_sensor_frames(sensor_specs, robots, robot_specs)
+    the sensors' frames against each other's and the robots' under the frame names `frames`
+    (parameters.Frames) (SpecError naming the key): `sensor_specs` as if the world's."""
+    robots = world_robots(world, frames)
+    check_topics(sensor_specs, robots, world.robot_specs)
+    check_sensor_frames(sensor_specs, robots, world.robot_specs, frames)
 
 
 def check_topics(sensor_specs, robots, robot_specs=()):

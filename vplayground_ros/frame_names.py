@@ -83,12 +83,12 @@ def check_robot_frames(world, name, model, namespace, path, frames=DEFAULT_FRAME
                                               "namespace for the robot)")
 
 
-def check_sensor_frames(sensor_specs, robots, robot_specs=()):
+def check_sensor_frames(sensor_specs, robots, robot_specs, frames):
     """Refuses a sensor whose frame (or optical frame) is a robot's (`car_b/base_link` as a
     frame_id, or a robot spawned onto a sensor's `car_c/odom`; a URDF robot's link frames and,
-    with a drive, its odom, of `robot_specs`): that frame would have two parents. Names the
-    sensor's frame_id."""
-    taken = {**frames_of(robots), **urdf_robot_frames(robot_specs)}
+    with a drive, its odom frame as `frames` name it, of `robot_specs`): that frame would have
+    two parents. Names the sensor's frame_id."""
+    taken = {**frames_of(robots), **urdf_robot_frames(robot_specs, frames)}
     frame_of = sensor_frame(robots, link_carriers(robot_specs))
     for spec in sensor_specs:
         frame = frame_of(spec)

@@ -20,7 +20,7 @@ from .physics import specs
 from .physics.math3d import rpy_to_quat
 from .physics.math3d import quaternions_to_matrices
 from .resources import find_shared, is_file
-from .robots import validate_robot, world_robots
+from .robots import validate_robot
 from .sensors import lumped_links, validate_sensors
 from .urdf_robots import (ENTRY_KEYS, VEHICLE_ENTRY_KEYS, add_robot_entry, check_against_model, description_source,
                           is_description_text, validate_entry, vehicle_entry)
@@ -549,7 +549,7 @@ def load_world(path_or_dict, max_bodies=None, directories=None, frames=DEFAULT_F
             except ValueError as error:  # checks that need the world (e.g. inside its bounds)
                 raise SceneError(f"{label}: {error}") from None
     try:  # needs the robots' namespaces, which the World gave them
-        check_sensors(sensor_specs, world_robots(world, frames), world.robot_specs)
+        check_sensors(sensor_specs, world, frames)
     except specs.SpecError as error:
         raise SceneError(f"{label}: sensors: {error}") from None
     world.sensor_specs = sensor_specs

@@ -14,7 +14,7 @@ from ..frame_names import frames_taken as frames_of_world, sensor_frames
 from ..physics import specs
 from ..physics.math3d import matrix_to_quaternion, rpy_to_quat
 from ..physics.world import prepare_body
-from ..robots import validate_robot, world_robots
+from ..robots import validate_robot
 from ..scene import body_mesh_points
 from ..sensors import TYPES as SENSOR_TYPES, lumped_links, pose_matrix, validate_sensor
 from ..urdf_robots import (add_robot_entry, check_against_model, description_source, is_description_text, robot_spec,
@@ -239,7 +239,7 @@ class EntityRequests:
             for path, entry, model in robots:
                 added += add_robot_entry(world, entry, model, path, frames)
             if sensors or added:  # with the robots' namespaces, which adding gave them
-                check_sensors([*world.sensor_specs, *sensors], world_robots(world, frames), world.robot_specs)
+                check_sensors([*world.sensor_specs, *sensors], world, frames)
         except Exception:
             world.remove_bodies(added)  # all or nothing
             raise
@@ -418,7 +418,7 @@ class EntityRequests:
             clash = next((frame for frame in sensor_frames(edited) if frame in taken), None)
             if clash is not None:
                 raise RequestError(NAME_NOT_UNIQUE, f"{name}.frame_id: {specs.quote(clash)} is {taken[clash]}")
-        check_sensors([*others, edited], world_robots(world, frames), world.robot_specs)
+        check_sensors([*others, edited], world, frames)
         world.sensor_specs = [edited if s is spec else s for s in world.sensor_specs]
         return reply(OK, f"edited {name}: {', '.join(sorted(set(fields) - {'name', 'type'}))}")
 
