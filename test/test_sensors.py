@@ -381,6 +381,11 @@ def test_a_sensor_goes_with_its_parent_even_when_another_body_takes_its_name(cap
      "sensors[0].horizontal_fov: must be >= 0.001"),
     ({"name": "s", "type": "depth_camera", "parent": "world", "horizontal_fov": 1.0e-310},
      "sensors[0].horizontal_fov: must be >= 0.001"),
+    # A reach of a nanometre saw nothing (1e-300 is 0 in LaserScan's float32: range_max = range_min).
+    ({"name": "s", "type": "lidar_2d", "parent": "world", "range_min": 0, "range_max": 1.0e-9},
+     "sensors[0].range_max: must be >= 0.001"),
+    ({"name": "s", "type": "depth_camera", "parent": "world", "range_min": 0, "range_max": 1.0e-300},
+     "sensors[0].range_max: must be >= 0.001"),
     # Degenerate scans: beams on one angle, rings on one elevation, an image taller than 170 deg.
     ({"name": "s", "type": "lidar_2d", "parent": "world", "angle_min": 0.5, "angle_max": 0.5, "samples": 10},
      "sensors[0].angle_max: must exceed angle_min (0.5) by at least 0.001 rad with 10 samples"),

@@ -62,11 +62,13 @@ DEFAULTS = {
 MAX_RAYS = 4_000_000  # per sensor and scan: beyond this one scan would stall the simulation
 MAX_RATE = 1000.0
 # Lower bounds no sensor needs to go under: a reading every ~17 minutes, a field of view or a
-# scan's span of 0.06 degrees. Tiny positive values got through a mere "> 0" and broke what
-# follows: a rate of 1e-320 Hz overflowed the schedule, a field of view of 5e-324 rad divided by
-# zero (the simulation thread died of both), one of 1e-310 gave CameraInfo K = inf.
+# scan's span of 0.06 degrees, a reach of a millimetre. Tiny positive values got through a mere
+# "> 0" and broke what follows: a rate of 1e-320 Hz overflowed the schedule, a field of view of
+# 5e-324 rad divided by zero (the simulation thread died of both), one of 1e-310 gave CameraInfo
+# K = inf; a range_max of 1e-9 m saw nothing, and 1e-300 is 0 in LaserScan's float32.
 MIN_RATE = 1.0e-3  # Hz
 MIN_SPAN = 1.0e-3  # rad: horizontal_fov, and a 2D scan's or a 3D lidar's span, first beam to last
+MIN_RANGE_MAX = 1.0e-3  # m
 MAX_FOV = math.radians(170.0)  # a camera's, horizontal and the vertical one its size implies
 # +-pi written with fewer places (3.1416, 3.14159) is +-pi: a full turn when both ends are.
 PI_SLACK = 1.0e-4
@@ -118,8 +120,10 @@ def validate_sensor(raw, path, parents, links=None):
         out["parent"], out["pose"] = body, [*map(float, pose[:3, 3]), *quat_to_rpy(matrix_to_quaternion(pose))]
     out["rate"] = specs.number(value("rate"), at("rate"), MIN_RATE, MAX_RATE)
     keys = TYPE_KEYS[kind]
-    for key in sorted(keys & {"range_min", "range_max", "noise_stddev", "gyro_noise", "accel_noise"}):
+    for key in sorted(keys & {"range_min", "noise_stddev", "gyro_noise", "accel_noise"}):
         out[key] = specs.number(value(key), at(key), 0.0, 1.0e4)
+    if "range_max" in keys:
+        out["range_max"] = specs.number(value("range_max"), at("range_max"), MIN_RANGE_MAX, 1.0e4)
     for key in sorted(keys & {"samples", "horizontal_samples", "channels", "width", "height"}):
         out[key] = specs.integer(value(key), at(key), 1, 100_000)
     for key in sorted(keys & {"angle_min", "angle_max"}):
