@@ -336,6 +336,26 @@ def test_a_rate_above_steps_per_second_reads_once_a_step_and_says_so(caplog):
         "sensor fast: rate 1000 Hz is above steps_per_second (500): i"]
 
 
+def test_a_fast_sensors_warning_is_said_once_not_at_every_rebuild(caplog):
+    """Every ~/reset rebuilds the sensors (another World of the scene; or the time gone back
+    and the specs copied, a partial one): the warning that a rate is above steps_per_second came
+    again with each, a line per sensor per episode for a harness that resets between them. It
+    is said once per sensor and setting; a new rate or step rate is another setting."""
+    fast = {"name": "fast", "type": "lidar_2d", "parent": "world", "samples": 8, "rate": 1000.0}
+    world, sensors = load_world(scene(fast, steps_per_second=100)), Sensors()
+    with caplog.at_level(logging.WARNING, logger="vplayground_ros.sensors"):
+        for _ in range(3):
+            run_sensors(world, sensors, 0.05, [])
+            world.time, world.step_count = 0.0, 0
+            world.sensor_specs = [dict(spec) for spec in world.sensor_specs]
+            run_sensors(world, sensors, 0.05, [])
+            world = load_world(scene(fast, steps_per_second=100))
+        assert [record.getMessage()[:40] for record in caplog.records] == ["sensor fast: rate 1000 Hz is above steps"]
+        world.sensor_specs = [{**world.sensor_specs[0], "rate": 500.0}]
+        run_sensors(world, sensors, 0.1, [])
+    assert [record.getMessage()[:40] for record in caplog.records][1:] == ["sensor fast: rate 500 Hz is above steps_"]
+
+
 def test_sensors_are_saved_with_the_scene_and_go_with_a_removed_parent(caplog):
     imu = {"name": "imu", "type": "imu", "parent": "b"}
     world = load_world(scene(imu, bodies=[{"name": "b", "position": [0, 0, 0.5]}]))

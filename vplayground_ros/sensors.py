@@ -351,6 +351,7 @@ class Sensors:
         self.sensors = []
         self.clock = None  # the world's Clock since it came or last changed its step rate
         self._world, self._specs, self._step = None, None, -1
+        self._said_too_fast = set()  # (name, rate, steps_per_second) warned of: once each, not per rebuild
 
     def follow(self, world):
         """New sensors for a new world, or when its time went back; when only its sensor specs
@@ -376,6 +377,9 @@ class Sensors:
         if fresh or world.sensor_specs is not self._specs:
             kept = {} if fresh else {id(sensor.spec): sensor for sensor in self.sensors}
             self._world, self._specs = world, world.sensor_specs
+            # What was said of sensors and rates there no longer (bounded under spawn and remove).
+            present = {(spec.get("name"), spec.get("rate")) for spec in world.sensor_specs}
+            self._said_too_fast = {said for said in self._said_too_fast if said[:2] in present}
             self.sensors = []
             for spec in world.sensor_specs:
                 sensor = kept.get(id(spec))
@@ -393,10 +397,13 @@ class Sensors:
             raise SensorError("; ".join(f"sensor {name} left out: {type(error).__name__}: {error}"
                                         for name, error in failed)) from failed[0][1]
 
-    @staticmethod
-    def warn_if_too_fast(spec, steps_per_second):
-        """At most one reading a step (one state a step to read): a faster rate is said."""
-        if spec["rate"] > steps_per_second:
+    def warn_if_too_fast(self, spec, steps_per_second):
+        """At most one reading a step (one state a step to read): a faster rate is said, once
+        for each sensor, rate and step rate (a reset makes the sensors again, with nothing new
+        to say)."""
+        setting = (spec["name"], spec["rate"], steps_per_second)
+        if spec["rate"] > steps_per_second and setting not in self._said_too_fast:
+            self._said_too_fast.add(setting)
             log.warning("sensor %s: rate %g Hz is above steps_per_second (%d): it is read once a step, "
                         "at %d Hz", spec["name"], spec["rate"], steps_per_second, steps_per_second)
 
