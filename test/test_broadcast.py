@@ -601,3 +601,25 @@ def test_flush_ends_even_if_snapshots_keep_coming(running):
     done = threading.Event()
     threading.Thread(target=lambda: (broadcaster.flush(), done.set()), daemon=True).start()
     assert done.wait(10.0), "flush did not end"
+
+
+def test_the_topic_table_keeps_no_entry_of_a_robot_gone(running):
+    """A robot's topics join the table as it publishes and leave it when it goes, so spawning
+    and removing under new names does not grow it. Its robot_description, latched, was retracted
+    (its publisher destroyed) but its entry stayed: one more for every name ever spawned."""
+    runtime, sink = running(SCENE, "--real-time-factor", "0")
+    topics = runtime.broadcaster.topics
+    before = None
+    for k in range(6):
+        name = f"arm_{k}"
+        ok, message = runtime.requests.spawn(yaml.safe_dump({"name": name, "urdf": "arm.urdf",
+                                                             "position": [-10, 12, 0]}))
+        assert ok, message
+        assert wait_for(lambda: {f"/{name}/robot_description", f"/{name}/joint_states"} <= set(topics),
+                        explain=lambda: sorted(topics))
+        assert runtime.requests.remove_entity(name)[0]
+        assert wait_for(lambda: f"/{name}/joint_states" not in topics, explain=lambda: sorted(topics))
+        assert [key for key in list(topics) if key.startswith("/arm_")] == []
+        before = len(topics) if before is None else before
+        assert len(topics) == before
+    assert sink.of(f"/{name}/robot_description")  # it went out while the robot was there

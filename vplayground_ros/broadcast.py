@@ -234,8 +234,9 @@ class Broadcaster:
         to a newcomer (a new sink, a client subscribing) only: the others, the bag above all,
         have them."""
         for latched_key, (data, seconds) in list(self._latched.items()):
-            if key is None or key == latched_key:
-                sink.publish(self.topics[latched_key], data, seconds)
+            topic = self.topics.get(latched_key)  # None: its robot went since (retracted on the simulation thread)
+            if topic is not None and (key is None or key == latched_key):
+                sink.publish(topic, data, seconds)
 
     def welcome(self, sink, key=None):
         """A client of `sink` subscribed (to the topic `key`): a latched topic's last message is
@@ -283,9 +284,10 @@ class Broadcaster:
         spawning and removing under new names does not grow the node's publishers for ever.
         A topic an entity of the snapshot publishes on stays (the root namespace's /odom, taken
         over by another robot), and a robot or sensor spawned again gets its topics again on
-        first use. The latched ones (robot_description) are retracted where they are sent;
-        the bag keeps its channels. On the thread that publishes these topics (the publisher's,
-        or the simulation's while it drains), when the snapshot's entities changed."""
+        first use. The latched ones (robot_description) are retracted, and leave the table,
+        where they are sent (_describe_robots); the bag keeps its channels. On the thread that
+        publishes these topics (the publisher's, or the simulation's while it drains), when the
+        snapshot's entities changed."""
         present = (snapshot.vehicle_specs, snapshot.robot_specs, snapshot.sensor_specs)
         if self._present is not None and all(a is b for a, b in zip(present, self._present)):
             return
@@ -297,8 +299,7 @@ class Broadcaster:
         live.update(sensor_key(topic) for spec in snapshot.sensor_specs
                     for topic in sensor_messages.topics(spec, carriers.get(spec["parent"])))
         robot_keys, sensor_keys = dict(self._robot_topics), dict(self._sensor_topics)  # (the simulation thread adds)
-        kept_robots = {ident: key for ident, key in robot_keys.items()
-                       if key in live or self.topics[key].qos == "latched"}
+        kept_robots = {ident: key for ident, key in robot_keys.items() if key in live}
         kept_sensors = {ident: key for ident, key in sensor_keys.items() if key in live}
         gone = ({*robot_keys.values(), *sensor_keys.values()} - {*kept_robots.values(), *kept_sensors.values()})
         if not gone:
@@ -476,12 +477,16 @@ class Broadcaster:
 
     def _describe_robots(self, snapshot, robots, urdf_robots, sensor_specs):
         """Each robot's robot_description (URDF, latched; a URDF robot's as loaded), sent when it
-        differs from the last one; a robot that is gone leaves no description for a newcomer."""
+        differs from the last one; a robot that is gone leaves no description for a newcomer, nor
+        its entry in the topic table. (These are the simulation thread's: it makes, sends and
+        retracts them, and they are not among _robot_topics, which the publisher thread prunes.)"""
         current = {}
         texts = [(r, robot_description(snapshot.vehicle_specs[r.name], sensor_specs, r.name, self.frames))
                  for r in robots] + [(r, r.description) for r in urdf_robots]
         for r, text in texts:
-            key = self.robot_topic(r, "robot_description")
+            topic = robot_topics(r, self.resolve_name)["robot_description"]
+            key = topic.key
+            self.topics.setdefault(key, topic)
             current[key] = text
             if self._descriptions.get(key) != text:
                 self.send(key, messages.string(text), snapshot.time)
@@ -495,6 +500,7 @@ class Broadcaster:
             self._visuals_sent = ([prefix for prefix, _ in drawn], [v for _, v in drawn])
         for key in self._descriptions.keys() - current.keys():
             self.retract(key)
+            del self.topics[key]
         self._descriptions = current
 
     def retract(self, key):
