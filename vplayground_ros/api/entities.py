@@ -37,6 +37,12 @@ def sensor_named(world, name):
     return next((s for s in world.sensor_specs if s["name"] == name), None)
 
 
+def world_lumped_links(world, adding=()):
+    """sensors.lumped_links of the world's URDF robots and those `adding` ((robot name, model)
+    of a spawn): where a sensor whose parent is such a link rides."""
+    return lumped_links([(robot["name"], robot["model"]) for robot in world.robot_specs] + list(adding))
+
+
 def drop_sensors_of(world, removed):
     """The sensors whose parent was just removed go with it, with a warning naming both."""
     removed = set(removed)
@@ -208,14 +214,13 @@ class EntityRequests:
         parents = set(existing) | {spec.get("name") for _, kind, spec, _, _ in prepared if kind in (True, False)}
         parents |= {body["name"] for _, _, model in robots for body in model.bodies}
         sensors = []
+        links = world_lumped_links(world, [(entry["name"], model) for _, entry, model in robots])
         for path, vehicle, spec, rename, _ in prepared:
             if vehicle != "sensor":
                 continue
             if isinstance(spec.get("parent"), str):
                 spec = {**spec, "parent": renamed.get(spec["parent"], spec["parent"])}
-            sensor = validate_sensor(spec, path, parents, lumped_links(
-                [(robot["name"], robot["model"]) for robot in world.robot_specs]
-                + [(entry["name"], model) for _, entry, model in robots]))
+            sensor = validate_sensor(spec, path, parents, links)
             wanted = sensor["name"]
             while True:
                 frame_names = sensor_frames(sensor)
@@ -409,8 +414,7 @@ class EntityRequests:
                 raise RequestError(FAILED, f"{name}.{key}: a sensor's {key} cannot be edited "
                                            "(remove it and spawn another)")
         parents = set(world.body_names())
-        edited = validate_sensor({**spec, **fields}, name, parents,
-                                 lumped_links((robot["name"], robot["model"]) for robot in world.robot_specs))
+        edited = validate_sensor({**spec, **fields}, name, parents, world_lumped_links(world))
         others = [s for s in world.sensor_specs if s is not spec]
         if sensor_frames(edited) != sensor_frames(spec):
             taken = {**frames_of_world(frames, world, others), **dict.fromkeys(parents, "a body's name"),
