@@ -168,6 +168,7 @@ def test_a_description_uri_is_found_as_the_yaml_spawns_urdf_is(ros):
         for uri in ("no_such_robot.urdf", "../config/car.urdf"):
             missing = call(ros, SpawnEntity, "spawn_entity", name="stray", uri=uri)
             assert missing.result.result == NOT_FOUND and "not found" in missing.result.error_message, uri
+            assert "robot description" in missing.result.error_message, missing.result.error_message
     finally:
         for name in ("uri_car", "urdf_car"):
             ros.text("remove", f"{{entity: {name}}}")

@@ -497,6 +497,18 @@ def test_bad_robot_entries_are_refused_naming_the_key(robot, message):
         load_world({"version": 1, "robots": [{"name": "kuka", "urdf": KUKA, **robot}]})
 
 
+def test_a_description_that_is_not_there_is_named_as_one():
+    """A robot's description file that is not found is named so, in ~/spawn and a scene file
+    alike (the lookup is a mesh's: its error had said "mesh file", as if the robot's mesh were
+    missing)."""
+    requests = Requests(Simulation(load_world({"version": 1})), scene_directories=[])
+    ok, message = requests.spawn(yaml.safe_dump({"name": "lost", "urdf": "no_such_robot.urdf"}))
+    assert not ok and message.startswith("MISSING_ASSETS: spawn.urdf: robot description 'no_such_robot.urdf' "
+                                         "not found (looked in: "), message
+    with pytest.raises(SceneError, match=re.escape("robots[0].urdf: robot description 'no_such_robot.urdf' not found")):
+        load_world({"version": 1, "robots": [{"name": "lost", "urdf": "no_such_robot.urdf"}]})
+
+
 def test_a_robot_may_not_take_a_namespace_that_is_taken():
     with pytest.raises(SceneError, match="robots\\[1\\].namespace: 'left' is the namespace of a already"):
         load_world({"version": 1, "robots": [{"name": "a", "urdf": KUKA, "namespace": "left"},

@@ -190,36 +190,38 @@ def read_scene(path_or_dict):
 # How a scene names a mesh of the package's meshes/ wherever the package is installed (the ROS
 # resource URI): what saved scenes write, so a file of the same name beside them is not taken.
 PACKAGE_MESHES = "package://vplayground_ros/meshes/"
+# What resolve_mesh calls a robot's description file it looks for the same way.
+DESCRIPTION_FILE = "robot description"
 
 
-def resolve_mesh(name, base, directories=None, key="playground.mesh", shared_folder="meshes"):
+def resolve_mesh(name, base, directories=None, key="playground.mesh", shared_folder="meshes", kind="mesh file"):
     """A mesh path as written in a scene: `package://vplayground_ros/meshes/<file>`, absolute,
     else relative to the scene file's folder, else one of the package's `shared_folder` (meshes/;
     config/ for a robot's description: the built-in car's, wherever its scene was copied to).
     With `directories` (scenes loaded for a service call), a mesh outside them and the package's
     folder is refused, symbolic links resolved. Returns the path or raises SpecError listing
-    where it looked."""
+    where it looked, naming the file as `kind` (what the caller looks for)."""
     if name.startswith("package://") and not name.startswith(PACKAGE_MESHES):
-        raise specs.SpecError(key, f"mesh file {specs.quote(name)}: package:// names only this package's "
+        raise specs.SpecError(key, f"{kind} {specs.quote(name)}: package:// names only this package's "
                                    f"meshes ({PACKAGE_MESHES}<file>); give another file by its path")
     if name.startswith(PACKAGE_MESHES):
         file_name = name[len(PACKAGE_MESHES):]
         shared = find_shared(f"meshes/{file_name}") if file_name and Path(file_name).name == file_name else None
         if shared is None:
-            raise MissingMesh(key, f"mesh file {specs.quote(name)}: the package has no mesh {specs.quote(file_name)}")
+            raise MissingMesh(key, f"{kind} {specs.quote(name)}: the package has no mesh {specs.quote(file_name)}")
         return shared
     candidate = Path(name)
     tried = [candidate] if candidate.is_absolute() else [base / candidate]
     if is_file(tried[0]):
         if directories is not None and not inside(tried[0], directories) and not is_shared(tried[0], shared_folder):
-            raise MissingMesh(key, f"mesh file {specs.quote(name)} resolves outside the allowed directories")
+            raise MissingMesh(key, f"{kind} {specs.quote(name)} resolves outside the allowed directories")
         return tried[0]
     if not candidate.is_absolute() and ".." not in candidate.parts:  # (no way out of the folder)
         shared = find_shared(f"{shared_folder}/{name}")
         if shared is not None:
             return shared
         tried.append(Path(f"<package>/{shared_folder}") / name)
-    raise MissingMesh(key, f"mesh file {specs.quote(name)} not found (looked in: "
+    raise MissingMesh(key, f"{kind} {specs.quote(name)} not found (looked in: "
                            f"{', '.join(str(p) for p in tried)})")
 
 
@@ -449,7 +451,8 @@ def robot_sources(scene, base, directories):
         specs.mapping(raw, path, ENTRY_KEYS | VEHICLE_ENTRY_KEYS)
         source = description_source(raw, path)
         text = is_description_text(source)
-        file = str(source if text else resolve_mesh(source, base, directories, f"{path}.urdf", "config"))
+        file = str(source if text else resolve_mesh(source, base, directories, f"{path}.urdf", "config",
+                                                            DESCRIPTION_FILE))
         label = f"{path}.urdf" + ("" if text else f": {file}")
         sources.append((raw, file, label, read_robot(lambda: read_description(file, label, directories is None))))
     return sources

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from ..physics import specs
 from ..resources import find_shared
-from ..scene import resolve_mesh
+from ..scene import DESCRIPTION_FILE, resolve_mesh
 from .results import FAILED, RequestError
 
 MAX_PATH = 4096  # characters of a scene path (PATH_MAX)
@@ -76,7 +76,7 @@ def find_description(name, directories, key):
     found as a scene's robot is (scene.resolve_mesh): absolute, else from the working directory,
     inside `directories` (the scene directories), else the package's config/ (`car.urdf` is the
     built-in car's; never a name with `..`). MissingMesh, naming `key`, where it looked."""
-    return resolve_mesh(name, Path.cwd(), directories, key, "config")
+    return resolve_mesh(name, Path.cwd(), directories, key, "config", DESCRIPTION_FILE)
 
 
 def write_file(target, data, overwrite):
