@@ -211,6 +211,31 @@ def test_entity_state_info_bounds_and_delete(ros):
     assert "probe" not in call(ros, GetEntities, "get_entities").entities
 
 
+def test_a_sensors_state_moves_with_its_mount(ros):
+    """GetEntityState and GetEntitiesStates of a sensor on a moving body: its frame's pose and
+    its velocity in the world, the body's velocity at the mount point (its twist had read zero
+    however the body moved)."""
+    from geometry_msgs.msg import Twist
+    assert set_state(ros, SimulationState.STATE_PAUSED).result in (OK, SetSimulationState.Response.ALREADY_IN_TARGET_STATE)
+    try:
+        assert spawn(ros, "spinner", z=4.0).result.result == OK
+        assert ros.text("spawn", "{name: spinner_imu, type: imu, parent: spinner, pose: [0.5, 0, 0, 0, 0, 0]}")[0]
+        moving = EntityState(pose=pose(0.0, 5.0, 4.0).pose, twist=Twist(linear=Vector3(x=1.0), angular=Vector3(z=2.0)))
+        assert call(ros, SetEntityState, "set_entity_state", entity="spinner", state=moving).result.result == OK
+        got = call(ros, GetEntityState, "get_entity_state", entity="spinner_imu")
+        states = call(ros, GetEntitiesStates, "get_entities_states", filters=EntityFilters(filter="^spinner_imu$"))
+        assert got.result.result == OK and list(states.entities) == ["spinner_imu"]
+        for sensor in (got.state, states.states[0]):
+            assert (sensor.pose.position.x, sensor.pose.position.y) == pytest.approx((0.5, 5.0))
+            # (1, 0, 0) + (0, 0, 2) x (0.5, 0, 0)
+            twist = sensor.twist
+            assert (twist.linear.x, twist.linear.y, twist.linear.z) == pytest.approx((1.0, 1.0, 0.0))
+            assert (twist.angular.x, twist.angular.y, twist.angular.z) == pytest.approx((0.0, 0.0, 2.0))
+    finally:
+        ros.text("remove", "{entity: spinner}")
+        play(ros)
+
+
 def test_set_entity_state_moves_and_refuses(ros):
     assert spawn(ros, "mover", z=0.25).result.result == OK
     target = EntityState(pose=Pose(position=Point(x=3.0, y=-4.0, z=2.0), orientation=Quaternion(w=1.0)),

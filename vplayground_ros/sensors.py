@@ -289,6 +289,19 @@ def pose_matrix(xyz, quaternion):
     return m
 
 
+def mount_motion(world, parent, mount):
+    """(the pose in the world (4 x 4) of a frame at `mount` (4 x 4) on `parent`, a body's name
+    or WORLD; the parent's angular velocity; the world velocity of that frame's origin, the
+    parent's at that point), all in the world frame: where a sensor is and how it moves."""
+    if parent == WORLD:
+        return mount, np.zeros(3), np.zeros(3)
+    body = world.body(parent)
+    pose = pose_matrix(body["position"], body["quaternion"]) @ mount
+    angular = np.asarray(body["angular_velocity"], float)
+    arm = pose[:3, 3] - np.asarray(body["position"], float)
+    return pose, angular, np.asarray(body["linear_velocity"], float) + np.cross(angular, arm)
+
+
 class Clock:
     """Simulated time against the world's step count: the steps from `step` on, taken at
     `steps_per_second`, each last 1 / steps_per_second after `time`. A change of the step rate
@@ -420,7 +433,7 @@ class Sensors:
             except KeyError:  # gone already: the sensor goes at its first sample
                 return
         if sensor.kind == "imu":
-            sensor.last_velocity, sensor.last_time = self.mount_motion(sensor, world)[2], world.time
+            sensor.last_velocity, sensor.last_time = mount_motion(world, sensor.parent, sensor.mount)[2], world.time
 
     def steps_until_due(self, world):
         """Steps the world may take before the next sample (at least 1): a batch ends there."""
@@ -472,17 +485,10 @@ class Sensors:
         return np.concatenate(origins), np.concatenate(directions), np.concatenate(ranges)
 
     # ------------------------------------------------------------------ readings
-    def frame_pose(self, sensor, world):
-        """The sensor's pose in the world (4 x 4), and its parent's body state (or None)."""
-        if sensor.parent == WORLD:
-            return sensor.mount, None
-        body = world.body(sensor.parent)
-        return pose_matrix(body["position"], body["quaternion"]) @ sensor.mount, body
-
     def rays(self, sensor, world):
         """The sensor's rays now, in the world frame: (their origins (3,) or (R, 3), the
         directions (R, 3), how far each reaches from its origin: a number or (R,))."""
-        pose, _ = self.frame_pose(sensor, world)
+        pose = mount_motion(world, sensor.parent, sensor.mount)[0]
         directions = sensor.directions @ pose[:3, :3].T
         origin = pose[:3, 3]
         if sensor.kind == "camera":  # from the near clipping plane
@@ -556,16 +562,6 @@ class Sensors:
         colour = palette[hits.body % len(palette)] * light[:, None]
         return np.rint(colour * 255.0).astype(np.uint8)
 
-    def mount_motion(self, sensor, world):
-        """(the sensor's pose (4 x 4), its parent's angular velocity and the world velocity of
-        the mount point), all in the world frame."""
-        pose, body = self.frame_pose(sensor, world)
-        if body is None:
-            return pose, np.zeros(3), np.zeros(3)
-        angular = np.asarray(body["angular_velocity"], float)
-        arm = pose[:3, 3] - np.asarray(body["position"], float)
-        return pose, angular, np.asarray(body["linear_velocity"], float) + np.cross(angular, arm)
-
     def read_imu(self, sensor, world):
         """REP 145 readings of the parent body at the sensor: orientation (sensor frame in the
         world), angular velocity (sensor frame) and specific force: a - g, where a is the mean
@@ -573,7 +569,7 @@ class Sensors:
         the simulated time between them: samples fall on whole steps, so that interval is 1 /
         rate only on average), so at rest it reads +9.81 m/s^2 up and in free fall 0. The first
         sample measures from when the sensor was made (spawned, loaded, time reset)."""
-        pose, angular, linear = self.mount_motion(sensor, world)
+        pose, angular, linear = mount_motion(world, sensor.parent, sensor.mount)
         rotation = pose[:3, :3]
         gravity = np.asarray(world.settings["gravity"], float)
         acceleration = np.zeros(3)

@@ -119,8 +119,7 @@ def state_message(table_or_entity, frame, row=None):
     if row is None:
         e = table_or_entity
         position, orientation = e["pose"]["position"], e["pose"]["orientation"]
-        twist = e.get("twist", {"linear": [0.0] * 3, "angular": [0.0] * 3})
-        linear, angular, seconds = twist["linear"], twist["angular"], e["time"]
+        linear, angular, seconds = e["twist"]["linear"], e["twist"]["angular"], e["time"]
     else:
         t = table_or_entity
         position, orientation, linear, angular = t.positions[row], t.quaternions[row], t.linear[row], t.angular[row]

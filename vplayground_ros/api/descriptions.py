@@ -5,7 +5,7 @@ import numpy as np
 
 from ..physics.math3d import matrix_to_quaternion, rpy_to_quat
 from ..physics.shapes import SHAPES, half_extents, solid
-from ..sensors import pose_matrix
+from ..sensors import mount_motion, pose_matrix
 
 SENSOR_SIZE = 0.1  # m: the cube ~/get_entities draws a sensor as
 
@@ -52,17 +52,17 @@ def with_wheels(vehicle, half):
 
 
 def describe_sensor(world, spec):
-    """A sensor as plain data, like describe(): its pose in `world` now, its spec as properties
-    and a 0.1 m cube as its bounds (for ~/get_entities' marker)."""
+    """A sensor as plain data, like describe(): its frame's pose and twist in `world` now (its
+    parent's velocity at the mount point), its spec as properties and a 0.1 m cube as its
+    bounds (for ~/get_entities' marker)."""
     mount = pose_matrix(spec["pose"][:3], rpy_to_quat(spec["pose"][3:]))
-    if spec["parent"] != "world":
-        body = world.body(spec["parent"])
-        mount = pose_matrix(body["position"], body["quaternion"]) @ mount
+    pose, angular, linear = mount_motion(world, spec["parent"], mount)
     return {
         "name": spec["name"],
         "category": "sensor",
         "frame": "world",
-        "pose": {"position": mount[:3, 3].tolist(), "orientation": matrix_to_quaternion(mount[:3, :3]).tolist()},
+        "pose": {"position": pose[:3, 3].tolist(), "orientation": matrix_to_quaternion(pose[:3, :3]).tolist()},
+        "twist": {"linear": linear.tolist(), "angular": angular.tolist()},
         "properties": dict(spec),
         "shape": "box",
         "bounds": {"size": [SENSOR_SIZE] * 3},

@@ -50,8 +50,8 @@ def entity_table(world):
         positions = np.vstack([positions, [s["pose"]["position"] for s in sensors]])
         quaternions = np.vstack([quaternions, [s["pose"]["orientation"] for s in sensors]])
         reach = np.vstack([reach, np.full((len(sensors), 3), 0.5 * SENSOR_SIZE)])
-        linear = np.vstack([linear, np.zeros((len(sensors), 3))])
-        angular = np.vstack([angular, np.zeros((len(sensors), 3))])
+        linear = np.vstack([linear, [s["twist"]["linear"] for s in sensors]])
+        angular = np.vstack([angular, [s["twist"]["angular"] for s in sensors]])
     low, high = positions - reach, positions + reach
     if world.robot_specs:  # each URDF robot too: its root's state, the box around its links
         rows = {name: k for k, name in enumerate(names)}
