@@ -312,12 +312,15 @@ def test_a_compound_is_drawn_as_its_parts_on_its_frame():
 
 
 def test_a_compound_is_bounded_by_a_box_about_its_frame():
-    """The standard services' bounds and ~/get_entities' are boxes about an entity's pose: a
-    compound's holds its parts however it turns about its frame."""
+    """~/get_entities' box (bounds.size) is centred on an entity's pose: a compound's holds its
+    parts however it turns about its frame. Its corners (bounds.low, high: GetEntityBounds')
+    are where the parts are in that frame."""
     from vplayground_ros.api.descriptions import describe
     world = World(ground=None, settings=WEIGHTLESS)
     world.add_body({"name": "pair", "shape": "compound", "parts": [
         {"size": [1, 1, 1], "position": [0.5, 0, 0]}, {"size": [1, 1, 1], "position": [1.5, 0, 0]}]})
     # the parts span x = 0..2 about a centre of mass at x = 1: 1 m either side of it, 2 of the frame
-    assert describe(world, "pair")["bounds"]["size"] == pytest.approx([4, 1, 1])
+    bounds = describe(world, "pair")["bounds"]
+    assert bounds["size"] == pytest.approx([4, 1, 1])
+    assert bounds["low"] == pytest.approx([0, -0.5, -0.5]) and bounds["high"] == pytest.approx([2, 0.5, 0.5])
     assert world.body_properties()["sizes"][0] == pytest.approx([4, 1, 1])

@@ -211,6 +211,33 @@ def test_entity_state_info_bounds_and_delete(ros):
     assert "probe" not in call(ros, GetEntities, "get_entities").entities
 
 
+def test_bounds_are_the_box_where_the_entity_is_in_its_frame(ros):
+    """GetEntityBounds of entities whose frame is not their box's centre: a compound whose parts
+    lie along its frame's +x, a hull about its centre of mass, the arm standing on its base's
+    frame. The box is where they are (it had been mirrored about the frame: the arm reaching
+    as far below its base as above it)."""
+    def box(name):
+        reply = call(ros, GetEntityBounds, "get_entity_bounds", entity=name)
+        assert reply.result.result == OK, reply.result.error_message
+        return [[p.x, p.y, p.z] for p in reply.bounds.points]
+    assert set_state(ros, SimulationState.STATE_PAUSED).result in (OK, SetSimulationState.Response.ALREADY_IN_TARGET_STATE)
+    try:
+        pair = "{shape: compound, parts: [{size: [1, 1, 1], position: [0.5, 0, 0]}, {size: [1, 1, 1], position: [1.5, 0, 0]}]}"
+        assert spawn(ros, "pair", z=6.0, resource=pair).result.result == OK
+        assert box("pair") == [pytest.approx([0.0, -0.5, -0.5]), pytest.approx([2.0, 0.5, 0.5])]
+        corner = "{shape: convex, points: [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]}"  # centre of mass at 1/4
+        assert spawn(ros, "corner", z=9.0, resource=corner).result.result == OK
+        assert box("corner") == [pytest.approx([-0.25] * 3), pytest.approx([0.75] * 3)]
+        assert ros.text("spawn", "{name: bounded_arm, urdf: arm.urdf, position: [-8, 8, 0]}")[0]
+        low, high = box("bounded_arm")
+        assert low == pytest.approx([-0.12, -0.12, 0.0], abs=1e-6)  # the base's cylinder, from its foot
+        assert high == pytest.approx([0.12, 0.12, 1.2], abs=1e-6)   # up to the tool's sphere, joints at 0
+    finally:
+        for name in ("pair", "corner", "bounded_arm"):
+            ros.text("remove", f"{{entity: {name}}}")
+        play(ros)
+
+
 def test_a_sensors_state_moves_with_its_mount(ros):
     """GetEntityState and GetEntitiesStates of a sensor on a moving body: its frame's pose and
     its velocity in the world, the body's velocity at the mount point (its twist had read zero

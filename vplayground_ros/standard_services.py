@@ -11,8 +11,6 @@ import re
 import time
 from pathlib import Path
 
-import numpy as np
-
 from . import messages
 from .api import INVALID_MAP_DATA, MAP_DOES_NOT_EXIST, MAP_SUCCESS
 from .api.entity_queries import category_of
@@ -327,8 +325,8 @@ class StandardServices:
     def get_entity_bounds(self, request):
         """The box around the entity in its own frame (Bounds TYPE_BOX: lower, then upper corner)."""
         def bounds(entity):
-            half = 0.5 * np.asarray(entity["bounds"]["size"], float)
-            return {"bounds": {"type": 1, "points": [messages.xyz(-half), messages.xyz(half)]}}  # TYPE_BOX
+            corners = [messages.xyz(entity["bounds"][corner]) for corner in ("low", "high")]
+            return {"bounds": {"type": 1, "points": corners}}  # TYPE_BOX
         return self._about(request, bounds)
 
     # ------------------------------------------------------------------ simulation

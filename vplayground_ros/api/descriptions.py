@@ -5,6 +5,7 @@ import numpy as np
 
 from ..physics.math3d import matrix_to_quaternion, rpy_to_quat
 from ..physics.shapes import SHAPES, half_extents, solid
+from ..physics.shapes.compound import part_rotation
 from ..sensors import mount_motion, pose_matrix
 
 SENSOR_SIZE = 0.1  # m: the cube ~/get_entities draws a sensor as
@@ -16,13 +17,9 @@ def describe(world, name, vehicles=None):
     is_vehicle = name in (world.vehicle_names() if vehicles is None else vehicles)
     props = world.vehicle(name) if is_vehicle else world.body(name)
     body = world.body(name)
-    shape = solid(body["shape"], body)
-    half = np.asarray(half_extents(SHAPES[body["shape"]].code, shape.dimensions))
-    if shape.compound is not None:  # about its frame, where its pose is, not its centre of mass
-        half = half + np.abs(shape.compound.centre)
+    low, high = frame_box(body["shape"], solid(body["shape"], body))
     if is_vehicle:
-        half = with_wheels(props, half)
-    size = 2.0 * half
+        low, high = with_wheels(props, low, high)
     return {
         "name": name,
         "category": "vehicle" if is_vehicle else ("immovable" if body["immovable"] else "box"),
@@ -33,22 +30,53 @@ def describe(world, name, vehicles=None):
         "frozen": body["frozen"],
         "properties": props,
         "shape": body["shape"],
-        "bounds": {"size": size.tolist()},
+        "bounds": bounds(low, high),
     }
 
 
-def with_wheels(vehicle, half):
-    """A chassis's half extents about its frame grown to take in its wheels over their
+def bounds(low, high):
+    """An entity's `bounds`: the corners of the box around it in its frame (`low`, `high`: what
+    GetEntityBounds answers), and `size`, the box centred on its pose that holds it (what
+    ~/get_entities draws a box as)."""
+    low, high = np.asarray(low, float), np.asarray(high, float)
+    return {"size": (2.0 * np.maximum(-low, high)).tolist(), "low": low.tolist(), "high": high.tolist()}
+
+
+def frame_box(shape_name, shape):
+    """(low, high) corners of the box around a shape (shapes.Solid) in its body's frame. Not
+    always about the frame: a hull's frame is its centre of mass, a compound's parts stand
+    anywhere in theirs."""
+    if shape.hull is not None:
+        return shape.hull.points.min(axis=0), shape.hull.points.max(axis=0)
+    if shape.compound is not None:
+        lows, highs = zip(*map(part_box, shape.compound.parts))
+        return np.min(lows, axis=0), np.max(highs, axis=0)
+    half = np.asarray(half_extents(SHAPES[shape_name].code, shape.dimensions))
+    return -half, half
+
+
+def part_box(part):
+    """(low, high) of a compound's part in the body's frame: a hull's turned vertices, else its
+    shape's box turned about the part's centre."""
+    turn = part_rotation(part)
+    if part.solid.hull is not None:
+        points = part.centre + part.solid.hull.points @ turn.T
+        return points.min(axis=0), points.max(axis=0)
+    reach = np.abs(turn) @ np.asarray(half_extents(part.code, part.solid.dimensions))
+    return part.centre - reach, part.centre + reach
+
+
+def with_wheels(vehicle, low, high):
+    """A chassis's box in its frame (low, high) grown to take in its wheels over their
     suspension's whole travel: they are rays, no body's volume, but they stand where nothing
     should be spawned (the bounds had been the chassis alone, 0.8 m above the car's contact
     points). Each wheel's box is its radius every way about its centre (the engine's wheels
     have no width)."""
     for wheel in vehicle["wheels"]:
         mount, radius = np.asarray(wheel["mount"], float), float(wheel["radius"])
-        low = mount - [radius, radius, wheel["spring_length"] + radius]
-        high = mount + radius
-        half = np.maximum(half, np.maximum(np.abs(low), np.abs(high)))
-    return half
+        low = np.minimum(low, mount - [radius, radius, wheel["spring_length"] + radius])
+        high = np.maximum(high, mount + radius)
+    return low, high
 
 
 def describe_sensor(world, spec):
@@ -65,7 +93,7 @@ def describe_sensor(world, spec):
         "twist": {"linear": linear.tolist(), "angular": angular.tolist()},
         "properties": dict(spec),
         "shape": "box",
-        "bounds": {"size": [SENSOR_SIZE] * 3},
+        "bounds": bounds([-0.5 * SENSOR_SIZE] * 3, [0.5 * SENSOR_SIZE] * 3),
     }
 
 
@@ -81,11 +109,10 @@ def describe_robot(world, spec):
         mass += link["mass"]
         frozen = frozen and link["frozen"]
         frame = to_root @ pose_matrix(link["pose"]["position"], link["pose"]["orientation"])
-        half = 0.5 * np.asarray(link["bounds"]["size"])
-        for signs in np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T:
-            corners.append(frame[:3, :3] @ (signs * half) + frame[:3, 3])
+        box = np.array([link["bounds"]["low"], link["bounds"]["high"]])
+        for pick in np.array(np.meshgrid([0, 1], [0, 1], [0, 1])).reshape(3, -1).T:  # low or high on each axis
+            corners.append(frame[:3, :3] @ box[pick, [0, 1, 2]] + frame[:3, 3])
     corners = np.array(corners)
-    half = np.maximum(np.abs(corners.min(axis=0)), np.abs(corners.max(axis=0)))  # about the root's frame
     return {
         "name": spec["name"],
         "category": "robot",
@@ -96,5 +123,5 @@ def describe_robot(world, spec):
         "frozen": frozen,
         "properties": {key: value for key, value in spec.items() if key not in ("model", "limits", "joints_held")},
         "shape": "urdf",
-        "bounds": {"size": (2.0 * half).tolist()},
+        "bounds": bounds(corners.min(axis=0), corners.max(axis=0)),
     }

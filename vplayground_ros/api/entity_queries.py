@@ -3,8 +3,9 @@ category and world bounds (GetEntities, GetEntitiesStates and their filters), on
 state, category and bounds (GetEntityState, GetEntityInfo, GetEntityBounds).
 
 Categories: a vehicle is a robot, an immovable body a static object, any other body or a
-sensor an object. Bounds: the box around the entity in its own frame, and in the world the
-axis-aligned box around that (what the bounds filters test).
+sensor an object. Bounds: the box around the entity in its own frame (descriptions.frame_box);
+what the bounds filters test, in the world, is the axis-aligned box around the engine's box of
+each body, centred on its pose (larger than that for a shape whose frame is not its centre).
 """
 from collections import namedtuple
 
@@ -36,7 +37,8 @@ def entity_table(world):
     categories[vehicle_rows] = ROBOT
     half = 0.5 * state["sizes"]
     for k in vehicle_rows:  # its wheels too, as its bounds have them
-        half[k] = with_wheels(world.vehicle(names[k]), half[k])
+        low, high = with_wheels(world.vehicle(names[k]), -half[k], half[k])
+        half[k] = np.maximum(-low, high)
     rotations = quaternions_to_matrices(state["quaternions"])
     reach = np.einsum("nij,nj->ni", np.abs(rotations), half)
     positions, quaternions = state["positions"], state["quaternions"]
