@@ -7,6 +7,7 @@ import time
 from pathlib import Path
 
 import pytest
+import yaml
 
 rclpy = pytest.importorskip("rclpy")
 si = pytest.importorskip("simulation_interfaces")
@@ -235,6 +236,32 @@ def test_bounds_are_the_box_where_the_entity_is_in_its_frame(ros):
     finally:
         for name in ("pair", "corner", "bounded_arm"):
             ros.text("remove", f"{{entity: {name}}}")
+        play(ros)
+
+
+def test_the_yaml_get_entities_lists_what_get_entities_does(ros):
+    """~/get_entities lists the entities GetEntities does, in its order: a URDF robot among them
+    (it had listed the robot's links alone), described as ~/get_entity describes it, at its root
+    link's pose, drawn as the box around its links (GetEntityBounds')."""
+    from visualization_msgs.srv import GetInteractiveMarkers
+    assert set_state(ros, SimulationState.STATE_PAUSED).result in (OK, SetSimulationState.Response.ALREADY_IN_TARGET_STATE)
+    try:
+        assert ros.text("spawn", "{name: listed_arm, urdf: arm.urdf, position: [-8, 8, 0]}")[0]
+        markers = ros.call(GetInteractiveMarkers, "/vplayground/get_entities", GetInteractiveMarkers.Request()).markers
+        assert [m.name for m in markers] == list(call(ros, GetEntities, "get_entities").entities)
+        arm = next(m for m in markers if m.name == "listed_arm")
+        assert yaml.safe_load(arm.description) == yaml.safe_load(ros.text("get_entity", "{entity: listed_arm}")[1])
+        root = call(ros, GetEntityState, "get_entity_state", entity="listed_arm").state.pose.position
+        assert (arm.pose.position.x, arm.pose.position.y, arm.pose.position.z) == (root.x, root.y, root.z)
+        low, high = call(ros, GetEntityBounds, "get_entity_bounds", entity="listed_arm").bounds.points
+        (box,) = arm.controls[0].markers
+        assert box.type == 1  # CUBE
+        position, scale = box.pose.position, box.scale
+        assert (position.x, position.y, position.z) == pytest.approx(
+            ((low.x + high.x) / 2, (low.y + high.y) / 2, (low.z + high.z) / 2))
+        assert (scale.x, scale.y, scale.z) == pytest.approx((high.x - low.x, high.y - low.y, high.z - low.z))
+    finally:
+        ros.text("remove", "{entity: listed_arm}")
         play(ros)
 
 

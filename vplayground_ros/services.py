@@ -131,17 +131,19 @@ def entity_marker(runtime, name, description):
 
 def shape_markers(description):
     """The markers that draw an entity in its own frame (messages.shape_marker_layout: a capsule
-    is a cylinder and two spheres, a compound its parts; a sensor a small cube)."""
-    shape, hull, parts = description["shape"], None, None
-    if shape == "box":
-        dimensions = 0.5 * np.asarray(description["bounds"]["size"], float)
+    is a cylinder and two spheres, a compound its parts; a sensor a small cube, a URDF robot
+    the box around its links, where that box is)."""
+    shape, hull, parts, centre = description["shape"], None, None, np.zeros(3)
+    if shape in ("box", "urdf"):
+        low, high = np.asarray(description["bounds"]["low"], float), np.asarray(description["bounds"]["high"], float)
+        shape, dimensions, centre = "box", 0.5 * (high - low), 0.5 * (high + low)
     else:
         solid_shape = solid(shape, description["properties"])
         dimensions, hull = np.asarray(solid_shape.dimensions, float), solid_shape.hull
         parts = None if solid_shape.compound is None else frame_parts(solid_shape.compound)
     layout = messages.shape_marker_layout(np.array([SHAPES[shape].code]), dimensions[None], [0],
                                           [None if hull is None else hull.triangles], [parts])
-    poses = messages.shape_marker_poses(layout, np.array([[0.0] * 6 + [1.0]]))
+    poses = messages.shape_marker_poses(layout, np.array([[*centre, 0.0, 0.0, 0.0, 1.0]]))
     points = layout.points or (None,) * len(poses)
     return [{"type": int(t), "action": 0,  # ADD
              "pose": {"position": dict(zip("xyz", map(float, pose[:3]))), "orientation": dict(zip("xyzw", map(float, pose[3:])))},

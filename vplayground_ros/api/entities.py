@@ -497,8 +497,8 @@ class EntityRequests:
         return True, yaml.dump(self.sim.call(read), Dumper=YAML_DUMPER, sort_keys=False)
 
     def entities(self):
-        """[(name, description dict)] of every entity: the bodies in the order of
-        ~/bodies/poses, then the sensors."""
+        """[(name, description dict)] of every entity, as GetEntities lists them (entity_table):
+        the bodies in the order of ~/bodies/poses, then the sensors, then the URDF robots."""
         def read(world):
             vehicles = set(world.vehicle_names())  # once, not per entity: 10,000 bodies stay linear
             names = world.body_names()
@@ -506,5 +506,6 @@ class EntityRequests:
             # A sensor whose parent left the world goes at its next sample: not listed meanwhile.
             return ([(name, describe(world, name, vehicles)) for name in names]
                     + [(s["name"], describe_sensor(world, s)) for s in world.sensor_specs
-                       if s["parent"] == "world" or s["parent"] in present])
+                       if s["parent"] == "world" or s["parent"] in present]
+                    + [(robot["name"], describe_robot(world, robot)) for robot in world.robot_specs])
         return self.sim.call(read)
