@@ -599,6 +599,35 @@ def test_a_sensor_may_not_take_a_robots_odom_frame_under_the_nodes_frame_names()
     assert requests.sim.world.body_names() == [] and requests.sim.world.robot_specs == []
 
 
+def test_a_body_or_sensor_after_a_robot_in_one_spawn_meets_its_frames_as_after_its_spawn():
+    """A robot and, later in the same ~/spawn, a body or a sensor named like one of the robot's
+    frames: answered as that body or sensor spawned once the robot is there (NAME_NOT_UNIQUE
+    naming the frame, or another name with allow_renaming), the world unchanged when refused. A
+    sensor's had been RESULT_OPERATION_FAILED about its frame_id, a body's refused whatever
+    allow_renaming said. A body before the robot is what a robot spawned where it stands meets;
+    in its own namespace (a vehicle of the request takes the root one) the robot's frames are
+    rover/...: no clash."""
+    crate = {"name": "left_wheel", "size": [0.3, 0.3, 0.3], "position": [3, 0, 0.15]}
+    imu = {"name": "left_wheel", "type": "imu", "parent": "world"}
+    link = "'left_wheel' is a link of the robot rover, a frame the node publishes"
+    for request, answer in (
+            ([ROVER, crate], f"NAME_NOT_UNIQUE: [1].name: {link} (allow_renaming: true picks a free name)"),
+            ([ROVER, imu], f"NAME_NOT_UNIQUE: [1].name: {link} (sensor names are frames; allow_renaming: true"),
+            ([ROVER, {**imu, "name": "probe", "frame_id": "left_wheel"}], f"NAME_NOT_UNIQUE: [1].frame_id: {link}"),
+            ([crate, ROVER], "NAME_NOT_UNIQUE: [1].namespace: the robot rover's link 'left_wheel' would be the frame "
+                             "'left_wheel', which is the name of the body 'left_wheel'"),
+            ([ROVER, {**crate, "allow_renaming": True}], "RESULT_OK: left_wheel_2, rover"),
+            ([ROVER, {**imu, "allow_renaming": True}], "RESULT_OK: rover, left_wheel_2"),
+            ([{"name": "car", "urdf": "car.urdf", "position": [-5, 0, 1]}, ROVER, crate],
+             "RESULT_OK: car, left_wheel, rover")):
+        requests = Requests(Simulation(load_world({"version": 1})), scene_directories=[])
+        ok, message = requests.spawn(yaml.safe_dump(request))
+        assert (ok, message[:len(answer)]) == (answer.startswith("RESULT_OK"), answer), message
+        if not ok:
+            world = requests.sim.world
+            assert (world.body_names(), world.sensor_specs, world.robot_specs) == ([], [], [])
+
+
 def test_a_sensor_rides_a_link_a_fixed_joint_lumps_into_its_parent():
     """The rover's lidar_link is lumped into base_footprint's body by fixed joints (0.12 m up,
     then 0.2 forward and 0.1 up): a lidar on it, the most natural mount, had been refused as

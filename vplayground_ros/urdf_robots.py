@@ -202,6 +202,20 @@ def check_against_model(entry, model, path):
                                                                  "it takes no commands of its own")
 
 
+def reserved_frames(entry, frames):
+    """The frames no link of the robot of `entry` may be: the world frame (and WORLD, what a
+    sensor's parent calls it), a stack's, and with a drive the odom frame."""
+    return {frames.world, WORLD, *STACK_FRAMES, *((frames.odom,) if entry.get("drive") else ())}
+
+
+def robot_namespace(entry, model, taken, frames):
+    """The namespace the robot of `entry` (its RobotModel `model`) stands in where `taken`
+    ({namespace: whose}) are taken: the entry's, else the root one unless a robot has it or a
+    link would be a reserved frame there, else its name's."""
+    root_free = "" not in taken and not reserved_frames(entry, frames).intersection(model.link_frames)
+    return entry.get("namespace", "" if root_free else re.sub(r"[^A-Za-z0-9_]", "_", entry["name"]))
+
+
 def add_robot_entry(world, entry, model, path, frames):
     """Adds a checked entry's robot (urdf_import.add_robot: all or none) and lists it in
     world.robot_specs with its namespace: the entry's, else the root one if no vehicle or robot
@@ -212,12 +226,8 @@ def add_robot_entry(world, entry, model, path, frames):
     from .frame_names import check_robot_frames  # (it imports this module)
     from .urdf_import import add_robot
     taken = world.robot_namespaces()
-    # (WORLD: what a sensor's parent calls the world)
-    reserved = {frames.world, WORLD, *STACK_FRAMES, *((frames.odom,) if entry.get("drive") else ())}
-    own = re.sub(r"[^A-Za-z0-9_]", "_", entry["name"])
-    # The root namespace by default, unless a robot has it or a link would be a reserved frame there.
-    root_free = "" not in taken and not reserved.intersection(model.link_frames)
-    namespace = entry.get("namespace", "" if root_free else own)
+    reserved = reserved_frames(entry, frames)
+    namespace = robot_namespace(entry, model, taken, frames)
     if namespace in taken:
         raise specs.SpecError(f"{path}.namespace", f"{namespace!r} is the namespace of {taken[namespace]} already")
     prefix = namespace_prefix(namespace)

@@ -10,15 +10,15 @@ import numpy as np
 import yaml
 
 from ..broadcast import check_sensors
-from ..frame_names import frames_taken as frames_of_world, sensor_frames
+from ..frame_names import frames_taken as frames_of_world, sensor_frames, urdf_robot_frames
 from ..physics import specs
 from ..physics.math3d import matrix_to_quaternion, rpy_to_quat
 from ..physics.world import prepare_body
 from ..robots import validate_robot
 from ..scene import body_mesh_points
 from ..sensors import TYPES as SENSOR_TYPES, lumped_links, pose_matrix, validate_sensor
-from ..urdf_robots import (add_robot_entry, check_against_model, description_source, is_description_text, robot_spec,
-                           validate_entry, vehicle_entry)
+from ..urdf_robots import (add_robot_entry, check_against_model, description_source, is_description_text,
+                           robot_namespace, robot_spec, validate_entry, vehicle_entry)
 from .descriptions import describe, describe_robot, describe_sensor
 from .file_access import allowed_directories, find_description
 from .frames import frame_pose, pose_in_world
@@ -186,6 +186,12 @@ class EntityRequests:
         frames_taken = frames_of_world(frames, world)
         names, suffixes = (set(existing) | {s["name"] for s in world.sensor_specs} | set(frames_taken)
                            | {robot["name"] for robot in world.robot_specs}), {}
+        # A robot's frames are taken for what follows it in the request, as for what is spawned
+        # once it is there: in the namespace it will get, after the request's vehicles (added
+        # first; the first without a namespace takes the root one, World.add_vehicle).
+        namespaces = world.robot_namespaces()
+        if any(kind is True and spec.get("namespace", "") == "" for _, kind, spec, _, _ in prepared):
+            namespaces.setdefault("", "a vehicle of the request")
         # Bodies and vehicles first: a sensor of the request rides the body of the request that
         # its parent names, under the name that body gets.
         renamed = {}
@@ -193,6 +199,12 @@ class EntityRequests:
         for path, vehicle, spec, rename, frame in prepared:
             if vehicle == "robot":
                 robots.append(self._name_robot(world, path, *spec, rename, names, suffixes, frames_taken))
+                _, entry, model = robots[-1]
+                namespace = robot_namespace(entry, model, namespaces, frames)
+                namespaces[namespace] = entry["name"]
+                own_frames = urdf_robot_frames([{**entry, "namespace": namespace, "model": model}], frames)
+                frames_taken.update(own_frames)
+                names.update(own_frames)
                 continue
             if vehicle == "sensor":
                 continue
