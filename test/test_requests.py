@@ -170,6 +170,22 @@ def test_reset_scopes(requests):
     assert requests.reset(8)[1].startswith("RESULT_OPERATION_FAILED:")
 
 
+def test_a_reset_of_the_state_restarts_a_cars_controller():
+    """SCOPE_STATE (ResetSimulation's, and ~/reset's with reset_scope 2) puts a scene's car back
+    as the scene starts it, its command, steering and speed loop too: they had stayed as the
+    drive left them (the wheels turned, the integral wound up) and the car drove off again from
+    where it was put back."""
+    requests = Requests(Simulation(load_world({"version": 1, "vehicles": [SPEC_CAR]})))
+    world = requests.sim.world
+    as_added = world.vehicle_state("car")
+    world.drive("car", 3.0, 0.5, timeout=100)
+    world.step(3 * 128)
+    assert requests.reset(2)[0]
+    restarted = world.vehicle_state("car")
+    assert [key for key in as_added if not np.array_equal(restarted[key], as_added[key])] == []
+    world.step(2 * 128)
+    assert world.body("car")["position"][:2] == pytest.approx(SPEC_CAR["position"][:2], abs=0.01)
+
 def test_load_and_save_scene(requests, tmp_path):
     requests.scene_directories = [tmp_path]
     path = tmp_path / "out.yaml"

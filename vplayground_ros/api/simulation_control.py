@@ -169,7 +169,7 @@ class ControlRequests:
                 world.sensor_specs = [s for s in world.sensor_specs if s["name"] in loaded]
             done.append("spawned removed")
         if scope & SCOPE_STATE:
-            present = set(world.body_names())
+            present, vehicles = set(world.body_names()), set(world.vehicle_names())
             for name, spec in initial.items():
                 if name not in present:
                     (world.add_vehicle if "wheels" in spec else world.add_body)(copy.deepcopy(spec))
@@ -177,6 +177,10 @@ class ControlRequests:
                 world.edit_body(name, position=spec["position"], quaternion=spec["quaternion"],
                                 linear_velocity=spec["linear_velocity"],
                                 angular_velocity=spec["angular_velocity"])
+                if "wheels" in spec and name in vehicles:
+                    # Its controller too, as a car the scene adds has it: the steering had stayed
+                    # turned and the speed loop's integral wound up, so the car set off again.
+                    world.restart_vehicle(name)
             present = set(world.body_names())
             for robot in robots.values():  # as loaded: its links where they stood, its joints, its motors
                 world.remove_bodies([body for body in robot["bodies"] if body in present])

@@ -9,11 +9,12 @@ from .vehicle import allocate_vehicles, grow_vehicles
 DEFAULT_COMMAND_TIMEOUT = 1.2  # s: SPEC 6.4 cmd_vel_timeout
 VEHICLE_NUMBERS = ("engine_power", "brake_power", "max_steer", "max_steer_rate")  # spec key = array
 
-# Kernel state that starts at zero for a new vehicle (a reused row must not inherit any).
+# Kernel state that starts at zero for a new vehicle (a reused row must not inherit any) and
+# again when a reset of the state restarts it.
 RESET_FIELDS = ("command_speed", "command_yaw_rate", "command_age", "speed_integral",
                 "steer_correction", "throttle",
-                "brake", "steer", "steer_angle", "spin_angle", "spin_rate", "compression",
-                "in_contact")
+                "brake", "steer", "steer_angle", "steer_rate", "spin_angle", "spin_rate", "compression",
+                "compression_rate", "in_contact", "contact_point", "contact_normal")
 WHEEL_FIELDS = (("radius", "radius"), ("power_gain", "power_gain"), ("steered", "steered"),
                 ("stiffness", "spring_stiffness"), ("damper", "damper"),
                 ("spring_length", "spring_length"), ("static_friction", "static_friction"),
@@ -41,11 +42,20 @@ class VehicleRegistry:
         for key in VEHICLE_NUMBERS:
             getattr(rows, key)[row] = vehicle[key]
         self._load_wheels(row, vehicle["wheels"])
+        self._start(row)
+        self._specs[name] = {**vehicle, "name": name}
+        self._rows[name] = row
+
+    def restart(self, name):
+        """The vehicle's command, controller and wheels as a new vehicle's: no command, the
+        steering straight, nothing accumulated (its spec stays as edited)."""
+        self._start(self._row(name))
+
+    def _start(self, row):
+        rows = self.arrays
         for field in RESET_FIELDS:
             getattr(rows, field)[row] = 0
         rows.command_timeout[row] = DEFAULT_COMMAND_TIMEOUT
-        self._specs[name] = {**vehicle, "name": name}
-        self._rows[name] = row
 
     def remove(self, name):
         """Forgets a vehicle (its chassis body is the World's to free); no-op for a body."""

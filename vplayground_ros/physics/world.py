@@ -288,6 +288,12 @@ class World(WorldQueries):
         if self._vehicles.drive(name, speed, yaw_rate, timeout):
             self._wake(self._slots[name])
 
+    def restart_vehicle(self, name):
+        """Puts vehicle `name`'s command, controller and wheels back as they were when it was
+        added (no command, the steering straight, the speed and yaw loops' memory cleared); its
+        pose and velocities are edit_body's."""
+        self._vehicles.restart(name)
+
     def vehicle_state(self, name):
         """What the car is doing: applied controls and per-wheel state (arrays of 4, wheels
         front-left, front-right, rear-left, rear-right)."""
