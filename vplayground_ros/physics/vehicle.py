@@ -123,8 +123,9 @@ def control(vehicles, v, speed, yaw_rate, hold, dt):
     # (integrating: no error left in a steady turn). The steering turns at most max_steer_rate
     # (an actuator: it had snapped to any angle within a step) within its reach; the loop keeps
     # only what the steering could follow (no wind-up while it turns).
+    yaw_loop_runs = abs(speed) > YAW_LOOP_SPEED and target != 0.0
     correction = 0.0
-    if abs(speed) > YAW_LOOP_SPEED and target != 0.0:
+    if yaw_loop_runs:
         error = curvature * speed - yaw_rate
         correction = vehicles.steer_correction[v] + YAW_LOOP_SHARE * error * wheelbase / speed
     reach = vehicles.max_steer_rate[v] * dt
@@ -132,7 +133,7 @@ def control(vehicles, v, speed, yaw_rate, hold, dt):
     # The rate first, then the reach: a max_steer lowered mid-turn holds at once, left or right
     # alike (the other order had held a left turn and let a right one unwind at the rate).
     steer = min(max(min(max(model + correction, previous - reach), previous + reach), -limit), limit)
-    vehicles.steer_correction[v] = steer - model if correction != 0.0 else 0.0
+    vehicles.steer_correction[v] = steer - model if yaw_loop_runs else 0.0
     vehicles.throttle[v] = throttle
     vehicles.brake[v] = brake
     vehicles.steer[v] = steer
