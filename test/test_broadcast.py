@@ -45,6 +45,7 @@ from helpers import wait_for  # noqa: E402
 MARKERS = decoder("visualization_msgs/msg/MarkerArray")
 POSES = decoder("geometry_msgs/msg/PoseArray")
 DIAGNOSTICS = decoder("diagnostic_msgs/msg/DiagnosticArray")
+CLOUD = decoder("sensor_msgs/msg/PointCloud2")
 SPHERE_LIST, LINE_LIST, CUBE_LIST = 7, 5, 6
 CAR = {"name": "car", "position": [0, 0, 1.6], "chassis": {"size": [4.0, 1.8, 0.6], "mass": 1200},
        "engine_power": 6000, "brake_power": 9000, "max_steer": 0.6,
@@ -179,6 +180,25 @@ def test_the_scenery_follows_show_octree_at_once_even_paused(running):
         assert octree(sink.of("scene_markers", MARKERS)[-1][1]) == shown
     assert runtime.sim.snapshot.step == 1  # paused all along: sent on the change, not on a timer
 
+
+def test_contact_topics_turned_off_clear_what_they_drew(running):
+    """contacts.publish false: the last contact points and normals had stayed drawn, in a viewer
+    and in the bag, for as long as the topics were off. Turned off, each sends one message that
+    draws nothing (the markers' DELETEALL, an empty cloud), as with nothing touching, and then
+    nothing until turned on again."""
+    scene = {**SCENE, "settings": {"freezing": {"enabled": False}}}  # the crate keeps touching the ground
+    runtime, sink = running(scene, "--real-time-factor", "1")
+    clouds = lambda since=0: [c for _, c in sink.of("contact_points", CLOUD)[since:]]  # noqa: E731
+    assert wait_for(lambda: clouds() and clouds()[-1].width > 0)
+    rounds, sent = len(sink.of("poses")), len(sink.of("contact_points"))
+    assert runtime.parameters.set({"contacts.publish": False})[0]
+    assert wait_for(lambda: len(sink.of("poses")) > rounds + 10)  # the rounds go on
+    after = clouds(sent)
+    assert after and after[-1].width == 0 and [c.width for c in after].count(0) == 1  # (a round under way may draw first)
+    markers = sink.of("contact_markers", MARKERS)[-1][1].markers
+    assert [m.action for m in markers] == [3]  # DELETEALL alone
+    assert runtime.parameters.set({"contacts.publish": True})[0]
+    assert wait_for(lambda: clouds()[-1].width > 0)
 
 def test_a_loaded_scene_is_drawn_at_once_even_paused(running, tmp_path):
     runtime, sink = running(SCENE, "--real-time-factor", "1", "--start-paused")

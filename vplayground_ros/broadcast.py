@@ -851,8 +851,10 @@ class Broadcaster:
             if self.wanted(key):
                 self.send(key, messages.car_markers(snap, r.name, world_frame, snap.vehicle_specs[r.name]["wheels"]),
                           snap.time)
-        if self.parameters["contacts.publish"] and snap.contacts is not None:
-            limit = self.parameters["contacts.max_points"]
+        if snap.contacts is not None:
+            # Turned off, the topics draw nothing, as with nothing touching: one message that
+            # clears what they drew (the last contacts had stayed in the viewer and the bag).
+            limit = self.parameters["contacts.max_points"] if self.parameters["contacts.publish"] else 0
             touching = len(snap.contacts["depths"]) > 0 and limit > 0
             if self.wanted("contact_points") and not self._repeats_empty("contact_points", not touching):
                 self.send("contact_points", messages.contact_cloud(snap, world_frame, limit), snap.time)

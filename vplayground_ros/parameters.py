@@ -118,7 +118,7 @@ def parameter_table(settings, options, scene_directories, max_bodies, solver_thr
         P("marker_rate", 30.0, "simulated Hz of marker topics (when subscribed)", "float", 0.1, 1000),
         P("static_republish_period", 5.0, "simulated s between re-sends of the scenery and the bodies at rest", "float", 0.1, 3600),
         P("clock_rate", 0.0, "Hz cap of /clock (0 = every step)", "float", 0, 10000),
-        P("contacts.publish", True, "publish the contact topics", "bool"),
+        P("contacts.publish", True, "publish the contact topics (false: they draw nothing)", "bool"),
         P("contacts.max_points", 5000, "most contact points published", "int", 0, 1000000),
         P("show_octree", False, "draw the occupied octree cells in ~/scene/markers", "bool"),
         P("cmd_vel_timeout", 1.2, "s without cmd_vel before the car brakes to rest", "float", 0.01, 3600),
