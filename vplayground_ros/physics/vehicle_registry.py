@@ -11,8 +11,8 @@ VEHICLE_NUMBERS = ("engine_power", "brake_power", "max_steer", "max_steer_rate")
 
 # Kernel state that starts at zero for a new vehicle (a reused row must not inherit any) and
 # again when a reset of the state restarts it.
-RESET_FIELDS = ("command_speed", "command_yaw_rate", "command_age", "speed_integral",
-                "steer_correction", "throttle",
+RESET_FIELDS = ("command_speed", "command_yaw_rate", "command_age", "resistance", "previous_speed",
+                "tyres_held", "steer_correction", "throttle",
                 "brake", "steer", "steer_angle", "steer_rate", "spin_angle", "spin_rate", "compression",
                 "compression_rate", "in_contact", "contact_point", "contact_normal")
 WHEEL_FIELDS = (("radius", "radius"), ("power_gain", "power_gain"), ("steered", "steered"),
