@@ -34,7 +34,8 @@ from vplayground_ros.cli import parse_args  # noqa: E402
 from foxglove_client import FoxgloveClient  # noqa: E402
 from helpers import wait_for  # noqa: E402
 from vplayground_ros.foxglove_server import FoxgloveServer  # noqa: E402
-from vplayground_ros.node import SimulatorNode  # noqa: E402
+from vplayground_ros.broadcast import TOPICS  # noqa: E402
+from vplayground_ros.node import RosSink, SimulatorNode  # noqa: E402
 from vplayground_ros.runtime import Runtime  # noqa: E402
 from vplayground_ros.scene import load_world  # noqa: E402
 from vplayground_ros.simulation import Simulation  # noqa: E402
@@ -112,6 +113,23 @@ def ros():
     harness = Harness()
     yield harness
     harness.close()
+
+
+def test_a_withdrawn_publisher_is_destroyed_on_the_executors_thread(ros, monkeypatch):
+    """A topic withdrawn (its robot or sensor gone) on a thread that publishes has its publisher
+    destroyed on the node's executor thread. Destroyed beside the executor building its wait
+    set, the publisher's QoS event handler raised InvalidHandle there and ended the node's spin:
+    every service of the node went silent (a clean clone's suite, 19 standard-service tests)."""
+    sink = next(s for s in ros.runtime.broadcaster.sinks if isinstance(s, RosSink))
+    probe = TOPICS[0]._replace(key="withdraw_probe", name=f"{NS}/withdraw_probe")
+    destroyed_on, destroy = [], ros.node.destroy_publisher
+    monkeypatch.setattr(ros.node, "destroy_publisher",
+                        lambda publisher: destroyed_on.append(threading.current_thread()) or destroy(publisher))
+    assert sink.publisher(probe) is not None
+    sink.withdraw(probe)
+    assert wait_for(lambda: destroyed_on)
+    assert destroyed_on == [ros.threads[0]]
+    assert ros.call(SetBool, f"{NS}/pause", SetBool.Request(data=False)).message  # the node still serves
 
 
 def test_every_topic_is_advertised_with_its_type(ros):

@@ -94,6 +94,13 @@ class RosSink:
         self.publishers = {}
         for topic in TOPICS:
             self.publisher(topic)
+        # Publishers withdrawn on the threads that publish, destroyed on the executor's: a
+        # publisher's QoS event handler sits in the executor's wait set, and destroyed while the
+        # executor built that set it raised InvalidHandle there, which ended the node's spin
+        # (every service silent from then on).
+        self._withdrawn = []
+        self._withdrawn_lock = threading.Lock()
+        self._reaper = node.create_guard_condition(self._destroy_withdrawn)
 
     def publisher(self, topic):
         """The topic's publisher, made on first use (a scene's sensor topics come and go with
@@ -126,9 +133,18 @@ class RosSink:
 
     def withdraw(self, topic):
         """A topic nothing publishes on any longer (its robot or sensor gone): no longer
-        advertised (made again should it come back)."""
+        advertised (made again should it come back). Its publisher goes on the executor's
+        thread (_destroy_withdrawn)."""
         publisher = self.publishers.pop(topic.key, None)
         if publisher is not None:
+            with self._withdrawn_lock:
+                self._withdrawn.append(publisher)
+            self._reaper.trigger()
+
+    def _destroy_withdrawn(self):
+        with self._withdrawn_lock:
+            withdrawn, self._withdrawn = self._withdrawn, []
+        for publisher in withdrawn:
             self.node.destroy_publisher(publisher)
 
     def statuses(self):
