@@ -30,7 +30,7 @@ class FoxgloveClient:
         self.ws = connect(url, subprotocols=[subprotocol], max_size=None, open_timeout=timeout, legacy=True)
         self.timeout = timeout
         self.server_info = None
-        self.channels = {}        # topic -> advertised channel
+        self.channels = {}        # topic -> advertised channel (forgotten when unadvertised)
         self.services = {}        # name -> advertised service
         self.frames = defaultdict(lambda: deque(maxlen=keep))  # topic -> [(log time ns, payload)]
         self.received = 0         # frames received in all
@@ -89,6 +89,9 @@ class FoxgloveClient:
             self.server_info = message
         elif op == "advertise":
             self.channels.update({c["topic"]: c for c in message["channels"]})
+        elif op == "unadvertise":
+            gone = set(message["channelIds"])
+            self.channels = {topic: c for topic, c in self.channels.items() if c["id"] not in gone}
         elif op == "advertiseServices":
             self.services.update({s["name"]: s for s in message["services"]})
         elif op == "status":

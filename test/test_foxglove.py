@@ -1,7 +1,9 @@
 """The built-in Foxglove WebSocket server (SPEC 6.5) through a real WebSocket client, with the
 simulator in a process where rclpy and every ROS message package fail to import: the live
 window must work without a ROS install."""
+import gc
 import json
+import logging
 import math
 import random
 import socket
@@ -12,7 +14,9 @@ import threading
 import time
 from pathlib import Path
 
+import foxglove
 import pytest
+import yaml
 from mcap_ros2._dynamic import serialize_dynamic
 from websockets.exceptions import InvalidStatus
 from websockets.sync.client import connect
@@ -21,7 +25,12 @@ from foxglove_client import OLD_SUBPROTOCOL, SUBPROTOCOL, URL_IN_LOG, FoxgloveCl
 from foxglove_js import needs_node, run_script
 from helpers import wait_for
 
+from vplayground_ros.cli import parse_args
 from vplayground_ros.foxglove_front import MAX_VIEWERS, HandshakeError, read_head
+from vplayground_ros.foxglove_server import FoxgloveServer
+from vplayground_ros.runtime import Runtime
+from vplayground_ros.scene import load_world
+from vplayground_ros.simulation import Simulation
 
 NS = "/vplayground"
 TOPICS = {
@@ -590,6 +599,63 @@ def test_a_urdf_robot_spawned_over_the_socket_takes_joint_commands_from_a_client
         assert error < 2e-3
     finally:
         assert client.call(f"{NS}/remove", {"load_namespace": "{entity: sock_arm}"}).success
+
+
+def live_channels():
+    """The foxglove-sdk channels alive in this process."""
+    gc.collect()
+    return sum(type(o) is foxglove.Channel for o in gc.get_objects())
+
+
+def test_the_channels_of_entities_gone_are_unadvertised_and_freed():
+    """Robots and sensors spawned and removed under new names (a run of days) left every channel
+    they ever had advertised to the viewers and held in the process (the sdk keeps ~4 kB of each
+    until it is dropped): a channel whose topic is withdrawn is closed, a viewer subscribed to it
+    sees it go, and it is advertised again when its entity comes back. (In this process: the
+    sdk's channels are counted.)"""
+    options = parse_args(["--no-record"])
+    runtime = Runtime(Simulation(load_world(options.scene)), options, logging.getLogger("test_foxglove"))
+    server = FoxgloveServer(runtime, port=0)
+    runtime.start()
+    client = FoxgloveClient(server.url)
+
+    def spawn(tag):
+        return runtime.requests.spawn(yaml.safe_dump([
+            {"name": f"{tag}_car", "urdf": "car.urdf", "position": [-12.0, 12.0, 1.0]},
+            {"name": f"{tag}_scan", "type": "lidar_2d", "parent": f"{tag}_car", "pose": [0, 0, 1, 0, 0, 0], "samples": 8},
+            {"name": f"{tag}_arm", "urdf": "arm.urdf", "position": [12.0, -12.0, 0.0]},
+            {"name": f"{tag}_box", "size": [0.5, 0.5, 0.5], "position": [12.0, 12.0, 0.5]},
+            {"name": f"{tag}_imu", "type": "imu", "parent": f"{tag}_box", "pose": [0, 0, 0, 0, 0, 0]}]))
+
+    def channels_of(tag):
+        return sorted(topic for topic in client.channels if f"/{tag}_" in topic)
+    try:
+        assert client.wait(lambda: len(client.channels) >= len(TOPICS))
+        time.sleep(1.0)  # the default scene's sensors and robots are advertised on first use
+        before = (dict(client.channels), len(server.channels), live_channels())
+        for k in range(4):
+            tag = f"fx{k}"
+            ok, message = spawn(tag)[:2]
+            assert ok, message
+            assert client.wait(lambda: {f"/{tag}_car/odom", f"/{tag}_arm/joint_states", f"/{tag}_imu/data"}
+                               <= set(channels_of(tag))), channels_of(tag)
+            client.subscribe(*channels_of(tag))  # a viewer subscribed to them as they go
+            client.latest(f"/{tag}_arm/joint_states")
+            for name in ("car", "arm", "box"):
+                ok, message = runtime.requests.remove(yaml.safe_dump({"entity": f"{tag}_{name}"}))[:2]
+                assert ok, message
+            assert client.wait(lambda: not channels_of(tag)), f"still advertised: {channels_of(tag)}"
+        assert client.wait(lambda: client.channels == before[0]), set(client.channels) ^ set(before[0])
+        assert (len(server.channels), live_channels()) == before[1:]
+        # An entity that comes back gets its channels again, and a viewer its messages.
+        assert spawn("fx0")[0]
+        assert client.wait(lambda: "/fx0_arm/joint_states" in client.channels)
+        client.subscribe("/fx0_arm/joint_states")
+        assert client.latest("/fx0_arm/joint_states", count=len(client.frames["/fx0_arm/joint_states"]) + 1)
+    finally:
+        client.close()
+        runtime.stop()
+        server.stop()
 
 
 def test_a_handshake_trickled_a_byte_at_a_time_ends_at_its_deadline():

@@ -161,6 +161,19 @@ class FoxgloveServer:
                                                          message_encoding="cdr", context=self.context)
         return channel
 
+    def withdraw(self, topic):
+        """A topic nothing publishes on any longer (its robot or sensor gone): its channel is
+        closed, which unadvertises it (a viewer subscribed to it sees it go, and subscribes to
+        the new channel should its entity come back), and dropped, also from the sdk's registry
+        of every channel made (foxglove.channel._channels_by_id, for foxglove.log; a closed one is
+        never logged to again): kept, each name ever spawned held its channels, ~4 kB each."""
+        channel = self.channels.pop(topic.key, None)
+        if channel is not None:
+            channel.close()
+            foxglove.channel._channels_by_id.pop(channel.id(), None)
+
+    retract = withdraw  # a latched topic that ended (a robot's robot_description)
+
     def statuses(self):
         return [("foxglove", 0, self.url, {"subscriptions": self.subscriptions,
                                                         "client_channels": len(self.client_channels)})]
@@ -198,7 +211,8 @@ class FoxgloveServer:
         if self._time_sent >= 0:
             with self._time_lock:
                 self.server.broadcast_time(self._time_sent)
-        key = next((key for key, known in self.channels.items() if known.id() == channel.id), None)
+        # (a copy: the publishing threads add and withdraw channels meanwhile)
+        key = next((key for key, known in list(self.channels.items()) if known.id() == channel.id), None)
         self.runtime.broadcaster.welcome(self, key)
 
     def on_unsubscribe(self, client, channel):
