@@ -1,5 +1,6 @@
 """The node through real rclpy clients (SPEC 6): topics, services and codes, parameters,
 pause/step exactness, driving, Foxglove's publish tools, clean shutdown."""
+import gc
 import math
 import os
 import shutil
@@ -22,6 +23,7 @@ from nav_msgs.msg import Odometry  # noqa: E402
 from nav_msgs.srv import LoadMap  # noqa: E402
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue  # noqa: E402
 from rcl_interfaces.srv import SetParameters  # noqa: E402
+from rclpy.callback_groups import CallbackGroup  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
@@ -648,6 +650,41 @@ def test_remaps_and_a_namespace_name_the_bag_and_foxglove_channels_as_the_graph(
     assert {"/wheel_odom", "/sim/joint_states", "/sim/vplayground/state", "/sim/vplayground/car/ground_truth",
             "/clock", "/tf"} <= names, sorted(names)
     assert "/sim/odom" not in names and "/odom" not in names
+
+
+def callback_group_entries():
+    """The entries of every rclpy callback group alive in this process (a weak reference each to
+    an entity ever added to it)."""
+    gc.collect()
+    return sum(len(o.entities) for o in gc.get_objects() if isinstance(o, CallbackGroup))
+
+
+def test_robots_and_sensors_coming_and_going_leave_nothing_in_the_callback_groups(ros):
+    """rclpy's callback groups keep a weak reference to each entity ever added and never drop it
+    (ros2/rclpy#1356): each robot and sensor spawned and removed left a few in the node's
+    default group for each of its topics, through its publishers' event handlers and its command
+    subscriptions (36 for a car, an arm and an IMU), for as long as the node ran."""
+    def cycle(k):
+        car, arm, imu = f"cg{k}_car", f"cg{k}_arm", f"cg{k}_imu"
+        for spec in (f"{{name: {car}, urdf: car.urdf, position: [0, -20, 1]}}",
+                     f"{{name: {arm}, urdf: arm.urdf, position: [-10, 12, 0]}}",
+                     f"{{name: {imu}, type: imu, parent: world, pose: [0, 0, 3, 0, 0, 0]}}"):
+            ok, message = ros.text("spawn", spec)
+            assert ok, message
+        published, subscribed = [f"/{car}/odom", f"/{arm}/joint_states", f"/{imu}/data"], [f"/{car}/cmd_vel",
+                                                                                         f"/{arm}/joint_commands"]
+
+        def counts():
+            return ([ros.client.count_publishers(t) for t in published], [ros.client.count_subscribers(t) for t in subscribed])
+        assert wait_for(lambda: counts() == ([1] * 3, [1] * 2), explain=counts)
+        for name in (car, arm, imu):
+            assert ros.text("remove", f"{{entity: {name}}}")[0]
+        assert wait_for(lambda: counts() == ([0] * 3, [0] * 2), explain=counts)
+    cycle(0)
+    before = callback_group_entries()
+    for k in range(1, 4):
+        cycle(k)
+    assert callback_group_entries() <= before
 
 
 def test_a_removed_robots_and_sensors_topics_are_no_longer_advertised(ros):

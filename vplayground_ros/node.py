@@ -18,7 +18,7 @@ from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.task import Future
 
 from .broadcast import NODE_NAME, TOPICS
@@ -85,6 +85,16 @@ def plain(value):
     return list(value) if isinstance(value, (array.array, tuple)) else value
 
 
+def own_group():
+    """A callback group for one entity that comes and goes with a robot or a sensor (a publisher,
+    for its event handlers; a robot's command subscription), which goes with it: rclpy's groups
+    keep a weak reference to every entity ever added and never drop it (ros2/rclpy#1356), so
+    the node's default group grew with each robot or sensor spawned and removed, a few entries
+    for each of its topics. The executor is single-threaded: a group of its own changes no
+    callback's order."""
+    return MutuallyExclusiveCallbackGroup()
+
+
 class RosSink:
     """The ROS publishers as a Broadcaster sink. /tf and /tf_static exist only where tf2_msgs
     imports (a ROS install, or the wheels' venv that make built it into); everything else always."""
@@ -115,7 +125,8 @@ class RosSink:
                     f"apt install ros-jazzy-{topic.type.split('/')[0].replace('_', '-')})")
                 self.publishers[topic.key] = None
                 return None
-            self.publishers[topic.key] = self.node.create_publisher(kind, topic.name, QOS[topic.qos])
+            self.publishers[topic.key] = self.node.create_publisher(kind, topic.name, QOS[topic.qos],
+                                                                    callback_group=own_group())
         return self.publishers[topic.key]
 
     def publish(self, topic, data, seconds):
@@ -259,7 +270,7 @@ class SimulatorNode(Node):
             key, kind = wanted[topic]
             self._commands[topic] = self.create_subscription(
                 kind, topic, lambda msg, t=topic, k=key: inputs.handle(k, msg, t),
-                COMMAND_QOS if key == "cmd_vel" else QOS["reliable_10"])
+                COMMAND_QOS if key == "cmd_vel" else QOS["reliable_10"], callback_group=own_group())
         for topic in self._commands.keys() - wanted:
             self.destroy_subscription(self._commands.pop(topic))
 
