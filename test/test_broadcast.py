@@ -181,6 +181,77 @@ def test_the_scenery_follows_show_octree_at_once_even_paused(running):
     assert runtime.sim.snapshot.step == 1  # paused all along: sent on the change, not on a timer
 
 
+class ChannelSink(Collector):
+    """A sink that, like the Foxglove server, makes a topic's channel as it publishes and drops
+    it on withdraw or retract. Armed with a key, its next publish of that key on another thread
+    (a newcomer's resend) waits for that key's retraction, for up to a second: the slow publish
+    a robot's removal may meet."""
+
+    def __init__(self):
+        super().__init__()
+        self.channels, self.armed, self.retracted = set(), None, threading.Event()
+
+    def publish(self, topic, data, seconds):
+        if topic.key == self.armed and threading.current_thread() is not threading.main_thread():
+            self.armed = None
+            self.retracted.wait(1.0)
+        self.channels.add(topic.key)
+        super().publish(topic, data, seconds)
+
+    def withdraw(self, topic):
+        self.channels.discard(topic.key)
+
+    def retract(self, topic):
+        self.channels.discard(topic.key)
+        self.retracted.set()
+
+
+def test_a_newcomers_resend_does_not_bring_back_a_gone_robots_description(running):
+    """A viewer subscribing to a robot's robot_description as the robot is removed: the resend
+    (publisher thread) comes before the retraction (simulation thread) or not at all. Sent after
+    it, the description's channel was made again, serving the gone robot's URDF, with nothing
+    left to remove it."""
+    runtime, sink = running(SCENE, "--real-time-factor", "1", sink=ChannelSink())
+    key = "/robot_description"  # the car's, in the root namespace
+    assert wait_for(lambda: sink.of(key))
+    sink.armed = key
+    runtime.broadcaster.welcome(sink, key)
+    time.sleep(0.2)  # the publisher thread is in that publish
+    assert runtime.requests.remove_entity("car")[0]
+    assert wait_for(lambda: key not in runtime.broadcaster.topics)
+    time.sleep(1.2)
+    assert key not in sink.channels
+
+
+class WithdrawingSink(Collector):
+    """Keeps what it was told to withdraw; `failing`, each withdraw raises after that."""
+
+    def __init__(self, failing=False):
+        super().__init__()
+        self.withdrawn, self.failing = [], failing
+
+    def withdraw(self, topic):
+        self.withdrawn.append(topic.key)
+        if self.failing:
+            raise RuntimeError(f"sink bug withdrawing {topic.key}")
+
+
+def test_a_sink_failing_to_withdraw_leaves_no_topic_of_a_gone_entity_behind(running):
+    """Two sensors removed while one sink's withdraw raises: every sink is told of both topics
+    and the table keeps neither (the failure counted). The first failure had ended the loop:
+    the other topic stayed in the table and in the sinks with nothing left to remove it."""
+    runtime, sink = running(SCENE, "--real-time-factor", "1", sink=WithdrawingSink(failing=True))
+    other = WithdrawingSink()
+    runtime.broadcaster.add_sink(other)
+    imus = [{"name": f"w_imu{k}", "type": "imu", "parent": "world", "pose": [0, 0, 1 + k, 0, 0, 0]} for k in range(2)]
+    assert runtime.requests.spawn(yaml.safe_dump(imus))[0]
+    keys = {f"sensor:w_imu{k}/data:sensor_msgs/msg/Imu" for k in range(2)}
+    assert wait_for(lambda: keys <= {key for key, _, _ in list(sink.messages)})
+    assert runtime.requests.remove("{filter: ^w_imu}")[0]
+    assert wait_for(lambda: keys <= set(other.withdrawn))
+    assert keys <= set(sink.withdrawn) and not keys & runtime.broadcaster.topics.keys()
+
+
 def test_contact_topics_turned_off_clear_what_they_drew(running):
     """contacts.publish false: the last contact points and normals had stayed drawn, in a viewer
     and in the bag, for as long as the topics were off. Turned off, each sends one message that

@@ -173,8 +173,8 @@ def test_reset_scopes(requests):
 def test_a_reset_of_the_state_restarts_a_cars_controller():
     """SCOPE_STATE (ResetSimulation's, and ~/reset's with reset_scope 2) puts a scene's car back
     as the scene starts it, its command, steering and speed loop too: they had stayed as the
-    drive left them (the wheels turned, the integral wound up) and the car drove off again from
-    where it was put back."""
+    drive left them (the wheels turned, the loop's memory of the drive) and the car drove off
+    again from where it was put back. Driven again, it goes where a car of a fresh world goes."""
     requests = Requests(Simulation(load_world({"version": 1, "vehicles": [SPEC_CAR]})))
     world = requests.sim.world
     as_added = world.vehicle_state("car")
@@ -185,6 +185,12 @@ def test_a_reset_of_the_state_restarts_a_cars_controller():
     assert [key for key in as_added if not np.array_equal(restarted[key], as_added[key])] == []
     world.step(2 * 128)
     assert world.body("car")["position"][:2] == pytest.approx(SPEC_CAR["position"][:2], abs=0.01)
+    fresh = load_world({"version": 1, "vehicles": [SPEC_CAR]})
+    fresh.step(2 * 128)
+    for driven in (world, fresh):
+        driven.drive("car", 2.0, 0.3, timeout=100)
+        driven.step(2 * 128)
+    assert world.body("car")["position"] == pytest.approx(fresh.body("car")["position"], abs=0.02)
 
 def test_load_and_save_scene(requests, tmp_path):
     requests.scene_directories = [tmp_path]

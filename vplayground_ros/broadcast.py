@@ -210,6 +210,7 @@ class Broadcaster:
         self._draining = False   # the simulation thread publishes the pending rounds (_end_timeline)
         self._only = threading.local()  # .sink: a sink the publisher thread sends to alone
         self._ready = threading.Condition()
+        self._retracting = threading.Lock()  # a robot's description retracted, not resent meanwhile
         self.skipped = 0  # snapshots the publisher fell too far behind to publish
         parameters.listen(self._on_parameters)
         sim.add_listener(self._after_batch)
@@ -233,10 +234,16 @@ class Broadcaster:
         """The latched topics (scenery, state, /tf_static) as last sent, or the one of `key`,
         to a newcomer (a new sink, a client subscribing) only: the others, the bag above all,
         have them."""
-        for latched_key, (data, seconds) in list(self._latched.items()):
-            topic = self.topics.get(latched_key)  # None: its robot went since (retracted on the simulation thread)
-            if topic is not None and (key is None or key == latched_key):
-                sink.publish(topic, data, seconds)
+        for latched_key in list(self._latched):
+            if key is not None and key != latched_key:
+                continue
+            # Under _retracting: a robot gone meanwhile (the simulation thread retracts its
+            # description) is either sent before its retraction, which withdraws it from the
+            # sink, or not at all; sent after it, its channel came back with nothing to remove it.
+            with self._retracting:
+                latched, topic = self._latched.get(latched_key), self.topics.get(latched_key)
+                if latched is not None and topic is not None:
+                    sink.publish(topic, *latched)
 
     def welcome(self, sink, key=None):
         """A client of `sink` subscribed (to the topic `key`): a latched topic's last message is
@@ -305,12 +312,20 @@ class Broadcaster:
         if not gone:
             return
         self._robot_topics, self._sensor_topics = kept_robots, kept_sensors
-        for key in gone:
-            topic = self.topics.pop(key)
-            self._sent_empty.discard(key)
+        self._sent_empty.difference_update(gone)
+        topics = [self.topics.pop(key) for key in gone]
+        # Every sink told of every topic, whatever one of them raises (the first error then goes
+        # to the job, counted): a topic left untold stayed in that sink with nothing to remove it.
+        failure = None
+        for topic in topics:
             for sink in self.sinks:
-                if hasattr(sink, "withdraw"):
-                    sink.withdraw(topic)
+                try:
+                    if hasattr(sink, "withdraw"):
+                        sink.withdraw(topic)
+                except Exception as error:
+                    failure = failure or error
+        if failure is not None:
+            raise failure
 
     def robots(self, snapshot):
         """The robots (robots.Robot) of the snapshot's vehicles, in the World's order; made again
@@ -499,8 +514,9 @@ class Broadcaster:
                 self.send("robot_visuals", messages.robot_visuals(snapshot.time, drawn), snapshot.time)
             self._visuals_sent = ([prefix for prefix, _ in drawn], [v for _, v in drawn])
         for key in self._descriptions.keys() - current.keys():
-            self.retract(key)
-            del self.topics[key]
+            with self._retracting:  # (resend_latched)
+                self.retract(key)
+                del self.topics[key]
         self._descriptions = current
 
     def retract(self, key):

@@ -77,6 +77,7 @@ class FoxgloveServer:
                          for key, topic in runtime.broadcaster.topics.items()}
         self.inputs = {runtime.resolve_name(sub.name): sub
                        for sub in subscriptions(runtime.parameters["cmd_vel_stamped"])}
+        self._channels_lock = threading.Lock()  # making and dropping channels (channel, withdraw)
         self.client_channels = {}  # (client id, channel id) -> (subscription key, decode)
         self.subscriptions = 0
         self._time_sent = -1  # ns: the last server time sent (two threads send: under _time_lock)
@@ -154,11 +155,16 @@ class FoxgloveServer:
         return self.channel(topic).has_sinks()
 
     def channel(self, topic):
-        """The topic's channel, advertised on first use (a scene's sensor topics)."""
+        """The topic's channel, advertised on first use (a scene's sensor topics). Made under
+        _channels_lock: the publisher and simulation threads both publish, and a channel made
+        twice was advertised twice."""
         channel = self.channels.get(topic.key)
         if channel is None:
-            channel = self.channels[topic.key] = Channel(topic.name, schema=ros2msg(topic.type),
-                                                         message_encoding="cdr", context=self.context)
+            with self._channels_lock:
+                channel = self.channels.get(topic.key)
+                if channel is None:
+                    channel = self.channels[topic.key] = Channel(topic.name, schema=ros2msg(topic.type),
+                                                                 message_encoding="cdr", context=self.context)
         return channel
 
     def withdraw(self, topic):
@@ -167,7 +173,8 @@ class FoxgloveServer:
         the new channel should its entity come back), and dropped, also from the sdk's registry
         of every channel made (foxglove.channel._channels_by_id, for foxglove.log; a closed one is
         never logged to again): kept, each name ever spawned held its channels, ~4 kB each."""
-        channel = self.channels.pop(topic.key, None)
+        with self._channels_lock:
+            channel = self.channels.pop(topic.key, None)
         if channel is not None:
             channel.close()
             foxglove.channel._channels_by_id.pop(channel.id(), None)

@@ -36,8 +36,8 @@ def describe(world, name, vehicles=None):
 
 def bounds(low, high):
     """An entity's `bounds`: the corners of the box around it in its frame (`low`, `high`: what
-    GetEntityBounds answers), and `size`, the box centred on its pose that holds it (what
-    ~/get_entities draws a box as)."""
+    GetEntityBounds answers and ~/get_entities draws a box as), and `size`, the box centred on
+    its pose that holds it."""
     low, high = np.asarray(low, float), np.asarray(high, float)
     return {"size": (2.0 * np.maximum(-low, high)).tolist(), "low": low.tolist(), "high": high.tolist()}
 

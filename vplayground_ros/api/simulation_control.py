@@ -179,7 +179,7 @@ class ControlRequests:
                                 angular_velocity=spec["angular_velocity"])
                 if "wheels" in spec and name in vehicles:
                     # Its controller too, as a car the scene adds has it: the steering had stayed
-                    # turned and the speed loop's integral wound up, so the car set off again.
+                    # turned and the speed loop kept its memory of the drive, so the car set off again.
                     world.restart_vehicle(name)
             present = set(world.body_names())
             for robot in robots.values():  # as loaded: its links where they stood, its joints, its motors
