@@ -505,8 +505,6 @@ class Sensors:
         linear_acceleration (specific force, sensor frame). Each has its `time`; a 2D scan its
         `period` too (LaserScan's scan_time): 1 / rate, or a step when that is longer."""
         time = world.time
-        # The time between this sensor's readings: 1 / rate, or a step when that is longer.
-        period = max(1.0 / sensor.spec["rate"], 1.0 / world.settings["steps_per_second"])
         if sensor.kind == "imu":
             return {"time": time, **self.read_imu(sensor, world)}
         origin, directions, reach = self.rays(sensor, world)
@@ -533,6 +531,8 @@ class Sensors:
         ranges[far] = np.inf
         ranges[near] = -np.inf
         if sensor.kind == "lidar_2d":
+            # The time between this sensor's readings: 1 / rate, or a step when that is longer.
+            period = max(1.0 / sensor.spec["rate"], 1.0 / world.settings["steps_per_second"])
             return {"time": time, "ranges": ranges, "period": period}
         return {"time": time, "depth": ranges.reshape(spec["height"], spec["width"])}
 
