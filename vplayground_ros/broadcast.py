@@ -17,9 +17,9 @@ import numpy as np
 
 from . import cdr, messages, sensor_messages
 from .frame_names import check_sensor_frames, mount_frame, sensor_frame
-from .messages import topic_token
 from .parameters import frames as frame_names
 from .odometry import OdometryTracker
+from .physics import specs
 from .physics.math3d import quaternions_to_matrices
 from .robot_description import robot_description
 from .robots import (as_pose, compose, footprint_pose, inverse, namespace_prefix, robot, robot_transforms,
@@ -1040,6 +1040,6 @@ def robot_topics(robot, resolve_name=resolve):
     a reader asks for)."""
     out = {}
     for which, (suffix, kind, qos, private) in ROBOT_TOPICS.items():
-        name = resolve_name(f"~/{topic_token(robot.name)}/{suffix}" if private else robot.topic(suffix))
+        name = resolve_name(f"~/{specs.name_token(robot.name)}/{suffix}" if private else robot.topic(suffix))
         out[which] = Topic(name, name, kind, qos)
     return out

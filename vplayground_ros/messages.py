@@ -4,7 +4,6 @@ interfaces.encode. Every stamp is simulation time; frames follow REP 105 (robots
 robot's odom -> base_footprint -> base_link, its wheels under base_link), bodies under `world`.
 """
 import math
-import re
 from collections import namedtuple
 
 import numpy as np
@@ -19,11 +18,6 @@ WHEEL_NAMES = ("front_left", "front_right", "rear_left", "rear_right")
 # (prismatic, the spring's compression), <wheel>_steer (revolute), <wheel>_spin (continuous).
 WHEEL_JOINTS = ("suspension", "steer", "spin")
 WHEEL_WIDTH = 0.25  # m: as the markers and robot_description draw a wheel
-
-
-def topic_token(name):
-    """An entity name as one token of a topic name ('.' and '-' are not allowed there)."""
-    return re.sub(r"[^A-Za-z0-9_]", "_", name)
 
 
 def joint_names():

@@ -13,7 +13,8 @@ import numpy as np
 
 from . import cdr
 from .interfaces import encode
-from .messages import EXACT_VARIANCE, topic_token
+from .messages import EXACT_VARIANCE
+from .physics import specs
 from .physics.math3d import rpy_to_quat
 from .sensors import camera_intrinsics, lidar_2d_angles
 
@@ -53,7 +54,7 @@ def topics(spec, robot=None):
     namespace (robots.Robot, the one carrying it, or None) unless its `topic` is absolute."""
     kind = spec["type"]
     base = spec.get("topic") or (ROBOT_TOPICS[kind] if robot is not None
-                                 else "/".join(part for part in (topic_token(spec["name"]), OTHER_TOPICS[kind]) if part))
+                                 else "/".join(part for part in (specs.name_token(spec["name"]), OTHER_TOPICS[kind]) if part))
     if robot is not None and not base.startswith("/"):
         base = robot.topic(base)
     return [SensorTopic(suffix, f"{base}/{TAILS[suffix]}" if TAILS[suffix] else base, message)

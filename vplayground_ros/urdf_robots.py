@@ -23,7 +23,6 @@ link as the bodies stand now; links lumped into one body are fixed to it (/tf_st
 """
 import logging
 import math
-import re
 from collections import namedtuple
 
 import numpy as np
@@ -213,7 +212,7 @@ def robot_namespace(entry, model, taken, frames):
     ({namespace: whose}) are taken: the entry's, else the root one unless a robot has it or a
     link would be a reserved frame there, else its name's."""
     root_free = "" not in taken and not reserved_frames(entry, frames).intersection(model.link_frames)
-    return entry.get("namespace", "" if root_free else re.sub(r"[^A-Za-z0-9_]", "_", entry["name"]))
+    return entry.get("namespace", "" if root_free else specs.name_token(entry["name"]))
 
 
 def add_robot_entry(world, entry, model, path, frames):

@@ -368,6 +368,14 @@ LOCALIZATIONS = ("ground_truth", "none")
 # A ROS namespace, relative: tokens of letters, digits and '_' (not starting with a digit), '/'
 # between them; '' for none.
 NAMESPACE_PATTERN = re.compile(r"(?:[A-Za-z_][A-Za-z0-9_]*(?:/[A-Za-z_][A-Za-z0-9_]*)*)?")
+
+
+def name_token(name):
+    """An entity name as one token of a ROS name (a robot's default namespace, a topic's part):
+    the '.' and '-' a name may have and a ROS name may not become '_'."""
+    return re.sub(r"[^A-Za-z0-9_]", "_", name)
+
+
 WHEEL_COUNT = 4  # front-left, front-right, rear-left, rear-right
 # The chassis is a body: its material and flags, besides its size and (own) mass.
 CHASSIS_BODY_KEYS = {"elasticity", "static_friction", "dynamic_friction", "immovable",

@@ -4,7 +4,6 @@ Everything here is Python bookkeeping between steps (adding, editing, removing b
 buffers); the physics runs inside `pipeline.step_world`, many steps per call.
 """
 import heapq
-import re
 import time
 from collections import namedtuple
 
@@ -248,7 +247,7 @@ class World(WorldQueries):
         # topics: the first robot stands in the root namespace, each other in its name's (with
         # '_' for the '.' and '-' a name may have and a namespace may not).
         taken = self.robot_namespaces()
-        vehicle.setdefault("namespace", re.sub(r"[^A-Za-z0-9_]", "_", name) if "" in taken else "")
+        vehicle.setdefault("namespace", specs.name_token(name) if "" in taken else "")
         if vehicle["namespace"] in taken:
             raise specs.SpecError(f"{path}.namespace", f"{vehicle['namespace']!r} is the namespace of "
                                                        f"{taken[vehicle['namespace']]} already")
