@@ -12,6 +12,7 @@ import yaml
 rclpy = pytest.importorskip("rclpy")
 si = pytest.importorskip("simulation_interfaces")
 
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
 from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion, Vector3  # noqa: E402
 from rclpy.action import ActionClient  # noqa: E402
 from std_srvs.srv import SetBool, Trigger  # noqa: E402
@@ -483,6 +484,23 @@ def test_worlds_load_unload_and_list(ros):
         assert (world.world_resource.uri, world.world_resource.resource_string) == ("", scene.read_text())
     play(ros)
     assert wait_for(lambda: ros.sim.world.step_count > 10)
+
+
+def test_diagnostics_go_on_without_a_world(ros):
+    # The simulation's summary had named its state from a list of three: with no world (4)
+    # every /diagnostics round raised, and none went out until a world came back.
+    ros.listen(DiagnosticArray, "/diagnostics")
+    assert call(ros, UnloadWorld, "unload_world").result.result == OK
+
+    def status(name):
+        message = ros.latest.get("/diagnostics")
+        return next((s for s in message.status if s.name == name), None) if message else None
+    assert wait_for(lambda: status("simulation") is not None and status("simulation").message.startswith("no world"),
+                    explain=lambda: status("publisher"))
+    assert status("publisher").level == DiagnosticStatus.OK, status("publisher").message
+    loaded = call(ros, LoadWorld, "load_world", resource_string="version: 1\nbodies: [{name: back, position: [0, 0, 1]}]")
+    assert loaded.result.result == OK, loaded.result.error_message
+    play(ros)
 
 
 def test_reset_scopes(ros):

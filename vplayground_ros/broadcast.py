@@ -24,6 +24,7 @@ from .physics.math3d import quaternions_to_matrices
 from .robot_description import robot_description
 from .robots import (as_pose, compose, footprint_pose, inverse, namespace_prefix, robot, robot_transforms,
                      world_robots)
+from .simulation import STATE_NAMES
 from .urdf_robots import (WHEEL_ODOMETRY_COVARIANCE, WheelOdometry, drive_joints, fixed_edges, link_carriers,
                           link_edges, publishing_view, root_pose)
 
@@ -921,7 +922,7 @@ class Broadcaster:
         active, removed = len(snap.names) - frozen, len(sim.removed)
         target = f"{sim.real_time_factor:.2f}" if sim.real_time_factor > 0.0 else "max"
         step_ms = sim.mean_step_ms
-        summary = (f"{['stopped', 'playing', 'paused'][sim.state]}, RTF {sim.achieved_rtf:.2f}/{target}, "
+        summary = (f"{STATE_NAMES[sim.state]}, RTF {sim.achieved_rtf:.2f}/{target}, "
                    f"step {step_ms:.2f} ms, {sim.late_ticks} late ticks")
         if sim.fault_count:
             summary += f", {sim.fault_count} errors survived (first: {sim.faults[0]})"

@@ -39,6 +39,7 @@ RTF_WINDOW = 0.5
 # simulation_interfaces SimulationState: STOPPED is paused at the loaded scene's start (and a
 # run that ended), NO_WORLD after UnloadWorld, QUITTING once asked to end.
 STOPPED, PLAYING, PAUSED, QUITTING, NO_WORLD = 0, 1, 2, 3, 4
+STATE_NAMES = {STOPPED: "stopped", PLAYING: "playing", PAUSED: "paused", QUITTING: "quitting", NO_WORLD: "no world"}
 
 log = logging.getLogger(__name__)
 

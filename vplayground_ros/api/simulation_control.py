@@ -16,7 +16,7 @@ from ..parameters import SCOPE_ALL, SCOPE_SPAWNED, SCOPE_STATE, SCOPE_TIME, rese
 from ..physics import specs
 from ..scene import load_world
 from ..sensors import WORLD
-from ..simulation import PAUSED, PLAYING, QUITTING, STOPPED
+from ..simulation import PAUSED, PLAYING, QUITTING, STATE_NAMES, STOPPED
 from ..urdf_robots import add_robot_entry
 from .entities import drop_sensors_of
 from .results import (ALREADY, FAILED, INCORRECT_STATE, INCORRECT_TRANSITION, OK, RequestError, handled,
@@ -87,7 +87,7 @@ class ControlRequests:
         loaded scene's start: everything reset) or QUITTING (the run ends just after the
         reply). NO_WORLD and LOADING_WORLD are reached through unload_world and load_world."""
         target = specs.integer(target, "state.state", 0, 255)
-        names = {STOPPED: "stopped", PLAYING: "playing", PAUSED: "paused", QUITTING: "quitting"}
+        names = {state: STATE_NAMES[state] for state in (STOPPED, PLAYING, PAUSED, QUITTING)}  # the settable ones
         if target == self.sim.state and target not in names:  # NO_WORLD asked for in NO_WORLD, say
             return reply(ALREADY, f"already in state {target}")
         if target not in names:
