@@ -189,6 +189,21 @@ def test_a_duration_beyond_a_countable_run_is_refused(capsys):
     assert runtime.parameters["duration"] == 0.0
 
 
+@pytest.mark.parametrize("option, value, reason", [
+    ("--real-time-factor", "5000", "--real-time-factor must be >= 0 and at most 1000"),
+    ("--record-split-size", str(1 << 51), "--record-split-size must be at most 1125899906842624 bytes")])
+def test_an_option_beyond_its_parameters_range_is_refused_as_the_option(capsys, option, value, reason):
+    """Every option is also a parameter: one past the parameter's range had passed here, then
+    stopped the ROS node's start with a refused `--ros-args -p` override nobody had given (and
+    ran unchecked without ROS)."""
+    with pytest.raises(SystemExit) as refused:
+        cli.parse_args([option, value, "--no-record"])
+    assert refused.value.code == 2
+    assert reason in capsys.readouterr().err
+    edge = "1000" if option == "--real-time-factor" else str(1 << 50)  # the range's end still passes
+    assert str(getattr(cli.parse_args([option, edge, "--no-record"]), option[2:].replace("-", "_"))).startswith(edge)
+
+
 @pytest.mark.parametrize("size", ["-1", "1", "65535"])
 def test_a_split_size_below_a_chunk_is_refused(capsys, size):
     """1 byte had written a bag file per chunk, thousands in two simulated seconds."""

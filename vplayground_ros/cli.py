@@ -15,7 +15,7 @@ import threading
 import time
 from pathlib import Path
 
-from .parameters import MAX_DURATION
+from .parameters import MAX_DURATION, MAX_REAL_TIME_FACTOR, MAX_SPLIT_SIZE
 from .recorder import MIN_CHUNK_SIZE
 from .resources import find_shared
 from .scene import SceneError, load_world
@@ -62,8 +62,11 @@ def parse_args(argv):
     args = parser.parse_args(argv)
     if args.duration is not None and not 0 < args.duration <= MAX_DURATION:
         parser.error(f"--duration must be > 0 and at most {MAX_DURATION:g} s")
-    if args.real_time_factor < 0:
-        parser.error("--real-time-factor must be >= 0")
+    # Within the parameters' ranges: past them the node refused to start, blaming an override.
+    if not 0 <= args.real_time_factor <= MAX_REAL_TIME_FACTOR:
+        parser.error(f"--real-time-factor must be >= 0 and at most {MAX_REAL_TIME_FACTOR:g}")
+    if args.record_split_size > MAX_SPLIT_SIZE:
+        parser.error(f"--record-split-size must be at most {MAX_SPLIT_SIZE} bytes")
     if args.record_split_size < 0 or 0 < args.record_split_size < MIN_CHUNK_SIZE:
         # (1 byte had written a file per chunk, thousands a second)
         parser.error(f"--record-split-size must be 0 (one file) or at least {MIN_CHUNK_SIZE} bytes (the bag's "

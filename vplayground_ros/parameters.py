@@ -68,6 +68,8 @@ def reset_scope(value, path):
 # The longest run a duration may ask for, s (about 31 years): a step count, duration x steps per
 # second, stays an integer (1e308 s had ended the physics thread with an overflow).
 MAX_DURATION = 1e9
+MAX_REAL_TIME_FACTOR = 1000.0
+MAX_SPLIT_SIZE = 1 << 50  # bytes after which a bag goes on in a new file (a petabyte: no limit in practice)
 
 
 @dataclass(frozen=True)
@@ -98,7 +100,7 @@ def parameter_table(settings, options, scene_directories, max_bodies, solver_thr
     return [
         P("scene", str(options.scene), "scene file loaded at start", "str", read_only=True),
         P("real_time_factor", float(options.real_time_factor),
-          "simulated seconds per wall-clock second; 0 = as fast as possible", "float", 0, 1000),
+          "simulated seconds per wall-clock second; 0 = as fast as possible", "float", 0, MAX_REAL_TIME_FACTOR),
         P("start_paused", bool(options.start_paused), "start paused (~/pause false to play)", "bool", read_only=True),
         P("duration", float(options.duration or 0.0),
           "stop after this much simulated time, s (0 = run until stopped)", "float", 0.0, MAX_DURATION,
@@ -143,7 +145,8 @@ def parameter_table(settings, options, scene_directories, max_bodies, solver_thr
         P("click_spawn_height", 2.0, "height above the clicked point it drops from, m", "float", 0, 1000),
         P("record", str(options.record or ""), "MCAP bag being written ('' = not recording)", "str", read_only=True),
         P("record_split_size", int(options.record_split_size),
-          "bytes after which the bag continues in a new file (0 = one file)", "int", 0, 1 << 50, read_only=True),
+          "bytes after which the bag continues in a new file (0 = one file)", "int", 0, MAX_SPLIT_SIZE,
+          read_only=True),
         P("scene_directories", [str(d) for d in scene_directories],
           "directories ~/load_scene and ~/save_scene may use (set at start only)", "str[]", read_only=True),
         P("max_bodies", int(max_bodies), "most bodies the world may hold (spawns past it are refused)",
