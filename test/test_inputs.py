@@ -6,8 +6,11 @@ import warnings
 import numpy as np
 import pytest
 
+from pathlib import Path
+
 from test_requests import CAR_SCENE
 from vplayground_ros.api import Requests
+from vplayground_ros.api.descriptions import describe_robot
 from vplayground_ros.broadcast import resolve
 from vplayground_ros import throttle
 from vplayground_ros.inputs import Inputs, from_json
@@ -15,6 +18,9 @@ from vplayground_ros.parameters import FRAMES, frames
 from vplayground_ros.robots import robot
 from vplayground_ros.scene import load_world
 from vplayground_ros.simulation import Simulation
+from vplayground_ros.urdf_robots import RobotControl, publishing_view, robot_spec
+
+CONFIG = Path(__file__).resolve().parent.parent / "config"
 
 PARAMETERS = {**FRAMES, "cmd_vel_timeout": 1.2, "click_spawn_size": 0.5, "click_spawn_height": 2.0}
 
@@ -140,3 +146,42 @@ def test_a_throttle_lets_a_burst_through_then_counts_what_it_holds_back():
     now[0] = 10.0
     assert gate.admit("a") == 3  # the window over: the three held back are told with the next
     assert throttle.held_note(3) == " (3 more like it in the 10 s before were not logged)"
+
+
+def test_initialpose_puts_a_urdf_robot_in_the_root_namespace_there_on_the_ground():
+    """The rover of robots_scene.yaml (a URDF robot, the root namespace's, no vehicle in the
+    scene): the pose-estimate tool teleports it as it does the car (it had been ignored, logged
+    as "no robot in the root namespace"). Its links move as one, upright, facing the pose's
+    heading, its lowest point on the pose's height; it stops, and stands there."""
+    sim = Simulation(load_world(str(CONFIG / "robots_scene.yaml")))
+    control = RobotControl()
+    sim.controllers.append(control.before_batch)
+
+    def urdf_robots(snapshot):  # as the Broadcaster sees them
+        rows = {name: row for row, name in enumerate(snapshot.names)}
+        return [publishing_view(spec, rows) for spec in snapshot.robot_specs]
+    inputs = Inputs(sim, Requests(sim), PARAMETERS, Log(), lambda snapshot: [], resolve, urdf_robots, control)
+    world = sim.world
+    rover = robot_spec(world, "rover")
+    before = {body: world.body(body) for body in rover["bodies"]}
+    root = before[rover["bodies"][0]]
+    control.drive(world, "rover", 0.5, 0.0, 1.2)
+    heading = math.pi / 2
+    pose = {"position": {"x": 1.0, "y": -2.0, "z": 0.0},
+            "orientation": {"x": 0, "y": 0, "z": math.sin(heading / 2), "w": math.cos(heading / 2)}}
+    inputs.handle("initial_pose", message(header={"frame_id": "world"}, pose={"pose": pose}))
+    assert not inputs.log.warnings(), inputs.log.warnings()
+    moved_root = world.body(rover["bodies"][0])
+    assert np.allclose(moved_root["position"][:2], [1.0, -2.0])
+    assert np.allclose(np.abs(moved_root["quaternion"]), [0, 0, math.sin(heading / 2), math.cos(heading / 2)], atol=1e-9)
+    turn = np.array([[0.0, -1.0], [1.0, 0.0]])  # a quarter turn about z, from facing +x
+    for body, was in before.items():  # every link where the same rigid move puts it
+        now = world.body(body)
+        offset = np.asarray(was["position"]) - root["position"]
+        assert np.allclose(np.asarray(now["position"][:2]) - moved_root["position"][:2], turn @ offset[:2], atol=1e-9)
+        assert math.isclose(now["position"][2] - moved_root["position"][2], offset[2], abs_tol=1e-9)
+    low = describe_robot(world, rover)["bounds"]["low"][2]
+    assert math.isclose(moved_root["position"][2] + low, 0.0, abs_tol=1e-9)  # its lowest point on the ground
+    assert all(v == 0.0 for v in moved_root["linear_velocity"] + moved_root["angular_velocity"])
+    world.step(256)  # 2 s: the drive was stopped, so it stays where it was put
+    assert np.allclose(world.body(rover["bodies"][0])["position"][:2], [1.0, -2.0], atol=0.02)

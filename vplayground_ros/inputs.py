@@ -11,6 +11,8 @@ from types import SimpleNamespace
 import numpy as np
 import yaml
 
+from .api.descriptions import describe_robot
+from .api.entities import move_robot
 from .api.frames import frame_pose
 from .interfaces import decoder
 from .parameters import frames as frame_names
@@ -18,6 +20,7 @@ from .physics.math3d import rpy_to_quat
 from .physics.specs import MAX_COORDINATE
 from .sensors import pose_matrix
 from .throttle import ThrottledLog
+from .urdf_robots import robot_spec
 
 Subscription = namedtuple("Subscription", "key name type")
 TWIST, TWIST_STAMPED = "geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped"
@@ -195,9 +198,13 @@ class Inputs:
             self.log.warning(f"clicked_point: {message}")
 
     def initial_pose(self, msg):
-        """Teleports the robot in the root namespace, unless a localiser owns its pose
-        (localization none): in a Nav2 graph initialpose is AMCL's, a pose estimate."""
-        robot = next((r for r in self.robots(self.sim.snapshot) if not r.namespace), None)
+        """Teleports the robot in the root namespace (the car, or a URDF robot), unless a
+        localiser owns its pose (localization none): in a Nav2 graph initialpose is AMCL's, a
+        pose estimate. The robot stands upright on the pose's height, facing its heading, and
+        stops."""
+        snapshot = self.sim.snapshot
+        urdf = next((r for r in self.urdf_robots(snapshot) if not r.namespace), None)
+        robot = next((r for r in self.robots(snapshot) if not r.namespace), urdf)
         frame = str(msg.header.frame_id)
         pose = msg.pose.pose
         p = [float(getattr(pose.position, k)) for k in "xyz"]
@@ -208,7 +215,7 @@ class Inputs:
         if robot.localization == "none":
             self.log.info(f"initialpose left to the localiser ({robot.name}'s localization is none): not a teleport")
             return
-        car = robot.name
+        name = robot.name
         if not (np.all(np.isfinite(p)) and np.all(np.isfinite(q))):
             self.log.warning(f"initialpose ignored: the pose is not finite ({p}, {q})")
             return
@@ -216,6 +223,7 @@ class Inputs:
         norm = float(np.linalg.norm([v / largest for v in q])) * largest if largest > 0.0 else 0.0
         q = [v / norm for v in q] if norm > 0.0 else [0.0, 0.0, 0.0, 1.0]  # no orientation: the frame's
         frames = self.frames()
+        timeout = self.parameters["cmd_vel_timeout"]
 
         def teleport(world):
             transform = frame_pose(world, frame, frames)
@@ -223,13 +231,25 @@ class Inputs:
                 raise ValueError(f"header.frame_id {frame!r:.80} is not a frame the node publishes")
             target = transform @ pose_matrix(p, q)
             yaw = math.atan2(target[1, 0], target[0, 0])  # upright: only the heading is kept
-            wheels = world.vehicle(car)["wheels"]
+            heading = list(rpy_to_quat((0.0, 0.0, yaw)))
+            if robot is urdf:
+                spec = robot_spec(world, name)
+                # Its lowest point on the pose's height: the box around its links, in the root's
+                # frame, which the move leaves upright.
+                lift = -describe_robot(world, spec)["bounds"]["low"][2]
+                position = [float(target[0, 3]), float(target[1, 3]), float(target[2, 3]) + lift]
+                move_robot(world, spec, {"position": position, "quaternion": heading,
+                                         "linear_velocity": [0.0] * 3, "angular_velocity": [0.0] * 3}, "pose")
+                if spec.get("drive") is not None:
+                    self.control.drive(world, name, 0.0, 0.0, timeout)
+                return
+            wheels = world.vehicle(name)["wheels"]
             lift = max(w["spring_length"] + w["radius"] - w["mount"][2] for w in wheels)
             position = [float(target[0, 3]), float(target[1, 3]), float(target[2, 3]) + lift]
             world.check_inside(position, "pose.position")
-            world.edit_body(car, position=position, quaternion=list(rpy_to_quat((0.0, 0.0, yaw))),
+            world.edit_body(name, position=position, quaternion=heading,
                             linear_velocity=[0, 0, 0], angular_velocity=[0, 0, 0])
-            world.drive(car, 0.0, 0.0)
+            world.drive(name, 0.0, 0.0)
         self.submit("initialpose", teleport)
 
     def push(self, msg):

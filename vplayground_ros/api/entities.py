@@ -92,6 +92,42 @@ def check_inside(world, position, path):
         raise RequestError(INVALID_POSE, str(error)) from None
 
 
+def move_robot(world, robot, fields, label, frame="", frames=None):
+    """A URDF robot (its world.robot_specs entry) moved by `fields` (ROBOT_EDIT_KEYS, in `frame`
+    if given: any frame the node publishes, named by `frames`): every link as one rigid body with
+    its root (its joints stay as they are)."""
+    if "rpy" in fields:
+        fields = dict(fields)
+        fields["quaternion"] = rpy_to_quat(fields.pop("rpy")).tolist()
+    if frame:
+        fields = in_world(world, frame, fields, "edit.state", frames)
+    root = world.body(robot["bodies"][0])
+    old = pose_matrix(root["position"], root["quaternion"])
+    new = pose_matrix(fields.get("position", root["position"]), fields.get("quaternion", root["quaternion"]))
+    check_inside(world, new[:3, 3].tolist(), f"{label}.position")
+    move = new @ np.linalg.inv(old)
+    linear, angular = fields.get("linear_velocity"), fields.get("angular_velocity")
+    if (linear is not None and any(linear) or angular is not None and any(angular)) and root["immovable"]:
+        raise RequestError(FAILED, f"{label}.twist: its base is fixed (immovable)")
+    edits = {}
+    for body in robot["bodies"]:
+        link = world.body(body)
+        placed = move @ pose_matrix(link["position"], link["quaternion"])
+        edit = {"position": placed[:3, 3].tolist(), "quaternion": matrix_to_quaternion(placed[:3, :3]).tolist()}
+        if linear is not None or angular is not None:
+            spin = np.asarray(angular if angular is not None else root["angular_velocity"], float)
+            base = np.asarray(linear if linear is not None else root["linear_velocity"], float)
+            if not link["immovable"]:
+                edit["linear_velocity"] = (base + np.cross(spin, placed[:3, 3] - new[:3, 3])).tolist()
+                edit["angular_velocity"] = spin.tolist()
+        edits[body] = edit
+    for body, edit in edits.items():  # every link checked before any moves: all or nothing
+        specs.validate_body_fields(edit, f"{label}.{body}", set(edit))
+        check_inside(world, edit["position"], f"{label}.{body}.position")
+    for body, edit in edits.items():
+        world.edit_body(body, **edit)
+
+
 class EntityRequests:
     """Requests' entity handlers (see requests.py for the state they share)."""
 
@@ -358,7 +394,12 @@ class EntityRequests:
     def _edit(world, name, label, fields, vehicle_edit, frame, stamped, frames):
         robot = robot_spec(world, name)
         if robot is not None:
-            return EntityRequests._move_robot(world, robot, label, fields, vehicle_edit, frame, stamped, frames)
+            other = sorted(set(fields) - ROBOT_EDIT_KEYS) + (["vehicle"] if vehicle_edit is not None else [])
+            if other:
+                raise RequestError(FAILED, f"{label}.{other[0]}: a robot takes a pose and a twist; edit its links "
+                                           f"({robot['bodies'][0]}, ...) for anything else")
+            move_robot(world, robot, fields, label, frame, frames)
+            return reply(OK, f"edited {robot['name']}: {', '.join(sorted(fields))}")
         if name not in world.body_names():
             raise RequestError(NOT_FOUND, f"no entity named {label}")
         if vehicle_edit is not None and name not in world.vehicle_names():
@@ -375,45 +416,6 @@ class EntityRequests:
         if vehicle_edit:
             world.edit_vehicle(name, **vehicle_edit)
         return reply(OK, f"edited {name}: {', '.join(sorted(fields) + (['vehicle'] if vehicle_edit else []))}")
-
-    @staticmethod
-    def _move_robot(world, robot, label, fields, vehicle_edit, frame, stamped, frames):
-        """A URDF robot's pose and twist: every link moved as one rigid body with its root (its
-        joints stay as they are); its links' other keys are edited one by one by their names."""
-        other = sorted(set(fields) - ROBOT_EDIT_KEYS) + (["vehicle"] if vehicle_edit is not None else [])
-        if other:
-            raise RequestError(FAILED, f"{label}.{other[0]}: a robot takes a pose and a twist; edit its links "
-                                       f"({robot['bodies'][0]}, ...) for anything else")
-        if "rpy" in fields:
-            fields = {**fields, "quaternion": rpy_to_quat(fields.pop("rpy")).tolist()}
-        if frame:
-            fields = in_world(world, frame, fields, "edit.state", frames)
-        root = world.body(robot["bodies"][0])
-        old = pose_matrix(root["position"], root["quaternion"])
-        new = pose_matrix(fields.get("position", root["position"]), fields.get("quaternion", root["quaternion"]))
-        check_inside(world, new[:3, 3].tolist(), f"{label}.position")
-        move = new @ np.linalg.inv(old)
-        linear, angular = fields.get("linear_velocity"), fields.get("angular_velocity")
-        if (linear is not None and any(linear) or angular is not None and any(angular)) and root["immovable"]:
-            raise RequestError(FAILED, f"{label}.twist: its base is fixed (immovable)")
-        edits = {}
-        for body in robot["bodies"]:
-            link = world.body(body)
-            placed = move @ pose_matrix(link["position"], link["quaternion"])
-            edit = {"position": placed[:3, 3].tolist(), "quaternion": matrix_to_quaternion(placed[:3, :3]).tolist()}
-            if linear is not None or angular is not None:
-                spin = np.asarray(angular if angular is not None else root["angular_velocity"], float)
-                base = np.asarray(linear if linear is not None else root["linear_velocity"], float)
-                if not link["immovable"]:
-                    edit["linear_velocity"] = (base + np.cross(spin, placed[:3, 3] - new[:3, 3])).tolist()
-                    edit["angular_velocity"] = spin.tolist()
-            edits[body] = edit
-        for body, edit in edits.items():  # every link checked before any moves: all or nothing
-            specs.validate_body_fields(edit, f"{label}.{body}", set(edit))
-            check_inside(world, edit["position"], f"{label}.{body}.position")
-        for body, edit in edits.items():
-            world.edit_body(body, **edit)
-        return reply(OK, f"edited {robot['name']}: {', '.join(sorted(fields))}")
 
     @staticmethod
     def _edit_sensor(world, name, fields, frames):
