@@ -377,8 +377,12 @@ def test_a_robots_sensors_publish_where_a_stack_reads_them(run):
 
 def test_sensors_on_one_topic_or_frame_are_refused_naming_both():
     twin = {**LIDAR, "name": "twin_scan"}
-    with pytest.raises(ValueError, match="twin_scan.topic: /scan is the sensor roof_scan's already"):
+    with pytest.raises(ValueError, match=r"twin_scan.topic: /scan is the sensor roof_scan's already \(give the "
+                                         r"sensor a `topic`\)"):
         load_world({**SCENE, "sensors": [LIDAR, twin]})
+    # One that gave its topic is asked for another (it had been told to give one).
+    with pytest.raises(ValueError, match=r"/scan is the sensor roof_scan's already \(give the sensor another `topic`\)"):
+        load_world({**SCENE, "sensors": [LIDAR, {**twin, "topic": "scan"}]})
     with pytest.raises(ValueError, match=r"sensors\[1\].frame_id: the frame 'crate' is"):
         load_world({**SCENE, "sensors": [LIDAR, {**twin, "topic": "scan2", "frame_id": "crate"}]})
     with pytest.raises(ValueError, match=r"sensors\[1\].frame_id: the frame 'base_link' is"):

@@ -1028,7 +1028,7 @@ def check_topics(sensor_specs, robots, robot_specs=()):
     for spec in sensor_specs:
         for topic in sensor_messages.topics(spec, carriers.get(spec["parent"])):
             claim(resolve(topic.name), f"the sensor {spec['name']}'s", f"{spec['name']}.topic",
-                  " (give the sensor a `topic`)")
+                  f" (give the sensor {'another' if 'topic' in spec else 'a'} `topic`)")
 
 
 def sensor_key(topic):
