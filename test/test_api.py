@@ -152,6 +152,22 @@ def test_names_are_unique_and_slots_are_reused_without_disturbing_others(world):
     assert len(world._bodies.active) == 64  # the freed slot was reused, nothing grew
 
 
+def test_a_body_in_a_removed_bodys_slot_starts_its_freezing_time_afresh():
+    """A body at rest freezes after freezing.time whichever slot it takes: the slot of one
+    removed 0.44 s into its rest had handed the newcomer that time, and it froze after 0.06 s."""
+    scene = {"version": 1, "bodies": [{"name": "a", "position": [0, 0, 0.5]}]}
+    reused = load_world(scene)
+    reused.step(56)
+    reused.remove_body("a")
+    reused.add_body(scene["bodies"][0])
+    fresh = load_world(scene)
+    for world in (reused, fresh):
+        world.step(16)
+        assert not world.body("a")["frozen"]
+        world.step(52)
+        assert world.body("a")["frozen"]
+
+
 def test_edit_changes_only_given_keys(world):
     before = world.body("b")
     world.edit_body("b", mass=10.0, linear_velocity=[1, 0, 0])

@@ -401,8 +401,10 @@ class World(WorldQueries):
         b = self._bodies
         if b.static_indexed[slot]:
             self._broad.stale[0] += 1
+        # The freezing time too: a body taking the slot starts its rest afresh.
         for field, default in (("active", False), ("frozen", False), ("static_indexed", False),
-                               ("awake", False), ("immovable", False), ("collides", True)):
+                               ("awake", False), ("immovable", False), ("collides", True),
+                               ("freeze_timer", 0.0)):
             getattr(b, field)[slot] = default
         b.velocity[slot] = 0.0
         b.external_impulse[slot] = 0.0
