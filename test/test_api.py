@@ -168,6 +168,35 @@ def test_a_body_in_a_removed_bodys_slot_starts_its_freezing_time_afresh():
         assert world.body("a")["frozen"]
 
 
+def respawned_on_stack(first, second):
+    """A box resting on another for 40 steps beside an inert placeholder, the three added in
+    the order given; then the upper box and the placeholder removed and the upper box added
+    again as it started, into the lower of the two slots freed."""
+    world = World({"freezing": {"enabled": False}})
+    for spec in ({"name": "base", "position": [0, 0, 0.5]}, first, second):
+        world.add_body(spec)
+    world.step(40)
+    world.remove_bodies(["top", "spare"])
+    world.add_body(STACKED)
+    return world
+
+
+STACKED = {"name": "top", "position": [0.1, 0, 1.5], "rpy": [0, 0, 0.4]}
+SPARE = {"name": "spare", "position": [30, 30, 30], "immovable": True, "collides": False}
+
+
+def test_a_body_in_a_removed_bodys_slot_is_warm_started_by_nothing_of_it():
+    """The removed body's contacts leave none of their impulses to the newcomer in its slot: it
+    moves as one added where no contact was (the placeholder's slot). The shock propagation's
+    impulses had stayed, and the newcomer started from its predecessor's."""
+    again = respawned_on_stack(STACKED, SPARE)      # back in the slot its predecessor held
+    elsewhere = respawned_on_stack(SPARE, STACKED)  # in the placeholder's
+    for _ in range(5):
+        again.step(1)
+        elsewhere.step(1)
+        assert np.array_equal(again.state()["positions"], elsewhere.state()["positions"])
+
+
 def test_edit_changes_only_given_keys(world):
     before = world.body("b")
     world.edit_body("b", mass=10.0, linear_velocity=[1, 0, 0])

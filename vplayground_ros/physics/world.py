@@ -838,8 +838,10 @@ class World(WorldQueries):
         n = int(c.count[0])
         body_b = c.body_b[:n]
         involved = changed[c.body_a[:n]] | ((body_b >= 0) & changed[np.maximum(body_b, 0)])
-        c.impulse[:n][involved] = 0.0
-        c.friction_world[:n][involved] = 0.0
+        # Every impulse the warm start carries over (contact.warm_start_from), the shock
+        # propagation's too: left, a body in a removed one's slot started from its support.
+        for impulses in (c.impulse, c.friction_world, c.support_impulse, c.support_friction_world):
+            impulses[:n][involved] = 0.0
 
     def _wake(self, slot):
         self._broad.stale[0] += wake_body(self._bodies, slot)
