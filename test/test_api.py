@@ -197,6 +197,19 @@ def test_a_body_in_a_removed_bodys_slot_is_warm_started_by_nothing_of_it():
         assert np.array_equal(again.state()["positions"], elsewhere.state()["positions"])
 
 
+def test_contacts_are_not_handed_to_a_body_in_a_removed_bodys_slot():
+    """contacts() after a removal leaves the removed body's contacts out, also once another
+    body has taken its slot: they had been listed as the newcomer's, touching where it is not."""
+    world = load_world({"version": 1, "bodies": [{"name": "base", "position": [0, 0, 0.5]}, STACKED]})
+    world.step(20)
+    world.remove_body("top")
+    world.add_body({"name": "far", "position": [5, 5, 5]})
+    far = world.body_names().index("far")
+    contacts = world.contacts()
+    assert far not in contacts["body_a"] and far not in contacts["body_b"]
+    assert len(contacts["points"]) > 0  # the base still stands on the ground
+
+
 def test_edit_changes_only_given_keys(world):
     before = world.body("b")
     world.edit_body("b", mass=10.0, linear_velocity=[1, 0, 0])

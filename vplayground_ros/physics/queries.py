@@ -102,11 +102,12 @@ class WorldQueries:
         n = int(c.count[0])
         if n == 0:
             return dict(NO_CONTACTS)
-        active = self._bodies.active
+        # Bodies removed since that step take their contacts with them, also from a body that
+        # has taken the slot since.
+        present = self._bodies.active & ~self._departed
         row_of_slot = self._current_layout().row_of_slot
         a, b = c.body_a[:n], c.body_b[:n]
-        # Bodies removed since that step take their contacts with them.
-        keep = np.nonzero(active[a] & ((b < 0) | active[np.maximum(b, 0)]))[0]
+        keep = np.nonzero(present[a] & ((b < 0) | present[np.maximum(b, 0)]))[0]
         a, b = a[keep], b[keep]
         return {
             "points": c.point[keep],

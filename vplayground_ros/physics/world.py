@@ -123,6 +123,9 @@ class World(WorldQueries):
         # Slots whose state may have changed since remove_escaped last checked them (frozen and
         # immovable bodies do not move).
         self._unchecked = np.ones(capacity, dtype=bool)
+        # Slots whose body was removed since the newest contacts were made: those contacts are
+        # the removed body's, not its slot's next body's (contacts() leaves them out).
+        self._departed = np.zeros(capacity, dtype=bool)
         self._vehicles = VehicleRegistry()  # the chassis of each is the body of its name
         self._joints = JointRegistry()
         self._generated_joints = 0
@@ -413,6 +416,7 @@ class World(WorldQueries):
         self._vehicles.remove(name)
         self._names[slot] = None
         self._generations[slot] += 1
+        self._departed[slot] = True
         packed = self._solids[slot][1].hull is not None or self._solids[slot][1].compound is not None
         self._solids[slot] = None
         if packed:
@@ -693,6 +697,8 @@ class World(WorldQueries):
                 raise RuntimeError("octree index overflow: an index is smaller than 8 x bodies")
             else:
                 assert status == DONE
+        if done:
+            self._departed[:] = False  # the newest contacts are these steps'
         wall = self._clock() - wall
         pairs = int(counters[STAT_PAIRS] + counters[STAT_TRIANGLES])
         self._sharing = would_share(n, int(counters[STAT_POINTS]), pairs)
@@ -903,6 +909,7 @@ class World(WorldQueries):
         self._generations = np.concatenate([self._generations, np.zeros(capacity - old, np.int64)])
         self._solids.extend([None] * (capacity - old))
         self._unchecked = np.concatenate([self._unchecked, np.ones(capacity - old, dtype=bool)])
+        self._departed = np.concatenate([self._departed, np.zeros(capacity - old, dtype=bool)])
         self.layout_version += 1  # row_of_slot covers every slot
         for slot in range(old, capacity):
             heapq.heappush(self._free, slot)
