@@ -192,6 +192,19 @@ def test_a_reset_of_the_state_restarts_a_cars_controller():
         driven.step(2 * 128)
     assert world.body("car")["position"] == pytest.approx(fresh.body("car")["position"], abs=0.02)
 
+def test_a_reset_of_the_state_keeps_a_scenes_frozen_body_frozen():
+    """SCOPE_STATE puts a body the scene has frozen back frozen: a crate frozen in mid-air (a
+    2008 playground's floating shelf) had been woken by the reset and fell."""
+    requests = Requests(Simulation(load_world({"version": 1, "bodies": [
+        {"name": "shelf", "position": [0, 0, 3], "frozen": True}]})))
+    world = requests.sim.world
+    world.edit_body("shelf", position=[2, 0, 3])  # woken: it falls
+    world.step(32)
+    assert requests.reset(2)[0]
+    world.step(64)
+    assert world.body("shelf")["frozen"] and world.body("shelf")["position"] == [0.0, 0.0, 3.0]
+
+
 def test_load_and_save_scene(requests, tmp_path):
     requests.scene_directories = [tmp_path]
     path = tmp_path / "out.yaml"

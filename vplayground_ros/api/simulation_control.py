@@ -174,9 +174,11 @@ class ControlRequests:
                 if name not in present:
                     (world.add_vehicle if "wheels" in spec else world.add_body)(copy.deepcopy(spec))
                     continue
+                # Frozen as the scene has it: woken by the edit, a body frozen in mid-air fell.
+                frozen = (spec["chassis"] if "wheels" in spec else spec)["frozen"]
                 world.edit_body(name, position=spec["position"], quaternion=spec["quaternion"],
                                 linear_velocity=spec["linear_velocity"],
-                                angular_velocity=spec["angular_velocity"])
+                                angular_velocity=spec["angular_velocity"], frozen=frozen)
                 if "wheels" in spec and name in vehicles:
                     # Its controller too, as a car the scene adds has it: the steering had stayed
                     # turned and the speed loop kept its memory of the drive, so the car set off again.
