@@ -205,6 +205,27 @@ def test_a_reset_of_the_state_keeps_a_scenes_frozen_body_frozen():
     assert world.body("shelf")["frozen"] and world.body("shelf")["position"] == [0.0, 0.0, 3.0]
 
 
+PENDULUM = {"version": 1, "bodies": [
+    {"name": "pivot", "size": [0.2, 0.2, 0.2], "position": [0, 0, 3], "immovable": True},
+    {"name": "bob", "size": [0.2, 0.2, 0.2], "position": [1, 0, 3]}],
+    "joints": [{"name": "hinge", "type": "revolute", "parent": "pivot", "child": "bob",
+                "anchor": [0, 0, 3], "axis": [0, 1, 0]}]}
+
+
+def test_a_reset_of_the_state_brings_back_the_joints_of_a_scenes_body_removed_since():
+    """SCOPE_STATE brings back a scene's body removed since with the scene's joints it took with
+    it: the bob of a pendulum had come back unjointed and fallen to the ground."""
+    requests = Requests(Simulation(load_world(PENDULUM)))
+    world = requests.sim.world
+    assert requests.remove("{entity: bob}")[0] and world.joint_names() == []
+    assert requests.reset(2)[0]
+    assert world.joint_names() == ["hinge"]
+    fresh = load_world(PENDULUM)
+    for swinging in (world, fresh):
+        swinging.step(64)
+    assert world.body("bob")["position"] == pytest.approx(fresh.body("bob")["position"], abs=1e-9)
+
+
 def test_load_and_save_scene(requests, tmp_path):
     requests.scene_directories = [tmp_path]
     path = tmp_path / "out.yaml"

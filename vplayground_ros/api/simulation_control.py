@@ -187,6 +187,12 @@ class ControlRequests:
             for robot in robots.values():  # as loaded: its links where they stood, its joints, its motors
                 world.remove_bodies([body for body in robot["bodies"] if body in present])
                 add_robot_entry(world, robot, robot["model"], f"robots.{robot['name']}", self.frames())
+            # The scene's joints that went with a body removed since (or a robot's link) come
+            # back with it, as the scene made them: the body had come back loose.
+            joints = set(world.joint_names())
+            for spec in self.initial.get("joints", []):
+                if spec["name"] not in joints:
+                    world.add_joint(copy.deepcopy(spec))
             # The sensors start again on the bodies as restored (the robots' are new bodies), and
             # the scene's sensors removed since come back on them (the bodies did: the sensors
             # had stayed gone), unless a body spawned since has taken a removed one's name.
