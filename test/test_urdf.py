@@ -302,6 +302,27 @@ def test_scene_robots_load_and_save_as_robots(tmp_path):
     assert saved["joint_positions"]["lbr_iiwa_joint_2"] == pytest.approx(world.joint("kuka.lbr_iiwa_joint_2")["position"])
 
 
+def test_a_robot_saved_against_a_joint_limit_loads_again(tmp_path):
+    """A limp arm falls onto a joint limit, which the solver lets give by a little: saved
+    there, it loads again as a scene's joint does (the loader had refused the saved scene:
+    "'lbr_iiwa_joint_2' at 2.0944 is outside its limits [-2.0944, 2.0944]")."""
+    from vplayground_ros.scene import load_world, save_world
+    world = load_world(robot_scene(joint_positions={"lbr_iiwa_joint_2": 0.6, "lbr_iiwa_joint_4": -1.2}))
+
+    def past_a_limit():
+        return [joint for joint in map(world.joint, world.joint_names())
+                if not joint["lower"] <= joint["position"] <= joint["upper"]]
+    for _ in range(2 * RATE // 16):
+        world.step(16)
+        if past_a_limit():
+            break
+    assert past_a_limit()
+    save_world(world, tmp_path / "saved.yaml")
+    again = load_world(tmp_path / "saved.yaml")
+    for joint in world.joint_names():
+        assert again.joint(joint)["position"] == pytest.approx(world.joint(joint)["position"], abs=1e-9)
+
+
 @pytest.mark.parametrize("robot, message", [
     ({"urdf": None}, "robots[0].urdf: expected a file name or the description's text"),
     ({"joint_positions": {"elbow": 1.0}}, "joint_positions: no revolute, continuous or prismatic joint named 'elbow'"),

@@ -360,15 +360,16 @@ def robot_model(source, name, position=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), fix
     for joint in sorted(set(joint_positions) - movable):
         raise UrdfError(f"{label}: joint_positions: no revolute, continuous or prismatic joint named {joint!r}")
     # A joint starts within its limits: past one, its correction would launch it across its
-    # range. A position asked outside them is refused; a description whose zero lies outside
-    # them (pybullet_data's a1: its calves) starts at the nearest one.
+    # range. A position asked outside them is refused (but for the little a saved robot's joint
+    # may be past one, as a scene's joint may: specs.within_limits); a description whose zero
+    # lies outside them (pybullet_data's a1: its calves) starts at the nearest one.
     for joint in robot.joints:
         if joint.name not in movable:
             continue
         lower, upper = joint_limits(joint)
         if joint.name in joint_positions:
             value = float(joint_positions[joint.name])
-            if not lower <= value <= upper:
+            if not specs.within_limits(value, lower, upper):
                 raise UrdfError(f"{label}: joint_positions: {joint.name!r} at {value:g} is outside its limits "
                                 f"[{lower:g}, {upper:g}]")
         elif lower <= upper and not lower <= 0.0 <= upper:
