@@ -25,6 +25,10 @@ MAX_HULL_POINTS = 64
 # hull's size) are one face.
 COPLANAR_TOLERANCE = 1e-6
 
+# A centre of mass this close to the origin (relative to the hull's size) is the origin: what the
+# centre of points centred already (a saved hull's) rounds to, ~1e-16.
+CENTRED = 1e-12
+
 Hulls = namedtuple("Hulls", [
     "points",          # (P, 3) body frame, every hull's vertices end to end
     "point_start", "point_count",   # (H,) each hull's vertices in `points`
@@ -72,6 +76,10 @@ def build_hull(points, path="points"):
         volume, centre, second_moment = solid_moments(triangles)
     if not volume > 1e-12 * size ** 3:
         raise SpecError(path, "the points are flat or degenerate: a convex shape needs volume")
+    # Points already centred (a saved hull's) stay as they are: their centre comes out as
+    # rounding about the origin, and taking that off changed the points at every save.
+    if np.abs(centre).max() <= CENTRED * size:
+        centre = np.zeros(3)
     # Inertia per kg about the centre of mass: (trace(S) I - S) / V, S the second moment there.
     covariance = second_moment / volume - np.outer(centre, centre)
     unit_inertia = np.trace(covariance) * np.eye(3) - covariance
