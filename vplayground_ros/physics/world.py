@@ -308,9 +308,11 @@ class World(WorldQueries):
         """The vehicle's spec with its chassis body as it is now (what a scene file holds): pose,
         velocities, size, material and flags, and the chassis' own mass (the body's less the
         wheels')."""
-        spec = {k: v for k, v in self._vehicles.spec(name).items() if k not in ("rpy", "quaternion")}
-        body = self.body(name)
+        # The chassis' state last, in this order, wherever the spec had it: a spec loaded from a
+        # saved scene holds it, and the save after that had written it in another order.
         state = ("position", "quaternion", "linear_velocity", "angular_velocity")
+        spec = {k: v for k, v in self._vehicles.spec(name).items() if k not in ("rpy", *state)}
+        body = self.body(name)
         chassis = {"size": body["size"], "mass": body["mass"] - self._wheels_mass(name),
                    **{key: body[key] for key in specs.CHASSIS_BODY_KEYS}}
         return {**spec, "chassis": chassis, **{key: body[key] for key in state}}
