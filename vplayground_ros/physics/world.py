@@ -106,6 +106,9 @@ class World(WorldQueries):
         self.ground = specs.validate_ground(ground)
         self.time = 0.0
         self.step_count = 0
+        # Where the time is counted from (_count_steps): (time, step_count, steps_per_second)
+        # when the rate last changed or the time was set, and the (time, step_count) it left.
+        self._timeline = (0.0, 0, self.settings["steps_per_second"], (0.0, 0))
         self._bodies = allocate_bodies(capacity)
         self._names = [None] * capacity
         self._solids = [None] * capacity  # (shape name, shapes.Solid) per slot
@@ -668,8 +671,7 @@ class World(WorldQueries):
             started = time.thread_time()
             if resting_steps(self._bodies, self._broad, self._vehicles.arrays, self._contacts, n):
                 self.engine_cpu_seconds += time.thread_time() - started
-                self.time += n * dt
-                self.step_count += n
+                self._count_steps(n)
                 return  # every body frozen or immovable: this call moved none
         if not (refreeze or new_second):
             b = self._bodies
@@ -688,8 +690,7 @@ class World(WorldQueries):
             steps, status = step_world(n - done, ctx)
             self.engine_cpu_seconds += time.thread_time() - started
             done += steps
-            self.time += steps * dt
-            self.step_count += steps
+            self._count_steps(steps)
             if status == GROW_PAIRS:
                 self._grow_pairs()
             elif status == GROW_CONTACTS:
@@ -709,6 +710,19 @@ class World(WorldQueries):
         for key, index in (("woken", STAT_WOKEN), ("frozen", STAT_FROZEN), ("pairs", STAT_PAIRS),
                            ("points", STAT_POINTS), ("triangles", STAT_TRIANGLES)):
             self.stats[key] += int(counters[index])
+
+    def _count_steps(self, steps):
+        """Advances step_count and time by `steps`. The time is the steps since the rate last
+        changed (or the time was set) over the rate, not a sum batch by batch: 1/100 s is no
+        binary fraction, and the sum's rounding had followed the batches (stepping in real time
+        or as fast as possible gave other times and IMU readings)."""
+        rate = self.settings["steps_per_second"]
+        start_time, start_step, start_rate, left = self._timeline
+        if rate != start_rate or left != (self.time, self.step_count):
+            start_time, start_step = self.time, self.step_count  # another rate, or the time set
+        self.step_count += steps
+        self.time = start_time + (self.step_count - start_step) / rate
+        self._timeline = (start_time, start_step, rate, (self.time, self.step_count))
 
     def step_context(self, counters, threads=None):
         """What step_world takes: this world's arrays and settings, `counters` for its
