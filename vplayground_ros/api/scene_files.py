@@ -57,6 +57,7 @@ class SceneRequests:
             self.sim.clear_steps()  # none queued for the old world run on the new one
             self.initial = initial
             self.initial_robots = list(world.robot_specs)
+            self.initial_recipe = world.recipe
             self.scene_label, self.scene_text = label, text
             self.sim.world_loaded = True
             if stopped:
@@ -80,6 +81,7 @@ class SceneRequests:
             self.sim.clear_steps()
             self.initial = copy.deepcopy(world_to_scene(empty))
             self.initial_robots = []
+            self.initial_recipe = empty.recipe
             self.scene_label = self.scene_text = ""
             self.sim.world_loaded, self.sim.paused, self.sim.stopped = False, True, False
             return reply(OK, "unloaded: every entity removed")

@@ -14,7 +14,7 @@ import yaml
 
 from ..parameters import SCOPE_ALL, SCOPE_SPAWNED, SCOPE_STATE, SCOPE_TIME, reset_scope
 from ..physics import specs
-from ..scene import load_world
+from ..scene import build_world
 from ..sensors import WORLD
 from ..simulation import PAUSED, PLAYING, QUITTING, STATE_NAMES, STOPPED
 from ..urdf_robots import add_robot_entry
@@ -151,7 +151,7 @@ class ControlRequests:
     def _reset(self, world, scope):
         self._check_world("a reset")
         if scope == SCOPE_ALL:
-            self.sim.world = load_world(copy.deepcopy(self.initial))
+            self.sim.world = build_world(self.initial_recipe)  # as loaded, bit for bit
             self.sim.clear_steps()  # none queued for the old world run on the new one
             return reply(OK, "reset everything to the loaded scene")
         initial = {b["name"]: b for b in self.initial["bodies"]}

@@ -146,6 +146,9 @@ class World(WorldQueries):
         # never changed in place, so that whoever follows it sees it change. A robot losing a
         # body or a joint leaves it.
         self.robot_specs = []
+        # The scene this world was built from (vplayground_ros.scene.SceneRecipe), or None: what
+        # a full reset builds again.
+        self.recipe = None
         self._centre = np.zeros(3)  # world_centre(), kept with the playground
         self.stats = {"woken": 0, "frozen": 0, "pairs": 0, "points": 0, "triangles": 0}
         self.profiling = False  # time every stage of the step (bench/), at ~6 us a step
