@@ -379,6 +379,35 @@ def test_foxglove_server_shares_the_ros_graph(ros):
         client.close()
 
 
+def test_parameter_sets_crossing_from_ros_and_foxglove_leave_one_value_everywhere(ros):
+    """A set from a ROS client and another from a Foxglove client at once, round after round:
+    the World, the parameters and rclpy's copy (`ros2 param get`) end on one value. The values
+    were stored under the parameters' lock but told to the World and to rclpy after it: crossing
+    sets reached them in either order, and about half the rounds left one of the three on the
+    other value."""
+    client = FoxgloveClient(ros.foxglove.url)
+    set_from = {"ros": lambda value: ros.set_parameter("resolve_iterations", value, ParameterType.PARAMETER_INTEGER),
+                "foxglove": lambda value: client.set_parameters({"resolve_iterations": value})}
+    try:
+        assert ros.set_parameter("resolve_iterations", 5, ParameterType.PARAMETER_INTEGER).successful
+        for round_ in range(20):
+            values = {"ros": 6 + round_, "foxglove": 40 - round_}
+            together = threading.Barrier(len(values))
+            sets = [threading.Thread(target=lambda who=who: (together.wait(), set_from[who](values[who])))
+                    for who in values]
+            for thread in sets:
+                thread.start()
+            for thread in sets:
+                thread.join()
+            world = ros.sim.call(lambda world: world.settings["resolve_iterations"])
+            seen = {"world": world, "parameters": ros.runtime.parameters["resolve_iterations"],
+                    "rclpy": ros.node.get_parameter("resolve_iterations").value}
+            assert len(set(seen.values())) == 1 and world in values.values(), (round_, values, seen)
+    finally:
+        client.close()
+        assert ros.set_parameter("resolve_iterations", 5, ParameterType.PARAMETER_INTEGER).successful
+
+
 def drive_in_circles(ros):
     """Twist at 20 Hz on cmd_vel, 3 m/s and 1 rad/s, until the returned event is cleared. The car
     starts at rest at (10, -14) facing +x, so its circle (3 m, centred near (10, -11)) stays clear

@@ -345,6 +345,13 @@ class SimulatorNode(Node):
         self.add_on_set_parameters_callback(self._on_parameters)
         store.listen(self._copy_into_rclpy)
 
+    def set_parameters_atomically(self, parameter_list):
+        """rclpy's parameter services and _copy_into_rclpy set through here: rclpy stores the
+        values once _on_parameters has accepted them, so under the Parameters' lock, lest a change
+        made meanwhile from elsewhere be copied in before them and then overwritten."""
+        with self.runtime.parameters.lock:
+            return super().set_parameters_atomically(parameter_list)
+
     def _on_parameters(self, parameters):
         if getattr(self._copying, "active", False):  # values Parameters has already taken
             return SetParametersResult(successful=True)

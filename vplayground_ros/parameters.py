@@ -164,7 +164,11 @@ class Parameters:
         self._values = {p.name: p.default for p in table}
         self.values = MappingProxyType(self._values)  # read them; change them through set()
         self._listeners = []
-        self._lock = threading.Lock()
+        # Held from a change's check until every listener has been told of it, so that the World
+        # and rclpy's copy take crossing changes in the order the values were stored (told after
+        # it, a ROS and a Foxglove set at once had left either on the other's value). Reentrant:
+        # the node copies a change into rclpy under it, whose set comes back through `lock`.
+        self.lock = threading.RLock()
 
     def __getitem__(self, name):
         return self._values[name]
@@ -231,14 +235,14 @@ class Parameters:
         at start-up (the command line's, the port the Foxglove server bound when asked for any)
         come in here, type- and range-checked like a set; ValueError naming the problem."""
         checked = {name: self.check(name, value, read_only_ok=True) for name, value in values.items()}
-        with self._lock:
+        with self.lock:
             changed = {n: v for n, v in checked.items() if v != self._values[n]}
             self._values.update(changed)
-        self._tell(changed)
+            self._tell(changed)
 
     def set(self, changes):
         """Applies {name: value} all together, or nothing: (True, "") or (False, reason)."""
-        with self._lock:
+        with self.lock:
             try:
                 checked = {name: self.check(name, value) for name, value in changes.items()}
                 physics = {n: v for n, v in checked.items() if n in PHYSICS}
@@ -248,7 +252,7 @@ class Parameters:
                 return False, str(error)
             changed = {n: v for n, v in checked.items() if v != self._values[n]}
             self._values.update(checked)
-        self._tell(changed)
+            self._tell(changed)
         return True, ""
 
     def physics(self):
