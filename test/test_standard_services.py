@@ -649,25 +649,35 @@ def test_a_sensor_is_not_moved_by_set_entity_state(ros):
 
 
 def test_long_requests_beyond_the_limit_are_refused_at_once(ros):
-    """Calls that may take long run on threads of their own, a bounded number at once: beyond
-    it they are answered RESULT_OPERATION_FAILED at once (here the limit made 1 for the test)."""
+    """Calls that may take long, and SimulateSteps goals, run on threads of their own, a bounded
+    number at once: beyond it they are answered RESULT_OPERATION_FAILED at once (here the limit
+    made 1 for the test). Goals had not counted: each one accepted started a thread, 40 goals
+    40 threads."""
     import threading
 
     play(ros)
     assert set_state(ros, SimulationState.STATE_PAUSED).result == OK
     slots = ros.node._aside_slots
     ros.node._aside_slots = threading.BoundedSemaphore(1)
+    action = ActionClient(ros.client, SimulateSteps, "/simulate_steps")
     try:
         client = ros.client.create_client(StepSimulation, "/step_simulation")
-        assert client.wait_for_service(timeout_sec=10)
+        assert client.wait_for_service(timeout_sec=10) and action.wait_for_server(timeout_sec=10)
         stepping = client.call_async(StepSimulation.Request(steps=4000))
         assert wait_for(lambda: ros.sim.pending_steps > 0)
         refused = call(ros, GetEntitiesStates, "get_entities_states")
         assert refused.result.result == FAILED and "long requests are running" in refused.result.error_message
+        sent = action.send_goal_async(SimulateSteps.Goal(steps=10))
+        assert wait_for(sent.done)
+        outcome = sent.result().get_result_async()
+        assert wait_for(outcome.done, 5) and not stepping.done()
+        goal = outcome.result().result.result
+        assert goal.result == FAILED and "long requests are running" in goal.error_message
         assert wait_for(stepping.done, 60) and stepping.result().result.result == OK
         assert call(ros, GetEntitiesStates, "get_entities_states").result.result == OK  # its slot is free again
         ros.client.destroy_client(client)
     finally:
+        action.destroy()
         ros.node._aside_slots = slots
 
 

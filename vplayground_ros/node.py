@@ -34,8 +34,11 @@ def reliable(depth, durability=DurabilityPolicy.VOLATILE):
 
 QOS = {"reliable_1": reliable(1), "reliable_10": reliable(10), "reliable_100": reliable(100),
        "latched": reliable(1, DurabilityPolicy.TRANSIENT_LOCAL)}
-# Service calls that may take long (Service.aside) run at once, each on a thread of its own.
+# Service calls that may take long (Service.aside) and SimulateSteps goals run at once, each on
+# a thread of its own: at most this many.
 MAX_ASIDE_CALLS = 8
+BUSY = (f"RESULT_OPERATION_FAILED: {MAX_ASIDE_CALLS} long requests are running (steps, every entity's state, "
+        "spawn lists, SimulateSteps goals): ask again once one has answered")
 # Best effort, depth 1: matches both reliable and best-effort publishers (Foxglove's Teleop).
 COMMAND_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT, history=HistoryPolicy.KEEP_LAST)
 PARAMETER_TYPES = {"bool": Parameter.Type.BOOL, "int": Parameter.Type.INTEGER, "float": Parameter.Type.DOUBLE,
@@ -281,31 +284,33 @@ class SimulatorNode(Node):
         return callback
 
     def _serve_aside(self, service):
-        """A handler that may take long (Service.aside) runs on a thread of its own: the
-        executor serves everything else meanwhile and sends the reply when it is done. At most
-        MAX_ASIDE_CALLS at once: a flood of them answers RESULT_OPERATION_FAILED at once rather
-        than starting a thread each (0.4 s of CPU each for 10,000 entities)."""
+        """A handler that may take long (Service.aside) runs on a thread of its own (run_aside)."""
         busy = standard_failure(service.type)
 
         async def callback(request, response):  # filling a response of 10,000 states is 0.3 s too
-            if not self._aside_slots.acquire(blocking=False):
-                return fill(response, busy(f"RESULT_OPERATION_FAILED: {MAX_ASIDE_CALLS} long requests are "
-                                           "running (steps, every entity's state, spawn lists): ask again "
-                                           "once one has answered"))
-            try:
-                return await self.aside(lambda: fill(response, service.handler(request)))
-            finally:
-                self._aside_slots.release()
+            return await self.run_aside(lambda: fill(response, service.handler(request)),
+                                        lambda: fill(response, busy(BUSY)))
         return callback
 
-    def aside(self, fn, *args):
-        """An awaitable of fn(*args) run on a new thread; its end wakes the executor."""
+    async def run_aside(self, fn, busy):
+        """fn() on a thread of its own: the executor serves everything else meanwhile and sends
+        the answer when it is done. At most MAX_ASIDE_CALLS at once: beyond them busy() answers at
+        once, so a flood does not start a thread each (0.4 s of CPU each for 10,000 entities)."""
+        if not self._aside_slots.acquire(blocking=False):
+            return busy()
+        try:
+            return await self.aside(fn)
+        finally:
+            self._aside_slots.release()
+
+    def aside(self, fn):
+        """An awaitable of fn() run on a new thread; its end wakes the executor."""
         future = Future(executor=self.executor)
         future.add_done_callback(lambda _: None)  # a done callback is what wakes the executor
 
         def run():
             try:
-                future.set_result(fn(*args))
+                future.set_result(fn())
             except Exception as error:  # noqa: BLE001 - handed to the awaiting callback
                 future.set_exception(error)
         threading.Thread(target=run, name="vplayground-aside", daemon=True).start()
@@ -407,8 +412,14 @@ def simulate_steps_action(node, runtime):
         (goal_handle.succeed if outcome.result.result == 1 else goal_handle.abort)()
         return outcome
 
+    def refuse(goal_handle):
+        outcome = SimulateSteps.Result()
+        fill(outcome.result, {"result": 4, "error_message": BUSY})
+        goal_handle.abort()
+        return outcome
+
     async def execute(goal_handle):
-        return await node.aside(run_goal, goal_handle)
+        return await node.run_aside(lambda: run_goal(goal_handle), lambda: refuse(goal_handle))
 
     return ActionServer(node, SimulateSteps, "simulate_steps", execute_callback=execute,
                         cancel_callback=lambda _goal: CancelResponse.ACCEPT, callback_group=node._aside_group)
