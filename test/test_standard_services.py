@@ -667,6 +667,10 @@ def test_long_requests_beyond_the_limit_are_refused_at_once(ros):
         assert wait_for(lambda: ros.sim.pending_steps > 0)
         refused = call(ros, GetEntitiesStates, "get_entities_states")
         assert refused.result.result == FAILED and "long requests are running" in refused.result.error_message
+        # ~/spawn is one of them too, answered in its own type (it had been given the standard's
+        # Result, which AddDiagnostics has not: no answer at all)
+        ok, message = ros.text("spawn", "{name: refused_while_busy, size: [1, 1, 1], position: [0, 9, 3]}")
+        assert not ok and message.startswith("RESULT_OPERATION_FAILED:") and "long requests are running" in message
         sent = action.send_goal_async(SimulateSteps.Goal(steps=10))
         assert wait_for(sent.done)
         outcome = sent.result().get_result_async()

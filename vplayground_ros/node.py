@@ -23,7 +23,7 @@ from rclpy.task import Future
 
 from .broadcast import NODE_NAME, TOPICS
 from .inputs import subscriptions
-from .services import standard_failure
+from .services import failure
 from .standard_services import StandardServices
 
 
@@ -285,7 +285,7 @@ class SimulatorNode(Node):
 
     def _serve_aside(self, service):
         """A handler that may take long (Service.aside) runs on a thread of its own (run_aside)."""
-        busy = standard_failure(service.type)
+        busy = failure(service.type)  # ~/spawn's is AddDiagnostics', the others the standard's Result
 
         async def callback(request, response):  # filling a response of 10,000 states is 0.3 s too
             return await self.run_aside(lambda: fill(response, service.handler(request)),

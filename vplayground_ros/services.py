@@ -29,9 +29,12 @@ FAILURES = {
 }
 
 
-def standard_failure(service_type):
-    """The failure of a simulation_interfaces service: RESULT_OPERATION_FAILED (GetSimulatorFeatures
-    has no result: no features, the text in custom_info)."""
+def failure(service_type):
+    """text -> the service type's failure: FAILURES' own, else a simulation_interfaces service's
+    RESULT_OPERATION_FAILED (GetSimulatorFeatures has no result: no features, the text in
+    custom_info)."""
+    if service_type in FAILURES:
+        return FAILURES[service_type]
     if service_type.endswith("/GetSimulatorFeatures"):
         return lambda text: {"features": {"custom_info": text}}
     return lambda text: {"result": {"result": 4, "error_message": text}}
@@ -103,14 +106,14 @@ def guarded(runtime, service):
     type's failure with `RESULT_OPERATION_FAILED: internal error (...)`, and is logged with its
     traceback once and counted on /diagnostics (Simulation.fault). Unanswered, the caller waited
     out its own timeout."""
-    failure = FAILURES[service.type] if service.type in FAILURES else standard_failure(service.type)
+    failed = failure(service.type)
 
     def serve(request):
         try:
             return service.handler(request)
         except Exception as error:
             runtime.sim.fault(f"service {service.name}", error)
-            return failure(carriable(internal_error(error)))
+            return failed(carriable(internal_error(error)))
     return service._replace(handler=serve)
 
 
