@@ -26,6 +26,7 @@ from simulation_interfaces.srv import (DeleteEntity, GetAvailableWorlds, GetCurr
                                        ResetSimulation, SetEntityState, SetSimulationState, SpawnEntities,
                                        SpawnEntity, StepSimulation, UnloadWorld)
 
+from foxglove_client import FoxgloveClient  # noqa: E402
 from helpers import wait_for  # noqa: E402
 from test_node import Harness  # noqa: E402
 
@@ -650,39 +651,51 @@ def test_a_sensor_is_not_moved_by_set_entity_state(ros):
 
 def test_long_requests_beyond_the_limit_are_refused_at_once(ros):
     """Calls that may take long, and SimulateSteps goals, run on threads of their own, a bounded
-    number at once: beyond it they are answered RESULT_OPERATION_FAILED at once (here the limit
-    made 1 for the test). Goals had not counted: each one accepted started a thread, 40 goals
-    40 threads."""
+    number at once over ROS and Foxglove together: beyond it they are answered
+    RESULT_OPERATION_FAILED at once (here the limit made 1 for the test). Goals and Foxglove's
+    calls had not counted: each started a thread (25 steps called at once over Foxglove, 38
+    threads)."""
     import threading
 
     play(ros)
     assert set_state(ros, SimulationState.STATE_PAUSED).result == OK
-    slots = ros.node._aside_slots
-    ros.node._aside_slots = threading.BoundedSemaphore(1)
+    slots = ros.runtime.long_requests
+    ros.runtime.long_requests = taken = threading.BoundedSemaphore(1)
     action = ActionClient(ros.client, SimulateSteps, "/simulate_steps")
+    foxglove = FoxgloveClient(ros.foxglove.url)
     try:
-        client = ros.client.create_client(StepSimulation, "/step_simulation")
-        assert client.wait_for_service(timeout_sec=10) and action.wait_for_server(timeout_sec=10)
-        stepping = client.call_async(StepSimulation.Request(steps=4000))
-        assert wait_for(lambda: ros.sim.pending_steps > 0)
+        assert taken.acquire(blocking=False)  # the one slot, as a long request running holds it
         refused = call(ros, GetEntitiesStates, "get_entities_states")
         assert refused.result.result == FAILED and "long requests are running" in refused.result.error_message
         # ~/spawn is one of them too, answered in its own type (it had been given the standard's
         # Result, which AddDiagnostics has not: no answer at all)
         ok, message = ros.text("spawn", "{name: refused_while_busy, size: [1, 1, 1], position: [0, 9, 3]}")
         assert not ok and message.startswith("RESULT_OPERATION_FAILED:") and "long requests are running" in message
+        assert foxglove.wait(lambda: "/get_entities_states" in foxglove.services)
+        refused = foxglove.call("/get_entities_states", {}).result
+        assert refused.result == FAILED and "long requests are running" in refused.error_message
+        assert action.wait_for_server(timeout_sec=10)
         sent = action.send_goal_async(SimulateSteps.Goal(steps=10))
         assert wait_for(sent.done)
         outcome = sent.result().get_result_async()
-        assert wait_for(outcome.done, 5) and not stepping.done()
+        assert wait_for(outcome.done, 5)
         goal = outcome.result().result.result
         assert goal.result == FAILED and "long requests are running" in goal.error_message
+        taken.release()
+
+        client = ros.client.create_client(StepSimulation, "/step_simulation")
+        assert client.wait_for_service(timeout_sec=10)
+        stepping = client.call_async(StepSimulation.Request(steps=4000))
+        assert wait_for(lambda: ros.sim.pending_steps > 0)
+        refused = call(ros, GetEntitiesStates, "get_entities_states")
+        assert refused.result.result == FAILED and "long requests are running" in refused.result.error_message
         assert wait_for(stepping.done, 60) and stepping.result().result.result == OK
         assert call(ros, GetEntitiesStates, "get_entities_states").result.result == OK  # its slot is free again
         ros.client.destroy_client(client)
     finally:
+        foxglove.close()
         action.destroy()
-        ros.node._aside_slots = slots
+        ros.runtime.long_requests = slots
 
 
 def test_a_urdf_robot_spawned_through_the_standard_service_is_a_ros_robot(ros):

@@ -16,6 +16,7 @@ the ROS distribution; the sdk server itself listens on a loopback port behind it
 """
 import logging
 import threading
+from contextlib import nullcontext
 
 import foxglove
 from foxglove import Channel, Context, MessageSchema, Parameter, ParameterType, Schema, Service, ServiceSchema
@@ -24,6 +25,8 @@ from foxglove.websocket import Capability, StatusLevel
 from .foxglove_front import ProtocolFront
 from .inputs import TWIST, TWIST_STAMPED, from_cdr, from_json, subscriptions
 from .interfaces import decoder, encode, schema
+from .runtime import BUSY
+from .services import failure
 from .throttle import Throttle
 
 DEFAULT_PORT = 8765
@@ -203,8 +206,13 @@ class FoxgloveServer:
     def _service(self, service):
         request_type, response_type = f"{service.type}_Request", f"{service.type}_Response"
 
+        busy = failure(service.type)
+
         def handle(request):  # CDR only: the SDK answers a call in another encoding itself
-            return encode(response_type, service.handler(decoder(request_type)(bytes(request.payload))))
+            # The sdk runs each call on a thread of its own: a long one counts with the node's.
+            with self.runtime.long_request() if service.aside else nullcontext(True) as admitted:
+                response = service.handler(decoder(request_type)(bytes(request.payload))) if admitted else busy(BUSY)
+            return encode(response_type, response)
         return Service(self.runtime.resolve_name(service.name), handler=handle, schema=ServiceSchema(
             service.type, request=MessageSchema(encoding="cdr", schema=ros2msg(request_type)),
             response=MessageSchema(encoding="cdr", schema=ros2msg(response_type))))

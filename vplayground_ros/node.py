@@ -23,6 +23,7 @@ from rclpy.task import Future
 
 from .broadcast import NODE_NAME, TOPICS
 from .inputs import subscriptions
+from .runtime import BUSY
 from .services import failure
 from .standard_services import StandardServices
 
@@ -34,11 +35,6 @@ def reliable(depth, durability=DurabilityPolicy.VOLATILE):
 
 QOS = {"reliable_1": reliable(1), "reliable_10": reliable(10), "reliable_100": reliable(100),
        "latched": reliable(1, DurabilityPolicy.TRANSIENT_LOCAL)}
-# Service calls that may take long (Service.aside) and SimulateSteps goals run at once, each on
-# a thread of its own: at most this many.
-MAX_ASIDE_CALLS = 8
-BUSY = (f"RESULT_OPERATION_FAILED: {MAX_ASIDE_CALLS} long requests are running (steps, every entity's state, "
-        "spawn lists, SimulateSteps goals): ask again once one has answered")
 # Best effort, depth 1: matches both reliable and best-effort publishers (Foxglove's Teleop).
 COMMAND_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT, history=HistoryPolicy.KEEP_LAST)
 PARAMETER_TYPES = {"bool": Parameter.Type.BOOL, "int": Parameter.Type.INTEGER, "float": Parameter.Type.DOUBLE,
@@ -232,7 +228,6 @@ class SimulatorNode(Node):
         # The default group runs one callback at a time and holds it across an await: what
         # runs aside gets a group that lets everything else through meanwhile.
         self._aside_group = ReentrantCallbackGroup()
-        self._aside_slots = threading.BoundedSemaphore(MAX_ASIDE_CALLS)
         for service in runtime.services:
             try:
                 kind = interface_class(service.type)
@@ -293,15 +288,10 @@ class SimulatorNode(Node):
         return callback
 
     async def run_aside(self, fn, busy):
-        """fn() on a thread of its own: the executor serves everything else meanwhile and sends
-        the answer when it is done. At most MAX_ASIDE_CALLS at once: beyond them busy() answers at
-        once, so a flood does not start a thread each (0.4 s of CPU each for 10,000 entities)."""
-        if not self._aside_slots.acquire(blocking=False):
-            return busy()
-        try:
-            return await self.aside(fn)
-        finally:
-            self._aside_slots.release()
+        """fn() on a thread of its own, a long request (Runtime.long_request; else busy() at
+        once): the executor serves everything else meanwhile and sends the answer when it is done."""
+        with self.runtime.long_request() as admitted:
+            return await self.aside(fn) if admitted else busy()
 
     def aside(self, fn):
         """An awaitable of fn() run on a new thread; its end wakes the executor."""
