@@ -530,12 +530,13 @@ def load_world(path_or_dict, max_bodies=None, directories=None, frames=DEFAULT_F
         parts = validate_scene(scene, base, max_bodies, directories, frames)
     except specs.SpecError as error:
         raise SceneError(f"{label}: {error}", error) from None
-    return build_world(SceneRecipe(label, frames, parts))
+    return build_world(SceneRecipe(label, frames, *parts))
 
 
-class SceneRecipe(namedtuple("SceneRecipe", "label frames parts")):
-    """A scene as validated (validate_scene's parts, its label and the frame names it was checked
-    under): what build_world makes a World of, kept on the World as `recipe`, so that a full
+class SceneRecipe(namedtuple("SceneRecipe", "label frames settings ground playground bodies vehicles robots "
+                                            "joints sensor_specs")):
+    """A scene as validated (its label, the frame names it was checked under and validate_scene's
+    parts): what build_world makes a World of, kept on the World as `recipe`, so that a full
     reset makes the world as loaded again, bit for bit, without reading its files or validating
     it again. (Made again from the saved scene, world_to_scene's, it had differed in the last
     bits: a robot's root pose and joint angles as measured, a hull's inertia from its points
@@ -546,9 +547,8 @@ def build_world(recipe):
     """A new World of `recipe` (SceneRecipe); the recipe is left as it was."""
     # Every part copied but the robots' models (read-only descriptions, as a reset of the state
     # shares them): adding an entry fills in its defaults.
-    models = {id(model): model for _, (_, model) in recipe.parts[5]}
-    settings, ground, playground, bodies, vehicles, robots, joints, sensor_specs = copy.deepcopy(recipe.parts, models)
-    label, frames = recipe.label, recipe.frames
+    scene = copy.deepcopy(recipe, {id(model): model for _, (_, model) in recipe.robots})
+    label, frames, settings, ground, playground, bodies, vehicles, robots, joints, sensor_specs = scene
     world = World(settings, ground, capacity=max(64, len(bodies) + len(vehicles)))
     if playground is not None:
         spec, vertices, faces = playground
