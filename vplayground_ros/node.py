@@ -379,6 +379,7 @@ def simulate_steps_action(node, runtime):
     from simulation_interfaces.action import SimulateSteps
 
     standard = StandardServices(runtime)
+    failed = failure("simulation_interfaces/action/SimulateSteps")  # RESULT_OPERATION_FAILED
 
     def run_goal(goal_handle):
         """The goal's steps followed on a thread of its own, feedback as they complete."""
@@ -389,7 +390,7 @@ def simulate_steps_action(node, runtime):
                 tick = next(progress)
                 if goal_handle.is_cancel_requested:
                     progress.close()  # withdraws the steps not yet run
-                    fill(outcome.result, {"result": 4, "error_message": "cancelled"})
+                    fill(outcome, failed("cancelled"))
                     goal_handle.canceled()
                     return outcome
                 if tick is None:
@@ -403,8 +404,7 @@ def simulate_steps_action(node, runtime):
         return outcome
 
     def refuse(goal_handle):
-        outcome = SimulateSteps.Result()
-        fill(outcome.result, {"result": 4, "error_message": BUSY})
+        outcome = fill(SimulateSteps.Result(), failed(BUSY))
         goal_handle.abort()
         return outcome
 
