@@ -525,12 +525,17 @@ def load_world(path_or_dict, max_bodies=None, directories=None, frames=DEFAULT_F
     counted); `directories`
     confines the playground mesh to them (and the package's meshes/); `frames` are the node's
     frame names (parameters.Frames), which no body or sensor may take."""
+    return build_world(scene_recipe(path_or_dict, max_bodies, directories, frames))
+
+
+def scene_recipe(path_or_dict, max_bodies=None, directories=None, frames=DEFAULT_FRAMES):
+    """A scene file or dict read and validated (load_world's arguments), not yet built."""
     scene, label, base = read_scene(path_or_dict)
     try:
         parts = validate_scene(scene, base, max_bodies, directories, frames)
     except specs.SpecError as error:
         raise SceneError(f"{label}: {error}", error) from None
-    return build_world(SceneRecipe(label, frames, *parts))
+    return SceneRecipe(label, frames, *parts)
 
 
 class SceneRecipe(namedtuple("SceneRecipe", "label frames settings ground playground bodies vehicles robots "

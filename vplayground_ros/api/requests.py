@@ -10,7 +10,7 @@ import logging
 from pathlib import Path
 
 from ..parameters import WorldSettings, frames
-from ..scene import load_world, world_to_scene
+from ..scene import scene_recipe, world_to_scene
 from .entities import EntityRequests
 from .entity_queries import QueryRequests
 from .file_access import default_scene_directories
@@ -44,8 +44,8 @@ class Requests(EntityRequests, QueryRequests, ControlRequests, SceneRequests):
         self.max_bodies = max_bodies
         self.initial = copy.deepcopy(world_to_scene(simulation.world))
         self.initial_robots = list(simulation.world.robot_specs)  # as loaded: entries and models (a reset's)
-        # What a full reset builds (a world made without a scene: from the scene it saves as).
-        self.initial_recipe = simulation.world.recipe or load_world(copy.deepcopy(self.initial)).recipe
+        # What a full reset builds (a world made without a scene: the scene it saves as).
+        self.initial_recipe = simulation.world.recipe or scene_recipe(copy.deepcopy(self.initial))
 
     def frames(self):
         """The frame names: the parameters' (read-only), parameters.Frames."""
